@@ -1,0 +1,53 @@
+"""The ``i2v-loc`` command. Each subcommand lives in ``i2v_loc.commands.<name>`` and exposes
+``register(subparsers)``; modules are imported only when present, so heavy libraries load only
+for the subcommand that needs them."""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+
+from i2v_loc import __version__
+from i2v_loc.params import ParamsError
+
+COMMANDS = ["sim", "params", "calibrate", "run", "detect", "eval", "sweep", "serve", "bench"]
+
+
+class UserError(Exception):
+    """An error caused by the user's input: printed without a traceback, exit code 2."""
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="i2v-loc", description=__doc__.split("\n")[0] if __doc__ else None)
+    parser.add_argument("--version", action="version", version=f"i2v-loc {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    for name in COMMANDS:
+        try:
+            module = importlib.import_module(f"i2v_loc.commands.{name}")
+        except ModuleNotFoundError as err:
+            if err.name == f"i2v_loc.commands.{name}":
+                continue
+            raise
+        module.register(sub)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if not getattr(args, "func", None):
+        parser.print_help()
+        return 2
+    try:
+        return int(args.func(args) or 0)
+    except (UserError, ParamsError, FileNotFoundError) as err:
+        print(f"i2v-loc {args.command}: error: {err}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,1 @@
+"""Subcommands of the ``i2v-loc`` command line."""

@@ -1,0 +1,388 @@
+"""The single parameter model of i2v-loc.
+
+Every parameter lives here: YAML files, the REST API, the JSON Schema and the docs derive from
+these classes. Units are in the names (``_m``, ``_deg``, ``_s``, ``_m3``).
+
+Files: a YAML file may hold any subset of the top-level sections; ``load_params`` merges the
+files given, in order, over the built-in defaults and validates the result.
+"""
+
+from __future__ import annotations
+
+import copy
+import json
+from pathlib import Path
+from typing import Any, Literal
+
+import yaml
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+
+
+class Section(BaseModel):
+    """Base of every parameter section: unknown keys are errors, assignments are validated."""
+
+    model_config = ConfigDict(extra="forbid", validate_assignment=True)
+
+
+# --------------------------------------------------------------------------- sensors
+
+
+class Extrinsics(Section):
+    """Pose of a sensor in the yard frame (x east, y north, z up; angles applied Z-Y-X)."""
+
+    x_m: float = 0.0
+    y_m: float = 0.0
+    z_m: float = 0.0
+    roll_deg: float = Field(0.0, ge=-180, le=180)
+    pitch_deg: float = Field(0.0, ge=-90, le=90)
+    yaw_deg: float = Field(0.0, ge=-180, le=180)
+
+
+class SensorConfig(Section):
+    name: str = Field(..., min_length=1, max_length=32, pattern=r"^[A-Za-z0-9_\-]+$")
+    model: Literal["OS1-32", "OS1-64", "OS1-128"] = "OS1-32"
+    columns: Literal[512, 1024, 2048] = 1024
+    rate_hz: Literal[10, 20] = 10
+    min_range_m: float = Field(0.5, ge=0.0, le=10.0)
+    max_range_m: float = Field(120.0, gt=1.0, le=300.0)
+    time_offset_s: float = Field(0.0, ge=-1.0, le=1.0, description="Known offset added to this sensor's stamps to bring it onto the common clock")
+    extrinsics: Extrinsics = Field(default_factory=Extrinsics)
+
+    @property
+    def beams(self) -> int:
+        return int(self.model.split("-")[1])
+
+
+def _paper_field_sensors() -> list[SensorConfig]:
+    """Four OS1-32 of the paper's test field, counter-clockwise, looking at the field centre.
+
+    d12 = 19.2 m, d23 = 40.5 m, d34 = 19.2 m, d14 = 15 m: an isosceles trapezoid.
+    """
+    height_m = 4.0
+    corners = {"l1": (-7.5, 14.36), "l2": (-20.25, 0.0), "l3": (20.25, 0.0), "l4": (7.5, 14.36)}
+    centre = (0.0, 6.0)
+    import math
+
+    return [
+        SensorConfig(
+            name=name,
+            extrinsics=Extrinsics(
+                x_m=x,
+                y_m=y,
+                z_m=height_m,
+                yaw_deg=round(math.degrees(math.atan2(centre[1] - y, centre[0] - x)), 3),
+            ),
+        )
+        for name, (x, y) in corners.items()
+    ]
+
+
+# --------------------------------------------------------------------------- vehicles
+
+
+class UnitDimensions(Section):
+    length_m: float = Field(..., gt=0.2, le=25.0)
+    width_m: float = Field(..., gt=0.2, le=4.0)
+    height_m: float = Field(..., gt=0.2, le=5.0)
+    floor_m: float = Field(0.0, ge=0.0, le=2.0, description="Height of the bottom of the unit's box above the ground")
+
+    @property
+    def volume_m3(self) -> float:
+        return self.length_m * self.width_m * self.height_m
+
+
+class TruckGeometry(UnitDimensions):
+    """The towing unit. Its reference point is the rear axle centre on the ground."""
+
+    wheelbase_m: float = Field(..., gt=0.5, le=8.0)
+    front_overhang_m: float = Field(..., ge=0.0, le=3.0, description="Front axle to front face")
+    hitch_behind_rear_axle_m: float = Field(
+        ..., ge=-2.0, le=3.0, description="Hitch (fifth wheel or drawbar coupling) behind the rear axle; negative when ahead of it"
+    )
+
+
+class TrailerGeometry(UnitDimensions):
+    """The towed unit. Its reference point is the (effective) axle centre on the ground."""
+
+    hitch_to_axle_m: float = Field(..., gt=0.5, le=15.0, description="Kingpin or drawbar eye to the trailer's effective axle")
+    hitch_to_front_m: float = Field(
+        ..., ge=-3.0, le=3.0, description="Kingpin to the trailer's front face, positive when the face is ahead of the kingpin"
+    )
+
+
+class VehicleConfig(Section):
+    description: str = ""
+    truck: TruckGeometry
+    trailer: TrailerGeometry
+    vehicle_volume_tolerance_m3: float = Field(..., gt=0.0, description="δV of the whole-vehicle volume gate (paper Eq. 5)")
+    trailer_volume_tolerance_m3: float = Field(..., gt=0.0, description="δV of the trailer volume gate (paper section 3.4)")
+
+    @property
+    def vehicle_volume_m3(self) -> float:
+        return self.truck.volume_m3 + self.trailer.volume_m3
+
+
+def _paper_vehicles() -> dict[str, VehicleConfig]:
+    """The three vehicles of the paper's Table 1 (H x W x L) with documented kinematic figures.
+
+    Kinematic figures are typical values, not measured on the paper's vehicles: Twizy wheelbase
+    1.69 m (Renault data sheet); MAN TGX 4x2 tractor 3.60 m, Volvo FH 4x2 tractor 3.70 m; fifth
+    wheel about 0.3 m ahead of the rear axle; semitrailer kingpin set back 1.2 m from the front.
+    """
+    return {
+        "twizy": VehicleConfig(
+            description="Renault Twizy with a box trailer on a drawbar",
+            truck=TruckGeometry(length_m=2.00, width_m=1.57, height_m=1.50, floor_m=0.10,
+                                wheelbase_m=1.69, front_overhang_m=0.25, hitch_behind_rear_axle_m=0.45),
+            trailer=TrailerGeometry(length_m=2.50, width_m=1.75, height_m=2.50, floor_m=0.35,
+                                    hitch_to_axle_m=2.40, hitch_to_front_m=-0.60),
+            vehicle_volume_tolerance_m3=10.0,
+            trailer_volume_tolerance_m3=7.0,
+        ),
+        "man_tgx": VehicleConfig(
+            description="MAN TGX 4x2 tractor with a 13.68 m semitrailer",
+            truck=TruckGeometry(length_m=2.77, width_m=2.77, height_m=2.86, floor_m=0.45,
+                                wheelbase_m=3.60, front_overhang_m=1.40, hitch_behind_rear_axle_m=-0.35),
+            trailer=TrailerGeometry(length_m=13.68, width_m=2.77, height_m=2.55, floor_m=1.20,
+                                    hitch_to_axle_m=7.90, hitch_to_front_m=1.20),
+            vehicle_volume_tolerance_m3=85.0,
+            trailer_volume_tolerance_m3=70.0,
+        ),
+        "volvo_fh": VehicleConfig(
+            description="Volvo FH 4x2 tractor with a 6.30 m semitrailer",
+            truck=TruckGeometry(length_m=2.55, width_m=2.50, height_m=2.50, floor_m=0.50,
+                                wheelbase_m=3.70, front_overhang_m=1.40, hitch_behind_rear_axle_m=-0.30),
+            trailer=TrailerGeometry(length_m=6.30, width_m=2.50, height_m=2.50, floor_m=1.20,
+                                    hitch_to_axle_m=4.20, hitch_to_front_m=0.90),
+            vehicle_volume_tolerance_m3=40.0,
+            trailer_volume_tolerance_m3=30.0,
+        ),
+    }
+
+
+# --------------------------------------------------------------------------- pipeline stages
+
+
+class CalibrationParams(Section):
+    reference_sensor: str = Field("l1", description="Sensor whose extrinsics are kept fixed")
+    method: Literal["gicp", "point_to_plane"] = "gicp"
+    frames: int = Field(5, ge=1, le=100, description="Frames of the static scene accumulated per sensor")
+    voxel_size_m: float = Field(0.2, gt=0.01, le=2.0)
+    normal_radius_m: float = Field(2.0, ge=0.5, le=10.0, description="Normals from >= 2 m: 1 m diverges on sparse 32-beam rings")
+    max_correspondence_m: float = Field(1.0, gt=0.01, le=10.0)
+    max_iterations: int = Field(60, ge=1, le=1000)
+    min_fitness: float = Field(0.3, ge=0.0, le=1.0, description="Results below this fitness are refused")
+    min_overlap_points: int = Field(500, ge=10, description="Overlap needed to register two sensors directly")
+
+
+class ConcatenationParams(Section):
+    voxel_size_m: float = Field(0.1, ge=0.0, le=2.0, description="Voxel edge of the centroid grid (Eq. 1-2); 0 disables it")
+    sync_tolerance_s: float = Field(0.06, gt=0.0, le=1.0, description="Sensor frames further than this from the reference time are dropped")
+    reference: Literal["earliest", "latest", "mean"] = Field("earliest", description="Which sensor stamp is the frame's reference time")
+    motion_interpolation: bool = Field(True, description="Interpolate each point to the reference time (Eq. 3)")
+
+
+class RegionParams(Section):
+    x_min_m: float = -40.0
+    x_max_m: float = 40.0
+    y_min_m: float = -25.0
+    y_max_m: float = 40.0
+    z_min_m: float = -1.0
+    z_max_m: float = 5.0
+    ground_distance_threshold_m: float = Field(0.15, gt=0.0, le=2.0)
+    ransac_iterations: int = Field(100, ge=1, le=10000)
+    ransac_sample_voxel_m: float = Field(0.5, ge=0.0, le=5.0, description="Voxel size of the cloud RANSAC samples from; 0 uses every point")
+    max_ground_tilt_deg: float = Field(10.0, ge=0.0, le=45.0, description="Planes tilted more than this from horizontal are not ground")
+
+
+class ClusteringParams(Section):
+    tolerance_m: float = Field(0.7, gt=0.0, le=5.0, description="ε of Eq. 4")
+    min_points: int = Field(10, ge=1)
+    max_points: int = Field(200000, ge=1)
+
+
+class ClassificationParams(Section):
+    trailer_tolerance_m: float = Field(0.35, gt=0.0, le=5.0, description="ε of the second clustering inside a vehicle cluster")
+    min_trailer_points: int = Field(30, ge=1)
+
+
+class CentroidParams(Section):
+    enabled: bool = True
+
+
+class TrackingParams(Section):
+    max_distance_m: float = Field(1.0, gt=0.0, le=20.0, description="Association gate (paper: 1 m)")
+    max_age_frames: int = Field(3, ge=1, le=100)
+    min_hits: int = Field(3, ge=1, le=100)
+    process_noise: float = Field(1.0, gt=0.0)
+    measurement_noise_m: float = Field(0.15, gt=0.0)
+
+
+class OrientationParams(Section):
+    history_frames: int = Field(10, ge=2, le=200, description="Corrected centroids in the PCA history (Eq. 11-12)")
+    min_travel_m: float = Field(0.3, ge=0.0, le=20.0, description="Below this travel over the history the yaw is held")
+    max_yaw_rate_deg_s: float = Field(45.0, gt=0.0, le=720.0, description="Bound on the yaw change between frames")
+    smoothing: float = Field(0.5, ge=0.0, lt=1.0, description="Weight of the previous yaw in the smoothed yaw")
+
+
+class Params(Section):
+    """All parameters of i2v-loc."""
+
+    sensors: list[SensorConfig] = Field(default_factory=_paper_field_sensors)
+    vehicles: dict[str, VehicleConfig] = Field(default_factory=_paper_vehicles)
+    calibration: CalibrationParams = Field(default_factory=CalibrationParams)
+    concatenation: ConcatenationParams = Field(default_factory=ConcatenationParams)
+    region: RegionParams = Field(default_factory=RegionParams)
+    clustering: ClusteringParams = Field(default_factory=ClusteringParams)
+    classification: ClassificationParams = Field(default_factory=ClassificationParams)
+    centroid: CentroidParams = Field(default_factory=CentroidParams)
+    tracking: TrackingParams = Field(default_factory=TrackingParams)
+    orientation: OrientationParams = Field(default_factory=OrientationParams)
+
+    @model_validator(mode="after")
+    def _check_names(self) -> "Params":
+        names = [s.name for s in self.sensors]
+        if len(set(names)) != len(names):
+            raise ValueError(f"sensor names must be unique, got {names}")
+        return self
+
+    def sensor(self, name: str) -> SensorConfig:
+        for s in self.sensors:
+            if s.name == name:
+                return s
+        raise KeyError(f"no sensor named {name!r}; known: {[s.name for s in self.sensors]}")
+
+
+# --------------------------------------------------------------------------- loading and saving
+
+
+class ParamsError(ValueError):
+    """A parameter file or patch is invalid; the message names the file, key and allowed range."""
+
+
+def deep_merge(base: dict, patch: dict) -> dict:
+    """JSON merge patch (RFC 7396): dicts merge, ``None`` deletes, anything else replaces."""
+    out = copy.deepcopy(base)
+    for key, value in patch.items():
+        if value is None:
+            out.pop(key, None)
+        elif isinstance(value, dict) and isinstance(out.get(key), dict):
+            out[key] = deep_merge(out[key], value)
+        else:
+            out[key] = copy.deepcopy(value)
+    return out
+
+
+def _constraint_text(model: type[BaseModel], loc: tuple) -> str:
+    """The allowed range of the field at ``loc``, from the schema, e.g. '>= 0, <= 5'."""
+    schema = model.model_json_schema()
+    node: dict[str, Any] = schema
+    defs = schema.get("$defs", {})
+    for part in loc:
+        if "$ref" in node:
+            node = defs[node["$ref"].split("/")[-1]]
+        props = node.get("properties")
+        if props and part in props:
+            node = props[part]
+        elif isinstance(part, int) and "items" in node:
+            node = node["items"]
+        elif "additionalProperties" in node and isinstance(node["additionalProperties"], dict):
+            node = node["additionalProperties"]
+        else:
+            return ""
+    if "$ref" in node:
+        node = defs[node["$ref"].split("/")[-1]]
+    words = {"minimum": ">=", "maximum": "<=", "exclusiveMinimum": ">", "exclusiveMaximum": "<"}
+    parts = [f"{sym} {node[k]}" for k, sym in words.items() if k in node]
+    if "enum" in node:
+        parts.append("one of " + ", ".join(map(str, node["enum"])))
+    if "anyOf" in node:
+        enums = [str(c["const"]) for c in node["anyOf"] if "const" in c]
+        if enums:
+            parts.append("one of " + ", ".join(enums))
+    return ", ".join(parts)
+
+
+def describe_validation_error(err: ValidationError, source: str = "parameters") -> list[dict[str, Any]]:
+    """Turn a pydantic error into records with field, value, message and allowed range."""
+    out = []
+    for e in err.errors():
+        loc = tuple(e["loc"])
+        out.append(
+            {
+                "source": source,
+                "field": ".".join(str(p) for p in loc),
+                "value": e.get("input"),
+                "message": e["msg"],
+                "allowed": _constraint_text(Params, loc),
+            }
+        )
+    return out
+
+
+def format_errors(records: list[dict[str, Any]]) -> str:
+    lines = []
+    for r in records:
+        allowed = f" (allowed: {r['allowed']})" if r["allowed"] else ""
+        value = json.dumps(r["value"], default=str) if not isinstance(r["value"], dict) else "{...}"
+        lines.append(f"{r['source']}: {r['field']} = {value}: {r['message']}{allowed}")
+    return "\n".join(lines)
+
+
+def validate_params(data: dict, source: str = "parameters") -> Params:
+    try:
+        return Params.model_validate(data)
+    except ValidationError as err:
+        raise ParamsError(format_errors(describe_validation_error(err, source))) from err
+
+
+def read_yaml(path: str | Path) -> dict:
+    path = Path(path)
+    if not path.is_file():
+        raise ParamsError(f"{path}: no such parameter file")
+    try:
+        data = yaml.safe_load(path.read_text()) or {}
+    except yaml.YAMLError as err:
+        raise ParamsError(f"{path}: not valid YAML: {err}") from err
+    if not isinstance(data, dict):
+        raise ParamsError(f"{path}: expected a mapping of sections at the top level, got {type(data).__name__}")
+    return data
+
+
+def load_params(*paths: str | Path | None) -> Params:
+    """Defaults, then each file in order (later files win), validated once per file."""
+    merged = Params().model_dump(mode="json")
+    for path in paths:
+        if path is None:
+            continue
+        data = read_yaml(path)
+        merged = deep_merge(merged, data)
+        validate_params(merged, source=str(path))
+    return validate_params(merged)
+
+
+def apply_patch(params: Params, patch: dict, source: str = "patch") -> Params:
+    """A new validated ``Params`` with a JSON merge patch applied; ``params`` is left unchanged."""
+    if not isinstance(patch, dict):
+        raise ParamsError(f"{source}: a patch must be a JSON object of sections")
+    return validate_params(deep_merge(params.model_dump(mode="json"), patch), source)
+
+
+def dump_yaml(params: Params | dict, sections: list[str] | None = None) -> str:
+    data = params.model_dump(mode="json") if isinstance(params, BaseModel) else params
+    if sections:
+        data = {k: data[k] for k in sections}
+    return yaml.safe_dump(data, sort_keys=False, allow_unicode=True)
+
+
+def save_params(params: Params, path: str | Path) -> None:
+    """Write atomically: a temporary file in the same folder, then rename."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_suffix(path.suffix + ".tmp")
+    tmp.write_text(dump_yaml(params))
+    tmp.replace(path)
+
+
+def json_schema() -> dict:
+    return Params.model_json_schema()
