@@ -29,7 +29,7 @@ $(VENV)/.installed: pyproject.toml scripts/system-deps.sh
 
 $(VENV)/.installed-test: $(VENV)/.installed
 	bash scripts/system-deps.sh --test
-	$(BIN)/pip install --quiet -e '.[test]'
+	$(BIN)/pip install --quiet -e '.[test,distributed]'
 	touch $@
 
 clean:
