@@ -1,0 +1,119 @@
+"""Aggregate per-frame records into the reported metrics, overall and per vehicle / maneuver."""
+
+from __future__ import annotations
+
+from collections import defaultdict
+
+import numpy as np
+
+from i2v_loc.evaluation import metrics as m
+
+TASK_KEYS = ("method", "subset", "recording")
+MANEUVERS = ("straight", "single_turn", "long_curve", "u_turn", "lane_change", "roundabout",
+             "reverse_docking", "standstill")
+
+
+def column(records: list[dict], key: str) -> np.ndarray:
+    return np.array([np.nan if r.get(key) is None else r.get(key) for r in records], dtype=float)
+
+
+def _flag(records: list[dict], key: str) -> np.ndarray:
+    return np.array([bool(r.get(key)) for r in records], dtype=bool)
+
+
+def _rate(numerator: np.ndarray, denominator: np.ndarray) -> float:
+    n = int(denominator.sum())
+    return float((numerator & denominator).sum() / n) if n else float("nan")
+
+
+def _switches(records: list[dict]) -> dict[str, int]:
+    """ID switches per GT object, summed: the vehicle id and each unit's track id."""
+    chains: dict[tuple, list[dict]] = defaultdict(list)
+    for r in records:
+        if r["kind"] == "gt":
+            chains[tuple(r.get(k) for k in TASK_KEYS) + (r["gt_id"],)].append(r)
+    out = {"vehicle_id_switches": 0, "truck_id_switches": 0, "trailer_id_switches": 0}
+    for chain in chains.values():
+        chain.sort(key=lambda r: r["frame"])
+        out["vehicle_id_switches"] += m.id_switches([r["est_id"] for r in chain])
+        out["truck_id_switches"] += m.id_switches([r["truck_track_id"] for r in chain])
+        out["trailer_id_switches"] += m.id_switches([r["trailer_track_id"] for r in chain])
+    return out
+
+
+def _latency(frame_rows: list[dict]) -> dict[str, float]:
+    stages = sorted({k for row in frame_rows for k in row if k.startswith("latency_")})
+    out = {}
+    for key in stages:
+        stage = key[len("latency_"):-len("_ms")]
+        stats = m.latency_stats(column(frame_rows, key))
+        prefix = "latency_ms" if stage == "total" else f"latency_{stage}_ms"
+        for stat, value in stats.items():
+            out[f"{prefix}_{stat}"] = value
+    return out
+
+
+def summarize(records: list[dict], frame_rows: list[dict]) -> dict:
+    """All metrics of a group of records; ``frame_rows`` are the frames the group covers."""
+    gt = [r for r in records if r["kind"] == "gt"]
+    out: dict = {"gt_vehicle_frames": len(gt), "frames": len(frame_rows)}
+    flip_errors = []
+    for unit in ("truck", "trailer"):
+        yaw_err = column(gt, f"{unit}_yaw_err_deg")
+        flip_errors.append(yaw_err)
+        out[f"{unit}_frames_in_gt"] = int(_flag(gt, f"{unit}_in_gt").sum())
+        out[f"{unit}_frames_reported"] = int((_flag(gt, f"{unit}_reported") & _flag(gt, f"{unit}_in_gt")).sum())
+        out[f"{unit}_detection_rate"] = _rate(_flag(gt, f"{unit}_reported"), _flag(gt, f"{unit}_eligible"))
+        out[f"{unit}_pos_rmse_m"] = m.rmse(column(gt, f"{unit}_pos_err_m"))
+        out[f"{unit}_yaw_rmse_deg"] = m.rmse(yaw_err)
+        out[f"{unit}_heading_flip_rate"] = m.heading_flip_rate(yaw_err)
+    out["heading_flip_rate"] = m.heading_flip_rate(np.concatenate(flip_errors)) if gt else float("nan")
+    hitch = column(gt, "hitch_err_deg")
+    out["hitch_rmse_deg"] = m.rmse(hitch)
+    out["hitch_frames"] = int(np.isfinite(hitch).sum())
+    for prefix, label in (("dcap", ""), ("static", "static_")):
+        dt = column(gt, f"{prefix}_dT_m")
+        ok = np.isfinite(dt)
+        out[f"{label}dcap_frames"] = int(ok.sum())
+        mean = (lambda a: float(np.mean(np.abs(a[ok]))) if ok.any() else float("nan"))
+        out[f"{label}delta_T_m"] = mean(dt)
+        for axis in "xyz":
+            out[f"{label}delta_{axis}_m"] = mean(column(gt, f"{prefix}_d{axis}_m"))
+        out[f"{label}rra_rad"] = mean(column(gt, f"{prefix}_rra_rad"))
+    out.update(_switches(records))
+    out["false_vehicles"] = sum(1 for r in records if r["kind"] == "false")
+    out["false_vehicles_per_frame"] = out["false_vehicles"] / len(frame_rows) if frame_rows else float("nan")
+    out.update(_latency(frame_rows))
+    return out
+
+
+def _frame_key(row: dict) -> tuple:
+    return tuple(row.get(k) for k in TASK_KEYS) + (row.get("frame"),)
+
+
+def summarize_groups(records: list[dict], frame_rows: list[dict]) -> dict:
+    """``overall``, ``by_vehicle``, ``by_maneuver`` and ``by_recording`` summaries."""
+    frames_by_key = {_frame_key(r): r for r in frame_rows}
+
+    def group(key: str) -> dict:
+        buckets: dict[str, list[dict]] = defaultdict(list)
+        for r in records:
+            buckets[str(r.get(key))].append(r)
+        out = {}
+        for name, recs in sorted(buckets.items()):
+            keys = {_frame_key(r) for r in recs}
+            out[name] = summarize(recs, [frames_by_key[k] for k in keys if k in frames_by_key])
+        return out
+
+    by_recording = defaultdict(list)
+    for row in frame_rows:
+        by_recording[row.get("recording")].append(row)
+    recs_by_recording = defaultdict(list)
+    for r in records:
+        recs_by_recording[r.get("recording")].append(r)
+    return {
+        "overall": summarize(records, frame_rows),
+        "by_vehicle": group("vehicle"),
+        "by_maneuver": group("maneuver"),
+        "by_recording": {str(k): summarize(recs_by_recording.get(k, []), rows) for k, rows in sorted(by_recording.items())},
+    }
