@@ -1,0 +1,192 @@
+"""``i2v-loc serve``: the live yard service (REST, WebSocket, parameters, metrics, dashboard)."""
+
+from __future__ import annotations
+
+import ipaddress
+import logging
+import signal
+import socket
+import sys
+import threading
+import time
+from pathlib import Path
+
+from i2v_loc.cli import UserError
+
+DEFAULT_SOURCE = "sim:docking"
+
+
+def register(sub) -> None:
+    p = sub.add_parser(
+        "serve", help="run the live service: REST API, WebSocket stream and dashboard",
+        description="Run the pipeline live on a source and serve its states (see docs/service.md).",
+    )
+    p.add_argument("--source", default=DEFAULT_SOURCE,
+                   help="sim[:SCENARIO] (simulated yard, loops; default %(default)s) or replay:REC_DIR")
+    p.add_argument("--params", type=Path, metavar="FILE",
+                   help="parameter file: loaded at start (if it exists) and rewritten on every change")
+    p.add_argument("--host", default="127.0.0.1", help="address to bind (default %(default)s: this machine only)")
+    p.add_argument("--port", type=int, default=8000, help="port (default %(default)s; 0 picks a free one)")
+    p.add_argument("--loop", action="store_true", help="replay the recording in an endless loop")
+    p.add_argument("--token-file", type=Path, metavar="PATH",
+                   help="file holding the API token (default: the environment variable I2V_LOC_API_TOKEN)")
+    p.add_argument("--require-token-for-reads", action="store_true", help="reads need the token too")
+    p.add_argument("--vehicle", default="man_tgx", help="vehicle of the simulated yard (default %(default)s)")
+    p.add_argument("--sim-seed", type=int, default=1, help="seed of the simulated yard (default %(default)s)")
+    p.add_argument("--sim-duration", type=float, default=30.0, metavar="S",
+                   help="length of the simulated recording that loops (default %(default)s s)")
+    p.add_argument("--cache-dir", type=Path, help="where simulated recordings are cached (default ~/.cache/i2v-loc/sim)")
+    p.add_argument("--max-points", type=int, default=2000,
+                   help="foreground points per WebSocket message for the dashboard (default %(default)s; 0: none)")
+    p.add_argument("--no-realtime", action="store_true", help="process frames as fast as possible (benchmarking)")
+    p.add_argument("--access-log", action="store_true", help="log every HTTP request")
+    p.add_argument("--quiet", action="store_true", help="no live status line")
+    p.set_defaults(func=run)
+
+
+def run(args) -> int:
+    from i2v_loc.params import load_params
+    from i2v_loc.sources import SourceError, open_source
+    from service.auth import AuthConfig, TokenError, load_token
+
+    if not 0 <= args.port <= 65535:
+        raise UserError(f"--port must be within 0..65535, got {args.port}")
+    if args.max_points < 0:
+        raise UserError(f"--max-points must be >= 0, got {args.max_points}")
+    try:
+        token = load_token(args.token_file)
+    except TokenError as err:
+        raise UserError(str(err)) from err
+    if args.require_token_for_reads and token is None:
+        raise UserError("--require-token-for-reads needs a token: set I2V_LOC_API_TOKEN or pass --token-file PATH")
+    sock = _bind(args.host, args.port)
+    try:
+        source = open_source(args.source, loop=args.loop, vehicle=args.vehicle, seed=args.sim_seed,
+                             duration_s=args.sim_duration, cache_dir=args.cache_dir)
+    except SourceError as err:
+        sock.close()
+        raise UserError(str(err)) from err
+    params_file = args.params
+    if params_file is not None and params_file.exists() and not params_file.is_file():
+        raise UserError(f"--params {params_file}: not a file")
+    existing = params_file if params_file is not None and params_file.is_file() else None
+    params = load_params(source.sensors_file, existing)
+    return _serve(args, sock, source, params, params_file, AuthConfig(token, args.require_token_for_reads))
+
+
+def _bind(host: str, port: int) -> socket.socket:
+    """Bind here, so a busy port is a clear error (and port 0 gives a free one)."""
+    try:
+        family = socket.AF_INET6 if ipaddress.ip_address(host).version == 6 else socket.AF_INET
+    except ValueError:
+        family = socket.AF_INET
+    sock = socket.socket(family, socket.SOCK_STREAM)
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+    try:
+        sock.bind((host, port))
+    except OSError as err:
+        sock.close()
+        raise UserError(f"cannot listen on {host}:{port}: {err.strerror or err}") from err
+    sock.listen(128)
+    sock.set_inheritable(True)
+    return sock
+
+
+def _serve(args, sock, source, params, params_file, auth) -> int:
+    import uvicorn
+
+    from service.app import create_app
+    from service.core import build_service
+
+    logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
+    service = build_service(source, params, params_file, auth, realtime=not args.no_realtime, points_cap=args.max_points)
+    if params_file is not None and not params_file.exists():
+        service.store.save()
+    app = create_app(service)
+    host, port = sock.getsockname()[:2]
+    shown = f"[{host}]" if ":" in host else host
+    url = f"http://{'127.0.0.1' if host in ('0.0.0.0', '::') else shown}:{port}/"
+    _announce(args, source, service, params_file, auth, url)
+    config = uvicorn.Config(app, log_level="warning", access_log=args.access_log, lifespan="on",
+                            ws_ping_interval=20.0, ws_ping_timeout=20.0)
+    server = uvicorn.Server(config)
+    received: list[int] = []
+    # uvicorn shuts down gracefully on SIGINT/SIGTERM, then re-raises the signal to the handler
+    # in place before it started: these record it instead of killing the process mid-message.
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, lambda signum, _frame: received.append(signum))
+    status = None if args.quiet else _StatusLine(service, url)
+    if status:
+        status.start()
+    try:
+        server.run(sockets=[sock])
+    finally:
+        if status:
+            status.stop()
+    saved = f"; parameters saved to {params_file}" if params_file else ""
+    print(f"i2v-loc serve: stopped after {service.runner.frames_processed} frames{saved}", file=sys.stderr)
+    return 0
+
+
+def _announce(args, source, service, params_file, auth, url) -> None:
+    info = service.source_info
+    lines = [
+        f"i2v-loc serve: source {info.get('source')} ({info.get('frames')} frames at {source.rate_hz:g} Hz"
+        f"{', looping' if source.n_frames is None else ''})",
+        f"  dashboard  {url}",
+        f"  API        {url}api/v1/  (docs {url}docs)",
+        f"  parameters {params_file if params_file else 'not persisted (pass --params FILE to keep changes)'}",
+        "  writes     " + ("need the bearer token" if auth.token else
+                          "disabled: set I2V_LOC_API_TOKEN or pass --token-file PATH to enable them"),
+    ]
+    if auth.require_token_for_reads:
+        lines.append("  reads      need the bearer token")
+    host = sock_host = args.host
+    if sock_host not in ("127.0.0.1", "localhost", "::1") and not auth.require_token_for_reads:
+        lines.append(f"  warning    listening on {host}: reads are open to the network")
+    print("\n".join(lines), file=sys.stderr, flush=True)
+
+
+class _StatusLine:
+    """A live status line on the terminal (rewritten in place), or a log line every 10 s."""
+
+    def __init__(self, service, url: str):
+        self.service = service
+        self.url = url
+        self.tty = sys.stderr.isatty()
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name="i2v-loc-status", daemon=True)
+
+    def start(self) -> None:
+        self._thread.start()
+
+    def stop(self) -> None:
+        self._stop.set()
+        self._thread.join(2.0)
+        if self.tty:
+            sys.stderr.write("\n")
+
+    def _run(self) -> None:
+        interval_s = 1.0 if self.tty else 10.0
+        while not self._stop.wait(interval_s):
+            line = format_status(self.service.runner.status(), self.service.hub.client_count)
+            if self.tty:
+                sys.stderr.write("\r\033[K" + line + f" | {self.url}")
+            else:
+                sys.stderr.write(time.strftime("%H:%M:%S ") + line + "\n")
+            sys.stderr.flush()
+
+
+def format_status(status: dict, ws_clients: int) -> str:
+    vehicles = status.get("vehicles") or []
+    if vehicles:
+        shown = ", ".join(
+            f"#{v['id']} {v.get('vehicle') or '?'} hitch "
+            + (f"{v['hitch_deg']:+.1f}°" if isinstance(v.get("hitch_deg"), (int, float)) else "-")
+            for v in vehicles[:4]
+        )
+    else:
+        shown = "no vehicle"
+    drops = sum(status.get("frames_dropped", {}).values())
+    return (f"{status.get('frame_rate_hz', 0):5.1f} fps | frame {status.get('frame')} | {shown} | "
+            f"dropped {drops} | params v{status.get('params_version')} | ws {ws_clients}")

@@ -1,0 +1,245 @@
+"""The FastAPI application: REST API under /api/v1, WebSocket /ws/states, /metrics, dashboard /."""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import json
+from pathlib import Path
+
+from fastapi import APIRouter, Depends, FastAPI, HTTPException, Query, Request, WebSocket, WebSocketDisconnect
+from fastapi.encoders import jsonable_encoder
+from fastapi.exceptions import RequestValidationError
+from fastapi.responses import FileResponse, JSONResponse, Response
+from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
+from fastapi.staticfiles import StaticFiles
+from prometheus_client import CONTENT_TYPE_LATEST
+
+from i2v_loc import __version__
+from i2v_loc.params import json_schema
+from service.auth import bearer_from_header
+from service.core import Service
+from service.params_store import PatchRejected, UnknownVersion
+
+STATIC_DIR = Path(__file__).with_name("static")
+WS_AUTH_TIMEOUT_S = 5.0
+MAX_PATCH_BYTES = 1_000_000
+PATCH_MEDIA_TYPES = ("application/json", "application/merge-patch+json")
+
+_bearer = HTTPBearer(auto_error=False, description="The service's API token (I2V_LOC_API_TOKEN or --token-file)")
+
+
+def _error(status: int, message: str) -> dict:
+    return {"description": message, "content": {"application/json": {"example": {"detail": message}}}}
+
+
+def create_app(service: Service) -> FastAPI:
+    @contextlib.asynccontextmanager
+    async def lifespan(app: FastAPI):
+        service.hub.bind(asyncio.get_running_loop())
+        service.start()
+        try:
+            yield
+        finally:
+            service.hub.unbind()
+            await asyncio.to_thread(service.stop)
+
+    app = FastAPI(
+        title="i2v-loc yard service",
+        version=__version__,
+        description="Live localization of articulated vehicles (truck + trailer) from infrastructure LiDARs. "
+        "Reads are open unless the service runs with --require-token-for-reads; writes need the bearer token.",
+        lifespan=lifespan,
+    )
+    app.state.service = service
+
+    def guard(write: bool):
+        def check(creds: HTTPAuthorizationCredentials | None = Depends(_bearer)) -> None:
+            decision = service.auth.check(creds.credentials if creds else None, write)
+            if not decision.allowed:
+                raise HTTPException(decision.status, decision.message, headers=decision.headers or None)
+
+        return check
+
+    read_guard, write_guard = Depends(guard(False)), Depends(guard(True))
+    auth_errors = {401: _error(401, "Token missing"), 403: _error(403, "Token wrong or none configured")}
+    api = APIRouter(prefix="/api/v1", dependencies=[read_guard], responses=auth_errors)
+
+    @app.exception_handler(RequestValidationError)
+    async def _invalid_request(request: Request, exc: RequestValidationError):
+        errors = [{"field": ".".join(str(p) for p in e.get("loc", ())), "message": e.get("msg", ""),
+                   "value": e.get("input")} for e in exc.errors()]
+        return JSONResponse(status_code=422, content=jsonable_encoder(
+            {"detail": "invalid request: " + "; ".join(f"{e['field']}: {e['message']}" for e in errors),
+             "errors": errors}))
+
+    # ------------------------------------------------------------------ state
+
+    @api.get("/health", tags=["status"], summary="Liveness, readiness and per-sensor status")
+    def health() -> dict:
+        return service.health()
+
+    @api.get("/state", tags=["state"], summary="The latest frame (state line of docs/formats.md)",
+             responses={503: _error(503, "No frame processed yet")})
+    def state() -> dict:
+        latest = service.runner.latest
+        if latest is None:
+            raise HTTPException(503, "no frame has been processed yet; retry shortly", headers={"Retry-After": "1"})
+        return latest
+
+    @api.get("/vehicles", tags=["state"], summary="Vehicles of the latest frame")
+    def vehicles() -> dict:
+        latest = service.runner.latest or {}
+        return {"frame": latest.get("frame"), "stamp_s": latest.get("stamp_s"), "vehicles": latest.get("vehicles") or []}
+
+    @api.get("/vehicles/{vehicle_id}", tags=["state"], summary="One vehicle of the latest frame",
+             responses={404: _error(404, "No such vehicle in the latest frame")})
+    def vehicle(vehicle_id: int) -> dict:
+        latest = service.runner.latest or {}
+        found = [v for v in latest.get("vehicles") or [] if v.get("id") == vehicle_id]
+        if not found:
+            known = [v.get("id") for v in latest.get("vehicles") or []]
+            raise HTTPException(404, f"no vehicle with id {vehicle_id} in the latest frame; known ids: {known}")
+        return found[0]
+
+    @api.get("/sensors", tags=["status"], summary="Rate, last stamp and drops per sensor")
+    def sensors() -> dict:
+        return {"sensors": service.sensors()}
+
+    # ------------------------------------------------------------------ parameters
+
+    @api.get("/params", tags=["parameters"], summary="The parameters in force and their version")
+    def get_params() -> dict:
+        current = service.store.current
+        return {"version": current.version, "applied_version": service.runner.params_version,
+                "params": current.params.model_dump(mode="json")}
+
+    @api.get("/params/schema", tags=["parameters"], summary="JSON Schema of the parameters")
+    def get_schema() -> dict:
+        return json_schema()
+
+    @api.get("/params/history", tags=["parameters"], summary="Versions of the parameters since start-up")
+    def get_history() -> dict:
+        return {"current": service.store.version, "versions": service.store.history()}
+
+    patch_body = {"requestBody": {"required": True, "description": "A JSON merge patch (RFC 7396) of the parameters",
+                                  "content": {t: {"schema": {"type": "object"}} for t in PATCH_MEDIA_TYPES}}}
+
+    @api.patch("/params", tags=["parameters"], summary="Change parameters with a JSON merge patch",
+               dependencies=[write_guard], openapi_extra=patch_body,
+               responses={400: _error(400, "Body is not JSON"), 415: _error(415, "Not a JSON body"),
+                          422: _error(422, "Validation failed: field, value and allowed range per error")})
+    async def patch_params(request: Request):
+        patch = await _json_body(request)
+        try:
+            version = await asyncio.to_thread(service.store.patch, patch)
+        except PatchRejected as err:
+            return _rejected(err)
+        return _accepted(version)
+
+    @api.post("/params/rollback/{version}", tags=["parameters"], summary="Make an earlier version current again",
+              dependencies=[write_guard], responses={404: _error(404, "Unknown version")})
+    async def rollback(version: int):
+        try:
+            entry = await asyncio.to_thread(service.store.rollback, version)
+        except UnknownVersion as err:
+            raise HTTPException(404, err.args[0]) from None
+        except PatchRejected as err:  # an old version that today's model refuses
+            return _rejected(err)
+        return _accepted(entry)
+
+    # ------------------------------------------------------------------ metrics, dashboard
+
+    @app.get("/metrics", tags=["status"], summary="Prometheus metrics", dependencies=[read_guard],
+             response_class=Response, responses={200: {"content": {"text/plain": {}}}, **auth_errors})
+    def metrics() -> Response:
+        return Response(service.metrics.render(), media_type=CONTENT_TYPE_LATEST)
+
+    @app.get("/", include_in_schema=False)
+    def dashboard() -> FileResponse:
+        return FileResponse(STATIC_DIR / "index.html")
+
+    app.mount("/static", StaticFiles(directory=STATIC_DIR), name="static")
+
+    @app.websocket("/ws/states")
+    async def ws_states(websocket: WebSocket, points: bool = False):
+        await _serve_states(service, websocket, points)
+
+    app.include_router(api)
+    return app
+
+
+async def _json_body(request: Request):
+    media = request.headers.get("content-type", "").split(";")[0].strip().lower()
+    if media not in PATCH_MEDIA_TYPES:
+        raise HTTPException(415, f"send the patch as JSON (Content-Type {' or '.join(PATCH_MEDIA_TYPES)}), got {media or 'none'!r}")
+    body = await request.body()
+    if len(body) > MAX_PATCH_BYTES:
+        raise HTTPException(413, f"the patch is larger than {MAX_PATCH_BYTES} bytes")
+    if not body.strip():
+        raise HTTPException(400, "empty body: send a JSON object, e.g. {\"clustering\": {\"tolerance_m\": 0.5}}")
+    try:
+        return json.loads(body)
+    except (UnicodeDecodeError, json.JSONDecodeError) as err:
+        raise HTTPException(400, f"the body is not valid JSON: {err}") from None
+
+
+def _rejected(err: PatchRejected) -> JSONResponse:
+    return JSONResponse(status_code=422, content=jsonable_encoder({"detail": str(err), "errors": err.errors}))
+
+
+def _accepted(version) -> dict:
+    return {"version": version.version, "source": version.source, "patch": version.patch,
+            "params": version.params.model_dump(mode="json")}
+
+
+async def _serve_states(service: Service, websocket: WebSocket, want_points: bool) -> None:
+    """One JSON message per frame; a slow client only ever gets the newest state."""
+    await websocket.accept()
+    if not await _ws_authorised(service, websocket):
+        return
+    client = service.hub.add(want_points)
+    sender = asyncio.create_task(_send_loop(websocket, client))
+    receiver = asyncio.create_task(_receive_loop(websocket))
+    try:
+        await asyncio.wait({sender, receiver}, return_when=asyncio.FIRST_COMPLETED)
+    finally:
+        service.hub.remove(client)
+        for task in (sender, receiver):
+            task.cancel()
+        await asyncio.gather(sender, receiver, return_exceptions=True)
+
+
+async def _send_loop(websocket: WebSocket, client) -> None:
+    with contextlib.suppress(WebSocketDisconnect, RuntimeError, OSError):
+        while True:
+            await websocket.send_text(await client.next_text())
+            client.sent += 1
+
+
+async def _receive_loop(websocket: WebSocket) -> None:
+    with contextlib.suppress(WebSocketDisconnect, RuntimeError, OSError):
+        while True:
+            await websocket.receive_text()  # clients have nothing to say; this notices them leave
+
+
+async def _ws_authorised(service: Service, websocket: WebSocket) -> bool:
+    """Token from the Authorization header, or (browsers) a first message {"token": "..."}."""
+    auth = service.auth
+    if not auth.require_token_for_reads:
+        return True
+    token = bearer_from_header(websocket.headers.get("authorization"))
+    if token is None:
+        try:
+            first = await asyncio.wait_for(websocket.receive_text(), WS_AUTH_TIMEOUT_S)
+            token = json.loads(first).get("token")
+        except (asyncio.TimeoutError, ValueError, AttributeError, WebSocketDisconnect, RuntimeError):
+            token = None
+        token = token if isinstance(token, str) and token else None
+    decision = auth.check(token, write=False)
+    if not decision.allowed:
+        with contextlib.suppress(RuntimeError, WebSocketDisconnect):
+            await websocket.send_text(json.dumps({"type": "error", "status": decision.status, "detail": decision.message}))
+            await websocket.close(code=1008, reason=decision.message[:120])
+        return False
+    return True

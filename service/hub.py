@@ -1,0 +1,117 @@
+"""Fan-out of messages from the pipeline thread to WebSocket clients.
+
+Each client has a slot holding at most one pending state: a newer state replaces an older one
+that the client has not taken yet (counted as dropped), so a stalled client only ever gets the
+newest state and never holds up the pipeline or the other clients. Parameter messages are rare
+and always delivered (a short separate queue).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import threading
+from collections import deque
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+PARAMS_QUEUE_LIMIT = 16
+
+
+@dataclass
+class Message:
+    """One outgoing message, serialised once: ``plain`` (state line) and ``with_points``."""
+
+    kind: str  # "state" or "params"
+    plain: str
+    with_points: str | None = None
+
+
+@dataclass(eq=False)
+class Client:
+    want_points: bool
+    state: Message | None = None
+    control: deque = field(default_factory=lambda: deque(maxlen=PARAMS_QUEUE_LIMIT))
+    dropped: int = 0
+    sent: int = 0
+    wake: asyncio.Event = field(default_factory=asyncio.Event)
+
+    def offer(self, message: Message) -> bool:
+        """Store a message for this client; True if an untaken state was replaced."""
+        replaced = False
+        if message.kind == "state":
+            replaced = self.state is not None
+            if replaced:
+                self.dropped += 1
+            self.state = message
+        else:
+            self.control.append(message)
+        self.wake.set()
+        return replaced
+
+    async def next_text(self) -> str:
+        """The next message to send (parameter messages first), waiting if there is none."""
+        while True:
+            if self.control:
+                return self._text(self.control.popleft())
+            if self.state is not None:
+                message, self.state = self.state, None
+                return self._text(message)
+            self.wake.clear()
+            await self.wake.wait()
+
+    def _text(self, message: Message) -> str:
+        if self.want_points and message.with_points is not None:
+            return message.with_points
+        return message.plain
+
+
+class Hub:
+    """Thread-safe ``publish`` from any thread; clients live on one asyncio loop."""
+
+    def __init__(self, on_drop: Callable[[], None] | None = None, on_count: Callable[[int], None] | None = None):
+        self._clients: set[Client] = set()
+        self._loop: asyncio.AbstractEventLoop | None = None
+        self._lock = threading.Lock()
+        self.on_drop = on_drop
+        self.on_count = on_count
+
+    def bind(self, loop: asyncio.AbstractEventLoop) -> None:
+        self._loop = loop
+
+    def unbind(self) -> None:
+        with self._lock:
+            self._loop = None
+
+    @property
+    def client_count(self) -> int:
+        return len(self._clients)
+
+    def add(self, want_points: bool) -> Client:
+        client = Client(want_points=want_points)
+        self._clients.add(client)
+        self._counted()
+        return client
+
+    def remove(self, client: Client) -> None:
+        self._clients.discard(client)
+        self._counted()
+
+    def publish(self, message: Message) -> None:
+        """Called from the pipeline thread: never blocks on clients."""
+        with self._lock:
+            loop = self._loop
+            if loop is None or loop.is_closed():
+                return
+            try:
+                loop.call_soon_threadsafe(self._deliver, message)
+            except RuntimeError:  # loop shutting down
+                pass
+
+    def _deliver(self, message: Message) -> None:
+        for client in list(self._clients):
+            if client.offer(message) and self.on_drop is not None:
+                self.on_drop()
+
+    def _counted(self) -> None:
+        if self.on_count is not None:
+            self.on_count(len(self._clients))

@@ -1,0 +1,304 @@
+"""The pipeline thread: pace the source in real time, run the pipeline, publish every state.
+
+Nothing here waits for an HTTP or WebSocket client: results are handed to the ``Hub`` (which
+never blocks) and kept as the latest state for the REST API. Parameter changes arrive on a queue
+and are applied between two frames. A frame that fails to load or to process is counted and
+skipped. When the pipeline falls behind real time, it jumps to the newest frame (the skipped ones
+are counted as dropped, reason ``late``), as a live system would.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import queue
+import threading
+import time
+from collections import deque
+from collections.abc import Callable
+
+import numpy as np
+
+from service.hub import Hub, Message
+from service.metrics import ServiceMetrics
+from service.params_store import Version
+
+log = logging.getLogger("i2v_loc.service")
+
+STALE_AFTER_S = 1.0
+RATE_WINDOW_S = 5.0
+
+
+class SensorStats:
+    """Per-sensor rate (sweeps per wall-clock second), last stamp, and drops."""
+
+    def __init__(self, names: list[str]):
+        self._names = list(names)
+        self._arrivals: dict[str, deque] = {n: deque(maxlen=200) for n in names}
+        self._last_stamp: dict[str, float | None] = {n: None for n in names}
+        self._drops: dict[str, int] = {n: 0 for n in names}
+        self._last_fault: dict[str, str | None] = {n: None for n in names}
+        self._lock = threading.Lock()
+
+    def observe(self, present: dict[str, float], faults: dict[str, str], expected: list[str], now_s: float) -> list[str]:
+        """Record one frame: ``present`` maps sensor to stamp; returns the sensors that dropped."""
+        dropped = []
+        with self._lock:
+            for name in dict.fromkeys([*expected, *present]):
+                if name not in self._arrivals:
+                    self._names.append(name)
+                    self._arrivals[name] = deque(maxlen=200)
+                    self._last_stamp[name], self._drops[name], self._last_fault[name] = None, 0, None
+                if name in present:
+                    self._arrivals[name].append(now_s)
+                    self._last_stamp[name] = present[name]
+                fault = faults.get(name) or (None if name in present else "missing")
+                self._last_fault[name] = fault
+                if fault:
+                    self._drops[name] += 1
+                    dropped.append(name)
+        return dropped
+
+    def snapshot(self, now_s: float) -> dict[str, dict]:
+        with self._lock:
+            return {name: self._one(name, now_s) for name in self._names}
+
+    def _one(self, name: str, now_s: float) -> dict:
+        arrivals = [t for t in self._arrivals[name] if now_s - t <= RATE_WINDOW_S]
+        rate = (len(arrivals) - 1) / (arrivals[-1] - arrivals[0]) if len(arrivals) >= 2 and arrivals[-1] > arrivals[0] else 0.0
+        last = self._arrivals[name][-1] if self._arrivals[name] else None
+        if last is None:
+            status = "waiting"
+        elif now_s - last > STALE_AFTER_S:
+            status = "stale"
+        elif self._last_fault[name]:
+            status = f"fault:{self._last_fault[name]}"
+        else:
+            status = "ok"
+        return {
+            "status": status,
+            "rate_hz": round(rate, 2),
+            "last_stamp_s": self._last_stamp[name],
+            "last_seen_ago_s": None if last is None else round(now_s - last, 3),
+            "drops": self._drops[name],
+            "last_fault": self._last_fault[name],
+        }
+
+
+def foreground_xy(result, cap: int) -> np.ndarray | None:
+    """At most ``cap`` foreground points (x, y) of a pipeline result, evenly decimated."""
+    points = getattr(result, "foreground", None)
+    if points is None or cap <= 0:
+        return None
+    points = np.asarray(points)
+    if points.ndim != 2 or points.shape[1] < 2 or len(points) == 0:
+        return None
+    step = max(1, int(np.ceil(len(points) / cap)))
+    return points[::step, :2]
+
+
+def _json_default(obj):
+    if isinstance(obj, np.generic):
+        return obj.item()
+    if isinstance(obj, np.ndarray):
+        return obj.tolist()
+    raise TypeError(f"{type(obj).__name__} is not JSON serialisable")
+
+
+def dumps(obj) -> str:
+    return json.dumps(obj, separators=(",", ":"), default=_json_default, allow_nan=False)
+
+
+def _finite(obj):
+    """Replace NaN / inf (not valid JSON) by None, recursively."""
+    if isinstance(obj, float):
+        return obj if np.isfinite(obj) else None
+    if isinstance(obj, dict):
+        return {k: _finite(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_finite(v) for v in obj]
+    return obj
+
+
+class PipelineRunner:
+    def __init__(self, source, pipeline, hub: Hub, metrics: ServiceMetrics, expected_sensors: list[str],
+                 realtime: bool = True, points_cap: int = 2000, clock: Callable[[], float] = time.monotonic):
+        self.source = source
+        self.pipeline = pipeline
+        self.hub = hub
+        self.metrics = metrics
+        self.expected_sensors = list(expected_sensors)
+        self.realtime = realtime
+        self.points_cap = points_cap
+        self.clock = clock
+        self.sensors = SensorStats(self.expected_sensors)
+        self.params_version = 0
+        self.frames_processed = 0
+        self.frames_dropped: dict[str, int] = {"source_error": 0, "pipeline_error": 0, "late": 0}
+        self.finished = False
+        self.error: str | None = None
+        self.started_s: float | None = None
+        self.last_frame_s: float | None = None
+        self._latest: dict | None = None
+        self._latest_lock = threading.Lock()
+        self._frame_times: deque = deque(maxlen=50)
+        self._updates: queue.SimpleQueue = queue.SimpleQueue()
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name="i2v-loc-pipeline", daemon=True)
+        self._pipeline_counters: dict[str, int] = {}
+
+    # ------------------------------------------------------------------ control (any thread)
+
+    def start(self) -> None:
+        self.started_s = self.clock()
+        self._thread.start()
+
+    def stop(self, timeout_s: float = 5.0) -> None:
+        self._stop.set()
+        if self._thread.is_alive():
+            self._thread.join(timeout_s)
+
+    @property
+    def alive(self) -> bool:
+        return self._thread.is_alive()
+
+    def submit(self, version: Version) -> None:
+        """Queue a parameter change; applied before the next frame."""
+        self._updates.put(version)
+
+    @property
+    def latest(self) -> dict | None:
+        with self._latest_lock:
+            return self._latest
+
+    def frame_rate_hz(self) -> float:
+        times = list(self._frame_times)
+        if len(times) < 2 or times[-1] <= times[0]:
+            return 0.0
+        return (len(times) - 1) / (times[-1] - times[0])
+
+    # ------------------------------------------------------------------ the thread
+
+    def _run(self) -> None:
+        try:
+            self._loop()
+        except Exception as err:  # a bug, not bad data: report it on /health and in the log
+            self.error = f"{type(err).__name__}: {err}"
+            log.exception("the pipeline thread stopped")
+
+    def _loop(self) -> None:
+        period_s = 1.0 / float(self.source.rate_hz)
+        total = self.source.n_frames
+        k = 0
+        t0 = self.clock()
+        while not self._stop.is_set():
+            self._apply_updates()
+            if total is not None and k >= total:
+                self.finished = True
+                self._stop.wait(0.05)
+                continue
+            if self.realtime:
+                now = self.clock()
+                due = t0 + k * period_s
+                if now < due:
+                    self._stop.wait(min(due - now, period_s))
+                    continue
+                newest = int((now - t0) / period_s)
+                if total is not None:
+                    newest = min(newest, total - 1)
+                if newest > k:
+                    self._drop("late", newest - k)
+                    k = newest
+            self._step(k)
+            k += 1
+
+    def _apply_updates(self) -> None:
+        while True:
+            try:
+                version = self._updates.get_nowait()
+            except queue.Empty:
+                return
+            try:
+                self.pipeline.update_params(version.patch)
+            except Exception as err:  # validated by the store already: should not happen
+                log.error("parameter version %d could not be applied: %s", version.version, err)
+                continue
+            self.params_version = version.version
+            self.metrics.params_version.set(version.version)
+            message = {"type": "params", "version": version.version, "source": version.source,
+                       "patch": version.patch, "params": version.params.model_dump(mode="json")}
+            text = dumps(message)
+            self.hub.publish(Message("params", text, text))
+
+    def _drop(self, reason: str, n: int = 1) -> None:
+        self.frames_dropped[reason] = self.frames_dropped.get(reason, 0) + n
+        self.metrics.frames_dropped.labels(reason).inc(n)
+
+    def _step(self, k: int) -> None:
+        try:
+            frame = self.source.frame(k)
+        except Exception as err:
+            self._drop("source_error")
+            log.warning("frame %d could not be read and was skipped: %s", k, err)
+            return
+        try:
+            result = self.pipeline.process(frame)
+            state = _finite(result.to_json())
+        except Exception as err:
+            self._drop("pipeline_error")
+            log.warning("frame %d failed in the pipeline and was skipped: %s: %s", k, type(err).__name__, err)
+            return
+        now = self.clock()
+        state["params_version"] = self.params_version
+        self._record(frame, state, now)
+        plain = dumps(state)
+        with_points = None
+        xy = foreground_xy(result, self.points_cap) if self.points_cap else None
+        if xy is not None:
+            flat = np.round(np.asarray(xy, dtype=np.float64), 2).ravel().tolist()
+            with_points = plain[:-1] + ',"foreground":{"xy":' + dumps(flat) + "}}"
+        with self._latest_lock:
+            self._latest = state
+        self.hub.publish(Message("state", plain, with_points))
+
+    def _record(self, frame, state: dict, now: float) -> None:
+        self.frames_processed += 1
+        self.last_frame_s = now
+        self._frame_times.append(now)
+        m = self.metrics
+        m.frames_processed.inc()
+        for stage, ms in (state.get("latency_ms") or {}).items():
+            if isinstance(ms, (int, float)):
+                m.stage_latency.labels(stage).observe(ms / 1000.0)
+        present = {name: scan.stamp_s for name, scan in frame.scans.items()}
+        faults = {str(k): str(v) for k, v in (state.get("faults") or {}).items()}
+        for name in self.sensors.observe(present, faults, self.expected_sensors, now):
+            m.sensor_drops.labels(name).inc()
+        for name, info in self.sensors.snapshot(now).items():
+            m.sensor_rate.labels(name).set(info["rate_hz"])
+            if info["last_stamp_s"] is not None:
+                m.sensor_last_stamp.labels(name).set(info["last_stamp_s"])
+        m.vehicles.set(len(state.get("vehicles") or []))
+        counters = getattr(self.pipeline, "counters", None) or {}
+        for reason, value in counters.items():
+            if isinstance(value, (int, float)):
+                delta = value - self._pipeline_counters.get(reason, 0)
+                if delta > 0:
+                    m.pipeline_drops.labels(str(reason)).inc(delta)
+                self._pipeline_counters[reason] = value
+
+    # ------------------------------------------------------------------ summaries
+
+    def status(self) -> dict:
+        latest = self.latest or {}
+        vehicles = [{"id": v.get("id"), "vehicle": v.get("vehicle"), "hitch_deg": v.get("hitch_deg")}
+                    for v in latest.get("vehicles") or []]
+        return {
+            "frames_processed": self.frames_processed,
+            "frames_dropped": dict(self.frames_dropped),
+            "frame_rate_hz": round(self.frame_rate_hz(), 2),
+            "vehicles": vehicles,
+            "frame": latest.get("frame"),
+            "stamp_s": latest.get("stamp_s"),
+            "params_version": self.params_version,
+        }

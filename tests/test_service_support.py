@@ -1,0 +1,99 @@
+"""Helpers shared by the service and dashboard tests: a live server on a free loopback port.
+
+No tests here; the other test_service_* files and test_dashboard.py import this module.
+"""
+
+from __future__ import annotations
+
+import json
+import socket
+import threading
+import time
+from pathlib import Path
+
+import uvicorn
+
+from i2v_loc.params import load_params
+from i2v_loc.sources import ReplaySource
+from service.app import create_app
+from service.auth import AuthConfig
+from service.core import build_service
+
+REPO = Path(__file__).resolve().parents[1]
+SAMPLES = REPO / "samples"
+TOKEN = "test-token-5f2c"
+
+
+def sample_recording() -> Path:
+    """The committed sample recording the service tests replay (smallest one with a vehicle)."""
+    candidates = sorted(p.parent for p in SAMPLES.glob("*/meta.yaml"))
+    if not candidates:
+        raise FileNotFoundError(f"no sample recording under {SAMPLES}")
+    return candidates[0]
+
+
+class LiveServer:
+    """uvicorn serving ``app`` in a thread on 127.0.0.1:<free port>."""
+
+    def __init__(self, app):
+        self.app = app
+        self.sock = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+        self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        self.sock.bind(("127.0.0.1", 0))
+        self.port = self.sock.getsockname()[1]
+        self.url = f"http://127.0.0.1:{self.port}"
+        self.ws_url = f"ws://127.0.0.1:{self.port}"
+        config = uvicorn.Config(app, log_level="warning", lifespan="on", ws_ping_interval=None)
+        self.server = uvicorn.Server(config)
+        self.thread = threading.Thread(target=self.server.run, kwargs={"sockets": [self.sock]}, daemon=True)
+
+    def __enter__(self) -> "LiveServer":
+        self.thread.start()
+        deadline = time.monotonic() + 20
+        while not self.server.started:
+            if time.monotonic() > deadline or not self.thread.is_alive():
+                raise RuntimeError("the test server did not start")
+            time.sleep(0.02)
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.server.should_exit = True
+        self.thread.join(15)
+        self.sock.close()
+
+
+def make_service(recording: Path, params_file: Path | None = None, token: str | None = TOKEN,
+                 require_token_for_reads: bool = False, loop: bool = True, pipeline_factory=None, **kwargs):
+    source = ReplaySource(recording, loop=loop)
+    existing = params_file if params_file is not None and params_file.is_file() else None
+    params = load_params(source.sensors_file, existing)
+    extra = {"pipeline_factory": pipeline_factory} if pipeline_factory else {}
+    return build_service(source, params, params_file, AuthConfig(token, require_token_for_reads), **extra, **kwargs)
+
+
+def serve(recording: Path, **kwargs) -> tuple[LiveServer, object]:
+    service = make_service(recording, **kwargs)
+    return LiveServer(create_app(service)), service
+
+
+async def next_state(ws, timeout_s: float = 10.0, where=lambda m: True) -> dict:
+    """The next WebSocket state message satisfying ``where``."""
+    import asyncio
+
+    async def wait():
+        while True:
+            message = json.loads(await ws.recv())
+            if message.get("type") == "state" and where(message):
+                return message
+
+    return await asyncio.wait_for(wait(), timeout_s)
+
+
+def wait_for(predicate, timeout_s: float = 10.0, what: str = "condition"):
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        value = predicate()
+        if value:
+            return value
+        time.sleep(0.05)
+    raise AssertionError(f"timed out after {timeout_s} s waiting for {what}")
