@@ -193,6 +193,15 @@ class RegionParams(Section):
     ransac_iterations: int = Field(100, ge=1, le=10000)
     ransac_sample_voxel_m: float = Field(0.5, ge=0.0, le=5.0, description="Voxel size of the cloud RANSAC samples from; 0 uses every point")
     max_ground_tilt_deg: float = Field(10.0, ge=0.0, le=45.0, description="Planes tilted more than this from horizontal are not ground")
+    min_ground_fraction: float = Field(0.1, ge=0.0, le=1.0, description="A plane supported by fewer sampled points than this fraction is not ground")
+
+    @model_validator(mode="after")
+    def _check_bounds(self) -> "RegionParams":
+        for axis in "xyz":
+            low, high = getattr(self, f"{axis}_min_m"), getattr(self, f"{axis}_max_m")
+            if not low < high:
+                raise ValueError(f"{axis}_min_m ({low}) must be below {axis}_max_m ({high})")
+        return self
 
 
 class ClusteringParams(Section):
@@ -200,10 +209,18 @@ class ClusteringParams(Section):
     min_points: int = Field(10, ge=1)
     max_points: int = Field(200000, ge=1)
 
+    @model_validator(mode="after")
+    def _check_points(self) -> "ClusteringParams":
+        if self.min_points > self.max_points:
+            raise ValueError(f"min_points ({self.min_points}) must not exceed max_points ({self.max_points})")
+        return self
+
 
 class ClassificationParams(Section):
     trailer_tolerance_m: float = Field(0.35, gt=0.0, le=5.0, description="ε of the second clustering inside a vehicle cluster")
     min_trailer_points: int = Field(30, ge=1)
+    min_truck_points: int = Field(10, ge=1, description="Fewer points left after removing the trailer: the truck is not seen")
+    max_length_excess_m: float = Field(1.0, ge=0.0, le=20.0, description="A trailer candidate longer than the trailer plus this is rejected")
 
 
 class CentroidParams(Section):
@@ -223,6 +240,7 @@ class OrientationParams(Section):
     min_travel_m: float = Field(0.3, ge=0.0, le=20.0, description="Below this travel over the history the yaw is held")
     max_yaw_rate_deg_s: float = Field(45.0, gt=0.0, le=720.0, description="Bound on the yaw change between frames")
     smoothing: float = Field(0.5, ge=0.0, lt=1.0, description="Weight of the previous yaw in the smoothed yaw")
+    shape_weight: float = Field(0.0, ge=0.0, le=1.0, description="Blend of the unit's shape axis into the PCA axis (0 = pure PCA, the paper)")
 
 
 class Params(Section):

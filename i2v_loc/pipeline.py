@@ -1,0 +1,276 @@
+"""The localization pipeline: wires the stages of ``i2v_loc.stages`` (docs/pipeline.md).
+
+``Pipeline.process(frame)`` never raises on bad sensor data: faults are counted and reported in
+the result (docs/formats.md, state line). ``update_params`` validates a JSON merge patch at once
+(``ParamsError``) and applies it at the start of the next ``process`` call; it may be called from
+another thread.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections import Counter
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from i2v_loc.frame import Frame
+from i2v_loc.geometry import planar_pose
+from i2v_loc.params import Params, VehicleConfig, apply_patch
+from i2v_loc.stages.centroid import CentroidCorrector, CorrectedUnit
+from i2v_loc.stages.classification import TruckTrailerClassifier
+from i2v_loc.stages.clustering import Cluster, Clustering
+from i2v_loc.stages.concatenation import Concatenation, MotionHint
+from i2v_loc.stages.orientation import OrientationEstimator, UnitObservation
+from i2v_loc.stages.region import Region
+from i2v_loc.stages.tracking import Detection, Tracker, Track
+
+METHODS = ("paper",)
+STAGES = ("concatenation", "region", "clustering", "classification", "centroid", "tracking", "orientation")
+MOTION_HINT_MIN_SPEED_M_S = 0.1
+MOTION_HINT_MARGIN_M = 0.5
+
+
+def _r(value: float, digits: int = 4) -> float:
+    return round(float(value), digits)
+
+
+@dataclass
+class UnitResult:
+    track_id: int
+    center: np.ndarray
+    yaw_deg: float | None
+    dimensions: tuple[float, float, float]
+    points: int
+
+    def to_json(self) -> dict:
+        return {"track_id": self.track_id, "center": [_r(v) for v in self.center],
+                "yaw_deg": None if self.yaw_deg is None else _r(self.yaw_deg, 3),
+                "dimensions": [_r(v, 3) for v in self.dimensions], "points": int(self.points)}
+
+
+@dataclass
+class VehicleResult:
+    id: int
+    vehicle: str
+    truck: UnitResult | None
+    trailer: UnitResult | None
+    hitch_deg: float | None
+    tractor_to_trailer: np.ndarray | None
+
+    def to_json(self) -> dict:
+        t = self.tractor_to_trailer
+        return {"id": self.id, "vehicle": self.vehicle,
+                "hitch_deg": None if self.hitch_deg is None else _r(self.hitch_deg, 3),
+                "truck": self.truck.to_json() if self.truck else None,
+                "trailer": self.trailer.to_json() if self.trailer else None,
+                "tractor_to_trailer": None if t is None else [[_r(v, 6) for v in row] for row in t]}
+
+
+@dataclass
+class FrameResult:
+    frame: int
+    stamp_s: float
+    latency_ms: dict[str, float]
+    faults: dict[str, str]
+    dropped: dict[str, int]
+    clusters: list[dict]
+    vehicles: list[VehicleResult]
+    ground_found: bool = True
+    points: int = 0  # points after concatenation
+
+    def to_json(self) -> dict:
+        """The state line of docs/formats.md."""
+        return {"type": "state", "frame": int(self.frame),
+                "stamp_s": None if not np.isfinite(self.stamp_s) else _r(self.stamp_s, 6),
+                "latency_ms": {k: _r(v, 3) for k, v in self.latency_ms.items()},
+                "faults": dict(self.faults), "dropped": dict(self.dropped),
+                "clusters": self.clusters, "vehicles": [v.to_json() for v in self.vehicles]}
+
+
+@dataclass
+class _UnitCandidate:
+    kind: str
+    vehicle: str
+    group: int
+    points: np.ndarray
+    dims: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    corrected: CorrectedUnit | None = None
+
+
+@dataclass
+class _Timer:
+    latency_ms: dict[str, float] = field(default_factory=dict)
+    _t: float = field(default_factory=time.perf_counter)
+    _start: float = field(default_factory=time.perf_counter)
+
+    def lap(self, stage: str) -> None:
+        now = time.perf_counter()
+        self.latency_ms[stage] = (now - self._t) * 1e3
+        self._t = now
+
+    def total(self) -> dict[str, float]:
+        self.latency_ms["total"] = (time.perf_counter() - self._start) * 1e3
+        return self.latency_ms
+
+
+class Pipeline:
+    def __init__(self, params: Params, method: str = "paper"):
+        if method not in METHODS:
+            raise ValueError(f"unknown method {method!r}; known: {', '.join(METHODS)}")
+        self.method = method
+        self._lock = threading.Lock()
+        self._pending: Params | None = None
+        self._active = params
+        self.counters: Counter = Counter()
+        self.tracker = Tracker(params.tracking)
+        self.orientation = OrientationEstimator(params.orientation)
+        self._build(params)
+        self._motion: list[MotionHint] = []
+        self._last_yaw: dict[tuple[str, int], tuple[np.ndarray, float]] = {}
+
+    # ----------------------------------------------------------------- parameters
+
+    @property
+    def params(self) -> Params:
+        """The latest accepted parameters (a pending patch takes effect at the next frame)."""
+        with self._lock:
+            return self._pending or self._active
+
+    def update_params(self, patch: dict) -> Params:
+        with self._lock:
+            new = apply_patch(self._pending or self._active, patch)
+            self._pending = new
+        return new
+
+    def _apply_pending(self) -> None:
+        with self._lock:
+            pending, self._pending = self._pending, None
+        if pending is not None:
+            self._build(pending)
+
+    def _build(self, params: Params) -> None:
+        self._active = params
+        self.concatenation = Concatenation(params.concatenation, params.sensors)
+        self.region = Region(params.region)
+        self.clustering = Clustering(params.clustering, params.vehicles)
+        self.classifier = TruckTrailerClassifier(params.classification, params.vehicles)
+        self.centroid = CentroidCorrector(params.centroid)
+        self.tracker.params = params.tracking  # tracks and yaw histories survive a parameter change
+        self.orientation.params = params.orientation
+
+    # ----------------------------------------------------------------- processing
+
+    def process(self, frame: Frame) -> FrameResult:
+        self._apply_pending()
+        params = self._active
+        timer = _Timer()
+        merged = self.concatenation.process(frame.scans, self._motion)
+        timer.lap("concatenation")
+        region = self.region.process(merged.points)
+        timer.lap("region")
+        clustering = self.clustering.process(region.points)
+        timer.lap("clustering")
+        units, cluster_lines = self._classify(clustering.clusters)
+        timer.lap("classification")
+        ground_z = region.ground.height_at if region.ground else (lambda x, y: 0.0)
+        for unit in units:
+            unit.corrected = self._correct(unit, params.vehicles[unit.vehicle], ground_z)
+        timer.lap("centroid")
+        tracked = self.tracker.process([self._detection(u) for u in units], merged.stamp_s)
+        timer.lap("tracking")
+        vehicles = self._orient(tracked.all_tracks, merged.stamp_s, params)
+        timer.lap("orientation")
+        self._motion = self._motion_hints(tracked.all_tracks)
+        self._count(merged, region, clustering, cluster_lines)
+        return FrameResult(frame.index, merged.stamp_s, timer.total(), merged.faults,
+                           {k: v for k, v in merged.dropped.items() if k != "missing"},
+                           cluster_lines, vehicles, region.ground_found, len(merged.points))
+
+    def _classify(self, clusters: list[Cluster]) -> tuple[list[_UnitCandidate], list[dict]]:
+        units, lines = [], []
+        for group, cluster in enumerate(clusters):
+            status = cluster.status
+            if status == "candidate":
+                result = self.classifier.process(cluster.points, cluster.candidates)
+                status = f"vehicle:{result.vehicle}" if result.vehicle else "unmatched"
+                for kind, pts in (("truck", result.truck), ("trailer", result.trailer)):
+                    if result.vehicle and pts is not None:
+                        units.append(_UnitCandidate(kind, result.vehicle, group, pts))
+            lines.append({"points": int(len(cluster.points)), "center": [_r(v, 3) for v in cluster.center],
+                          "volume_m3": _r(cluster.volume_m3, 2), "status": status})
+        return units, lines
+
+    def _correct(self, unit: _UnitCandidate, vehicle: VehicleConfig, ground_z) -> CorrectedUnit:
+        dims = vehicle.truck if unit.kind == "truck" else vehicle.trailer
+        points = unit.points
+        centroid_xy = points[:, :2].mean(axis=0)
+        hint = self._yaw_hint(unit.kind, centroid_xy)
+        unit.dims = (dims.length_m, dims.width_m, dims.height_m)
+        return self.centroid.process(points, dims, ground_z(*centroid_xy), hint)
+
+    def _yaw_hint(self, kind: str, centroid_xy: np.ndarray) -> float | None:
+        """Last yaw of the nearest unit of this kind reported in the previous frame (unit axes)."""
+        best, best_d = None, 0.5 * self._active.tracking.max_distance_m + 2.0
+        for (k, _), (center, yaw_deg) in self._last_yaw.items():
+            d = float(np.hypot(*(center - centroid_xy)))
+            if k == kind and d < best_d:
+                best, best_d = np.radians(yaw_deg), d
+        return best
+
+    @staticmethod
+    def _detection(unit: _UnitCandidate) -> Detection:
+        return Detection(unit.kind, unit.vehicle, unit.group, unit.corrected.center, unit)
+
+    def _orient(self, tracks: list[Track], stamp_s: float, params: Params) -> list[VehicleResult]:
+        seen = [t for t in tracks if t.detection is not None]
+        observations = [UnitObservation(t.track_id, t.vehicle_id, t.kind, t.detection.center,
+                                        float(np.degrees(t.detection.payload.corrected.axis_yaw_rad)) % 180.0)
+                        for t in seen]
+        yaws = self.orientation.process(observations, stamp_s, {t.track_id for t in tracks})
+        self._last_yaw = {(t.kind, t.track_id): (t.detection.center[:2], yaws[t.track_id])
+                          for t in seen if yaws.get(t.track_id) is not None}
+        by_vehicle: dict[int, dict[str, UnitResult]] = {}
+        names: dict[int, str] = {}
+        for t in seen:
+            if not t.confirmed:
+                continue
+            payload: _UnitCandidate = t.detection.payload
+            by_vehicle.setdefault(t.vehicle_id, {})[t.kind] = UnitResult(
+                t.track_id, t.detection.center, yaws.get(t.track_id), payload.dims, payload.corrected.points)
+            names[t.vehicle_id] = t.vehicle
+        return [self._vehicle_result(vid, names[vid], units) for vid, units in sorted(by_vehicle.items())]
+
+    def _vehicle_result(self, vehicle_id: int, name: str, units: dict[str, UnitResult]) -> VehicleResult:
+        truck, trailer = units.get("truck"), units.get("trailer")
+        hitch = OrientationEstimator.hitch_deg(truck and truck.yaw_deg, trailer and trailer.yaw_deg)
+        transform = None
+        if hitch is not None:
+            t_truck = planar_pose(truck.center[0], truck.center[1], np.radians(truck.yaw_deg), truck.center[2])
+            t_trailer = planar_pose(trailer.center[0], trailer.center[1], np.radians(trailer.yaw_deg), trailer.center[2])
+            transform = np.linalg.inv(t_trailer) @ t_truck
+        return VehicleResult(vehicle_id, name, truck, trailer, hitch, transform)
+
+    def _motion_hints(self, tracks: list[Track]) -> list[MotionHint]:
+        hints = []
+        for t in tracks:
+            if t.detection is None or np.hypot(*t.velocity) < MOTION_HINT_MIN_SPEED_M_S:
+                continue
+            unit: _UnitCandidate = t.detection.payload
+            length, width, _ = unit.dims
+            hints.append(MotionHint(tuple(t.detection.center[:2]), unit.corrected.axis_yaw_rad,
+                                    length / 2 + MOTION_HINT_MARGIN_M, width / 2 + MOTION_HINT_MARGIN_M,
+                                    tuple(t.velocity)))
+        return hints
+
+    def _count(self, merged, region, clustering, cluster_lines: list[dict]) -> None:
+        self.counters["frames"] += 1
+        for reason, n in merged.dropped.items():
+            self.counters[reason] += n
+        if not region.ground_found:
+            self.counters["no_ground"] += 1
+        self.counters["noise_clusters"] += clustering.noise_clusters
+        for line in cluster_lines:
+            if line["status"] in ("too_large", "too_small", "unmatched"):
+                self.counters[line["status"]] += 1

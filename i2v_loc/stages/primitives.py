@@ -1,0 +1,116 @@
+"""Vectorised point-cloud primitives shared by several stages (no stage state here)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+from scipy.spatial import ConvexHull, QhullError, cKDTree
+
+
+def voxel_keys(points: np.ndarray, voxel_m: float) -> np.ndarray:
+    """One int64 key per point for the voxel it falls in (paper Eq. 1, origin at the cloud minimum)."""
+    ijk = np.floor((points - points.min(axis=0)) / voxel_m).astype(np.int64)
+    dims = ijk.max(axis=0) + 1
+    return (ijk[:, 0] * dims[1] + ijk[:, 1]) * dims[2] + ijk[:, 2]
+
+
+def voxel_centroids(points: np.ndarray, voxel_m: float, values: np.ndarray | None = None):
+    """Centroid of the points of each occupied voxel (paper Eq. 2).
+
+    ``values`` (N, k) are averaged per voxel along with the points; returns (centroids, means or None).
+    """
+    if voxel_m <= 0 or len(points) == 0:
+        return points, values
+    _, inverse, counts = np.unique(voxel_keys(points, voxel_m), return_inverse=True, return_counts=True)
+    data = points if values is None else np.hstack([points, values.reshape(len(points), -1)])
+    sums = np.zeros((len(counts), data.shape[1]))
+    for col in range(data.shape[1]):
+        sums[:, col] = np.bincount(inverse, weights=data[:, col], minlength=len(counts))
+    means = sums / counts[:, None]
+    if values is None:
+        return means[:, :3].astype(points.dtype), None
+    return means[:, :3].astype(points.dtype), means[:, 3:]
+
+
+def euclidean_labels(points: np.ndarray, tolerance_m: float) -> np.ndarray:
+    """Cluster label per point: connected components of the 'closer than tolerance' graph (Eq. 4)."""
+    n = len(points)
+    if n == 0:
+        return np.zeros(0, dtype=np.int64)
+    pairs = cKDTree(points).query_pairs(tolerance_m, output_type="ndarray")
+    graph = coo_matrix((np.ones(len(pairs), dtype=np.int8), (pairs[:, 0], pairs[:, 1])), shape=(n, n))
+    _, labels = connected_components(graph, directed=False)
+    return labels.astype(np.int64)
+
+
+def split_by_label(labels: np.ndarray) -> list[np.ndarray]:
+    """Point indices of each label, largest group first."""
+    if len(labels) == 0:
+        return []
+    order = np.argsort(labels, kind="stable")
+    bounds = np.flatnonzero(np.diff(labels[order])) + 1
+    groups = np.split(order, bounds)
+    return sorted(groups, key=len, reverse=True)
+
+
+@dataclass
+class Rect:
+    """Minimum-area rectangle in the xy plane: centre, side lengths (length >= width), yaw of the long side."""
+
+    center_xy: np.ndarray
+    length_m: float
+    width_m: float
+    yaw_rad: float
+
+    @property
+    def area_m2(self) -> float:
+        return self.length_m * self.width_m
+
+
+def min_area_rect(xy: np.ndarray) -> Rect:
+    """Rotating-calipers minimum-area rectangle, all hull edges evaluated at once."""
+    xy = np.asarray(xy, dtype=float)
+    try:
+        hull = xy[ConvexHull(xy).vertices]
+    except (QhullError, ValueError):
+        return _degenerate_rect(xy)
+    edges = np.diff(np.vstack([hull, hull[:1]]), axis=0)
+    angles = np.unique(np.mod(np.arctan2(edges[:, 1], edges[:, 0]), np.pi / 2))
+    c, s = np.cos(angles), np.sin(angles)
+    u = hull[:, 0][None] * c[:, None] + hull[:, 1][None] * s[:, None]
+    v = -hull[:, 0][None] * s[:, None] + hull[:, 1][None] * c[:, None]
+    du, dv = u.max(1) - u.min(1), v.max(1) - v.min(1)
+    best = int(np.argmin(du * dv))
+    cu, cv = (u[best].max() + u[best].min()) / 2, (v[best].max() + v[best].min()) / 2
+    a = angles[best]
+    center = np.array([cu * np.cos(a) - cv * np.sin(a), cu * np.sin(a) + cv * np.cos(a)])
+    if du[best] >= dv[best]:
+        return Rect(center, float(du[best]), float(dv[best]), float(a))
+    return Rect(center, float(dv[best]), float(du[best]), float(a + np.pi / 2))
+
+
+def _degenerate_rect(xy: np.ndarray) -> Rect:
+    """Collinear or tiny point sets: a zero-width rectangle along the principal axis."""
+    if len(xy) == 0:
+        return Rect(np.zeros(2), 0.0, 0.0, 0.0)
+    centered = xy - xy.mean(axis=0)
+    axis = np.linalg.svd(centered, full_matrices=False)[2][0] if len(xy) > 1 else np.array([1.0, 0.0])
+    proj = centered @ axis
+    center = xy.mean(axis=0) + axis * (proj.max() + proj.min()) / 2
+    return Rect(center, float(np.ptp(proj)), 0.0, float(np.arctan2(axis[1], axis[0])))
+
+
+def oriented_box_volume(points: np.ndarray) -> tuple[float, Rect]:
+    """Volume of the oriented box of a cluster: min-area rectangle in xy times the height range."""
+    rect = min_area_rect(points[:, :2])
+    height = float(np.ptp(points[:, 2])) if len(points) else 0.0
+    return rect.area_m2 * height, rect
+
+
+def unit_axes(yaw_rad: float) -> np.ndarray:
+    """Rows: the forward and left unit vectors of a heading in the xy plane."""
+    c, s = np.cos(yaw_rad), np.sin(yaw_rad)
+    return np.array([[c, s], [-s, c]])

@@ -1,0 +1,105 @@
+"""Stage 3: region of interest (passthrough) and RANSAC ground removal (paper section 3.2).
+
+RANSAC runs on a voxel-downsampled copy of the cloud and scores every hypothesis at once
+(one (samples x hypotheses) distance matrix); planes tilted more than ``max_ground_tilt_deg``
+are never candidates. The best plane is refined by least squares on its inliers and applied to
+the full-resolution cloud: points less than the threshold above it (or below it) are ground.
+If no admissible plane is found the cloud passes through and ``ground_found`` is False.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from i2v_loc.params import RegionParams
+from i2v_loc.stages.primitives import voxel_centroids
+
+
+@dataclass
+class GroundPlane:
+    normal: np.ndarray  # (3,) unit, pointing up (z > 0)
+    offset: float  # plane: normal . p + offset = 0
+    tilt_deg: float
+    inlier_fraction: float  # of the sampled cloud
+
+    def height_m(self, points: np.ndarray) -> np.ndarray:
+        """Signed distance above the plane."""
+        return points @ self.normal + self.offset
+
+    def height_at(self, x: float, y: float) -> float:
+        """z of the plane at (x, y)."""
+        return float(-(self.normal[0] * x + self.normal[1] * y + self.offset) / self.normal[2])
+
+
+@dataclass
+class RegionResult:
+    points: np.ndarray  # (N, 3) float32, inside the ROI and off the ground
+    ground: GroundPlane | None
+    roi_points: int
+    ground_points: int
+
+    @property
+    def ground_found(self) -> bool:
+        return self.ground is not None
+
+
+class Region:
+    def __init__(self, params: RegionParams, seed: int = 0):
+        self.params = params
+        self.rng = np.random.default_rng(seed)
+
+    def process(self, points: np.ndarray) -> RegionResult:
+        roi = points[self.roi_mask(points)]
+        plane = self.fit_ground(roi)
+        if plane is None:
+            return RegionResult(roi, None, len(roi), 0)
+        above = plane.height_m(roi) > self.params.ground_distance_threshold_m
+        return RegionResult(roi[above], plane, len(roi), int(len(roi) - above.sum()))
+
+    def roi_mask(self, points: np.ndarray) -> np.ndarray:
+        p = self.params
+        low = np.array([p.x_min_m, p.y_min_m, p.z_min_m], dtype=np.float32)
+        high = np.array([p.x_max_m, p.y_max_m, p.z_max_m], dtype=np.float32)
+        return ((points >= low) & (points <= high)).all(axis=1)
+
+    def fit_ground(self, points: np.ndarray) -> GroundPlane | None:
+        p = self.params
+        sample, _ = voxel_centroids(points.astype(np.float64), p.ransac_sample_voxel_m)
+        if len(sample) < 3:
+            return None
+        normals, offsets = self._hypotheses(sample)
+        if len(normals) == 0:
+            return None
+        distances = np.abs(sample @ normals.T + offsets)  # (samples, hypotheses)
+        scores = (distances < p.ground_distance_threshold_m).sum(axis=0)
+        best = int(np.argmax(scores))
+        if scores[best] < max(3, p.min_ground_fraction * len(sample)):
+            return None
+        inliers = sample[distances[:, best] < p.ground_distance_threshold_m]
+        return self._refine(inliers, normals[best], offsets[best], scores[best] / len(sample))
+
+    def _hypotheses(self, sample: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Planes through random point triples, oriented up, tilt-admissible ones only."""
+        idx = self.rng.integers(0, len(sample), size=(self.params.ransac_iterations, 3))
+        a, b, c = sample[idx[:, 0]], sample[idx[:, 1]], sample[idx[:, 2]]
+        normals = np.cross(b - a, c - a)
+        norms = np.linalg.norm(normals, axis=1)
+        ok = norms > 1e-9
+        normals = normals[ok] / norms[ok, None]
+        normals *= np.sign(normals[:, 2:3] + 1e-12)
+        admissible = normals[:, 2] >= np.cos(np.radians(self.params.max_ground_tilt_deg))
+        normals = normals[admissible]
+        offsets = -np.einsum("ij,ij->i", normals, a[ok][admissible])
+        return normals, offsets
+
+    def _refine(self, inliers: np.ndarray, normal: np.ndarray, offset: float, fraction: float) -> GroundPlane | None:
+        if len(inliers) >= 3:
+            centre = inliers.mean(axis=0)
+            refined = np.linalg.svd(inliers - centre, full_matrices=False)[2][2]
+            refined *= np.sign(refined[2] + 1e-12)
+            if refined[2] >= np.cos(np.radians(self.params.max_ground_tilt_deg)):
+                normal, offset = refined, -float(refined @ centre)
+        tilt = float(np.degrees(np.arccos(np.clip(normal[2], -1.0, 1.0))))
+        return GroundPlane(normal.astype(np.float64), float(offset), tilt, float(fraction))
