@@ -211,10 +211,14 @@ def load_openlabel(path: str | Path, rate_hz: float = 10.0, transform=None, stam
     if not files:
         raise GroundTruthError(f"{path}: no OpenLABEL .json files")
     frames: list[tuple[int, float | None, list[dict]]] = []
+    label_files = 0
     for file in files:
         data = _read_json(file)
         if "openlabel" not in data:
+            if path.is_dir():  # e.g. a calibration file next to the labels
+                continue
             raise GroundTruthError(f"{file}: not OpenLABEL (no top-level 'openlabel' key)")
+        label_files += 1
         for key, frame in (data["openlabel"].get("frames") or {}).items():
             try:
                 number = int(key)
@@ -222,6 +226,8 @@ def load_openlabel(path: str | Path, rate_hz: float = 10.0, transform=None, stam
                 raise GroundTruthError(f"{file}: frame key {key!r} is not an integer") from err
             stamp = (frame.get("frame_properties") or {}).get("timestamp")
             frames.append((number, stamp, _openlabel_units(frame, file, transform)))
+    if not label_files:
+        raise GroundTruthError(f"{path}: no OpenLABEL files (none has a top-level 'openlabel' key)")
     frames.sort(key=lambda f: f[0])
     stamps = [s for _, s, _ in frames if s is not None]
     origin = stamp_origin_s if stamp_origin_s is not None else (min(stamps) if stamps else 0.0)
@@ -341,12 +347,13 @@ def load_ground_truth(path: str | Path, **kwargs) -> list[dict]:
         return load_jsonl(path / "ground_truth.jsonl")
     if path.suffix == ".jsonl":
         return load_jsonl(path)
-    sample = path if path.is_file() else next(iter(sorted(path.glob("*.json"))), None)
-    if sample is None:
+    samples = [path] if path.is_file() else sorted(path.glob("*.json"))
+    if not samples:
         raise GroundTruthError(f"{path}: no ground truth (.jsonl) or label files (.json) found")
-    data = _read_json(sample)
-    if "openlabel" in data:
-        return load_openlabel(path, **kwargs)
-    if "objects" in data:
-        return load_labelcloud(path, **kwargs)
-    raise GroundTruthError(f"{sample}: neither OpenLABEL nor a labelCloud export")
+    for sample in samples:
+        data = _read_json(sample)
+        if "openlabel" in data:
+            return load_openlabel(path, **kwargs)
+        if "objects" in data:
+            return load_labelcloud(path, **kwargs)
+    raise GroundTruthError(f"{path}: neither OpenLABEL nor a labelCloud export")

@@ -1,0 +1,154 @@
+"""Run the pipeline over recordings and compare with the truth, in parallel.
+
+One task = one recording x one method x one sensor subset x one parameter set. Tasks are
+independent, so they run inline, in local processes (concurrent.futures) or on a Dask
+distributed cluster; the results are the same, returned in task order.
+"""
+
+from __future__ import annotations
+
+import itertools
+import multiprocessing
+import traceback
+from collections.abc import Callable, Sequence
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from i2v_loc.params import Params, deep_merge, load_params, read_yaml, validate_params
+
+EXECUTORS = ("local", "dask")
+
+
+class EvaluationError(RuntimeError):
+    """A task failed; the message names the recording, method and sensors."""
+
+
+@dataclass(frozen=True)
+class Task:
+    recording: str
+    method: str
+    sensors: tuple[str, ...] | None = None  # None = all sensors of the recording
+    params: dict = field(default_factory=dict, hash=False, compare=False)  # full parameter dump
+    labels: str | None = None  # ground truth other than the recording's ground_truth.jsonl
+    gate_m: float = 4.0
+    tag: str = ""  # free label (the sweep's combination index)
+
+    @property
+    def subset(self) -> str:
+        return "+".join(self.sensors) if self.sensors else "all"
+
+    @property
+    def name(self) -> str:
+        return f"{Path(self.recording).name} [{self.method}, {self.subset}{', ' + self.tag if self.tag else ''}]"
+
+
+def recording_params(base: dict, recording: str, sensors: Sequence[str] | None) -> Params:
+    """The parameters for a recording: ``base`` with the recording's true sensor extrinsics
+    (its sensors.yaml) and only the chosen sensors."""
+    from i2v_loc.recording import Recording
+
+    rec = Recording(recording)
+    data = dict(base)
+    if rec.sensors_file.is_file():
+        data = deep_merge(data, {"sensors": read_yaml(rec.sensors_file).get("sensors", data.get("sensors"))})
+    if sensors:
+        known = [s["name"] for s in data["sensors"]]
+        missing = [s for s in sensors if s not in known]
+        if missing:
+            raise EvaluationError(f"{recording}: sensors {missing} not in the parameters (known: {known})")
+        data["sensors"] = [s for s in data["sensors"] if s["name"] in sensors]
+    return validate_params(data, source=f"{recording} parameters")
+
+
+def run_pipeline(task: Task) -> list[dict]:
+    """State lines of the pipeline on every frame of the task's recording."""
+    from i2v_loc.pipeline import Pipeline
+    from i2v_loc.recording import Recording
+
+    rec = Recording(task.recording)
+    params = recording_params(task.params, task.recording, task.sensors)
+    pipeline = Pipeline(params, method=task.method)
+    return [pipeline.process(frame).to_json() for frame in rec.frames(sensors=task.sensors)]
+
+
+def run_task(task: Task) -> dict:
+    """Run one task: the pipeline, then the comparison. Returns records and frame rows tagged
+    with the task's method, subset, recording and tag."""
+    from i2v_loc.evaluation.groundtruth import load_ground_truth
+    from i2v_loc.evaluation.matching import match_states
+
+    try:
+        gt_lines = load_ground_truth(task.labels or task.recording)
+        states = run_pipeline(task)
+        params = recording_params(task.params, task.recording, task.sensors)
+        records, frames = match_states(states, gt_lines, params, task.gate_m)
+    except Exception as err:  # re-raised in the parent with the task named
+        raise EvaluationError(f"{task.name}: {type(err).__name__}: {err}\n{traceback.format_exc()}") from None
+    tags = {"method": task.method, "subset": task.subset, "recording": Path(task.recording).name, "tag": task.tag}
+    for row in itertools.chain(records, frames):
+        row.update(tags)
+    return {"task": tags, "records": records, "frames": frames}
+
+
+def run_tasks(tasks: Sequence, func: Callable = run_task, workers: int = 1, executor: str = "local",
+              address: str | None = None, progress: bool = True, desc: str = "evaluating") -> list:
+    """``func`` over ``tasks``, results in task order, with a tqdm progress bar."""
+    from tqdm import tqdm
+
+    if executor not in EXECUTORS:
+        raise ValueError(f"unknown executor {executor!r}; choose one of {', '.join(EXECUTORS)}")
+    bar = tqdm(total=len(tasks), desc=desc, unit="task", disable=not progress)
+    try:
+        if executor == "dask":
+            return _run_dask(tasks, func, workers, address, bar)
+        if workers <= 1 or len(tasks) <= 1:
+            out = []
+            for task in tasks:
+                out.append(func(task))
+                bar.update()
+            return out
+        return _run_processes(tasks, func, workers, bar)
+    finally:
+        bar.close()
+
+
+def _run_processes(tasks, func, workers, bar) -> list:
+    # spawn, not fork: forking a parent with live TBB/OpenMP threads (Open3D) can deadlock
+    context = multiprocessing.get_context("spawn")
+    results: list = [None] * len(tasks)
+    with ProcessPoolExecutor(max_workers=workers, mp_context=context) as pool:
+        futures = {pool.submit(func, task): i for i, task in enumerate(tasks)}
+        for future in as_completed(futures):
+            results[futures[future]] = future.result()
+            bar.update()
+    return results
+
+
+def _run_dask(tasks, func, workers, address, bar) -> list:
+    try:
+        from distributed import Client, LocalCluster, as_completed as dask_completed
+    except ImportError as err:
+        raise EvaluationError("the dask executor needs Dask distributed: pip install 'i2v-loc[distributed]'") from err
+    cluster = None
+    if address:
+        client = Client(address)
+    else:
+        cluster = LocalCluster(n_workers=max(1, workers), threads_per_worker=1, processes=True)
+        client = Client(cluster)
+    try:
+        futures = client.map(func, list(tasks), pure=False)
+        index = {f.key: i for i, f in enumerate(futures)}
+        results: list = [None] * len(tasks)
+        for future in dask_completed(futures):
+            results[index[future.key]] = future.result()
+            bar.update()
+        return results
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()
+
+
+def base_params(params_file: str | None) -> dict:
+    return load_params(params_file).model_dump(mode="json")
