@@ -1,13 +1,16 @@
 """Stage 6: centroid (Eq. 6) and its correction for occluded faces with the known dimensions (Eq. 7).
 
 Worked in the unit's own axes (forward u along the unit's yaw, left v): a sensor sees the faces
-turned towards it, so the centroid is pulled towards them; the face plane closest to the
-centroid on each axis is a seen face, and the true centre lies half the known dimension behind
-it: c_u = plane_u -+ D_u / 2, i.e. C + (D_u - 2 d_u) / 2 with d_u the centroid-to-plane
-distance (the paper's Eq. 7 with d the distance to the closest plane). When the measured extent
-already covers the dimension the centre is the middle of the extent.
+turned towards it, so the centroid is pulled towards them; the true centre lies half the known
+dimension behind a seen face plane: c_u = plane_u -+ D_u / 2, i.e. C + (D_u - 2 d_u) / 2 with d_u
+the centroid-to-plane distance (the paper's Eq. 7 with d the distance to the plane). Which end of
+the measured extent is a face: the one whose end slab spreads wider across the other axis (a face
+perpendicular to the axis; an end cut by occlusion is only the edge of a side wall); on a tie the
+end closest to the centroid (the paper's rule). When the measured extent already covers the
+dimension the centre is the middle of the extent.
 The axes come from the yaw hint (the unit's last estimated yaw) when given, else from the
-minimum-area rectangle of the unit's points, its long side matched to the longer known dimension.
+L-shape fit of the unit's points (closeness criterion), its longer extent matched to the longer
+known dimension.
 """
 
 from __future__ import annotations
@@ -17,7 +20,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from i2v_loc.params import CentroidParams, UnitDimensions
-from i2v_loc.stages.primitives import min_area_rect, unit_axes
+from i2v_loc.stages.primitives import l_shape_yaw, unit_axes
+
+FACE_SLAB_M = 0.3  # points this close to an end of the extent belong to that end's face
 
 
 @dataclass
@@ -45,21 +50,34 @@ class CentroidCorrector:
         if not self.params.enabled:
             return CorrectedUnit(centroid, centroid, yaw, (float(extent[0]), float(extent[1])), len(pts))
         known = np.array([dims.length_m, dims.width_m])
-        shift = np.where(extent >= known, (low + high) / 2, self._from_closest_plane(low, high, known))
+        shift = np.where(extent >= known, (low + high) / 2, self._from_face_plane(local, low, high, known))
         center_xy = centroid[:2] + shift @ axes
         center_z = ground_z_m + dims.floor_m + dims.height_m / 2
         return CorrectedUnit(np.array([*center_xy, center_z]), centroid, yaw,
                              (float(extent[0]), float(extent[1])), len(pts))
 
     @staticmethod
-    def _from_closest_plane(low: np.ndarray, high: np.ndarray, known: np.ndarray) -> np.ndarray:
-        """Centre offset (local axes) half a dimension behind the face plane nearest the centroid."""
-        low_is_closer = -low < high
-        return np.where(low_is_closer, low + known / 2, high - known / 2)
+    def _from_face_plane(local: np.ndarray, low: np.ndarray, high: np.ndarray, known: np.ndarray) -> np.ndarray:
+        """Centre offset (local axes) half a dimension behind the seen face plane of each axis."""
+        low_is_face = np.empty(2, dtype=bool)
+        for axis in (0, 1):
+            other = local[:, 1 - axis]
+            at_low = local[:, axis] <= low[axis] + FACE_SLAB_M
+            at_high = local[:, axis] >= high[axis] - FACE_SLAB_M
+            spread_low, spread_high = np.ptp(other[at_low]), np.ptp(other[at_high])
+            if abs(spread_low - spread_high) > FACE_SLAB_M:
+                low_is_face[axis] = spread_low > spread_high
+            else:
+                low_is_face[axis] = -low[axis] < high[axis]
+        return np.where(low_is_face, low + known / 2, high - known / 2)
 
     @staticmethod
     def _axis_yaw(points: np.ndarray, dims: UnitDimensions, yaw_hint_rad: float | None) -> float:
         if yaw_hint_rad is not None:
             return float(yaw_hint_rad)
-        rect = min_area_rect(points[:, :2])
-        return rect.yaw_rad if dims.length_m >= dims.width_m else rect.yaw_rad + np.pi / 2
+        yaw = l_shape_yaw(points[:, :2])
+        local = (points[:, :2] - points[:, :2].mean(axis=0)) @ unit_axes(yaw).T
+        along_is_longer = np.ptp(local[:, 0]) >= np.ptp(local[:, 1])
+        if along_is_longer != (dims.length_m >= dims.width_m):
+            yaw += np.pi / 2
+        return float(yaw)

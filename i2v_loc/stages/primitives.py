@@ -114,3 +114,27 @@ def unit_axes(yaw_rad: float) -> np.ndarray:
     """Rows: the forward and left unit vectors of a heading in the xy plane."""
     c, s = np.cos(yaw_rad), np.sin(yaw_rad)
     return np.array([[c, s], [-s, c]])
+
+
+def l_shape_yaw(xy: np.ndarray, min_distance_m: float = 0.01, max_points: int = 1500) -> float:
+    """Axis (radians, modulo pi/2) of the rectangle whose edges the points hug (closeness criterion
+    of L-shape fitting): a coarse 1 deg sweep over 90 deg, then a 0.1 deg sweep around the best.
+    Unlike the minimum-area rectangle it is not fooled by an L-shaped view (a right triangle hull
+    has equal-area rectangles on its legs and its hypotenuse)."""
+    xy = np.asarray(xy, dtype=float)
+    if len(xy) > max_points:
+        xy = xy[np.linspace(0, len(xy) - 1, max_points).astype(int)]
+    xy = xy - xy.mean(axis=0)
+    coarse = np.radians(np.arange(0.0, 90.0, 1.0))
+    best = coarse[np.argmax(_closeness(xy, coarse, min_distance_m))]
+    fine = best + np.radians(np.arange(-1.0, 1.0001, 0.1))
+    return float(np.mod(fine[np.argmax(_closeness(xy, fine, min_distance_m))], np.pi / 2))
+
+
+def _closeness(xy: np.ndarray, angles: np.ndarray, min_distance_m: float) -> np.ndarray:
+    c, s = np.cos(angles), np.sin(angles)
+    u = xy[:, :1] * c + xy[:, 1:] * s  # (N, A)
+    v = -xy[:, :1] * s + xy[:, 1:] * c
+    du = np.minimum(u - u.min(axis=0), u.max(axis=0) - u)
+    dv = np.minimum(v - v.min(axis=0), v.max(axis=0) - v)
+    return (1.0 / np.maximum(np.minimum(du, dv), min_distance_m)).sum(axis=0)

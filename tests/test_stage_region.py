@@ -1,0 +1,63 @@
+"""Region stage: passthrough bounds and RANSAC ground plane with the tilt limit."""
+
+import numpy as np
+import pytest
+
+from i2v_loc.params import ParamsError, RegionParams, apply_patch, Params
+from i2v_loc.stages.region import Region
+
+
+def plane_of(tilt_deg, n=4000, seed=0):
+    rng = np.random.default_rng(seed)
+    xy = rng.uniform(-15, 15, (n, 2))
+    z = np.tan(np.radians(tilt_deg)) * xy[:, 0] + rng.normal(0, 0.02, n)
+    return np.column_stack([xy, z]).astype(np.float32)
+
+
+def box_on_ground(n=500, seed=1):
+    rng = np.random.default_rng(seed)
+    return np.column_stack([rng.uniform(2, 4, n), rng.uniform(2, 4, n), rng.uniform(0.5, 2.0, n)]).astype(np.float32)
+
+
+def wide_region(**kw):
+    return RegionParams(x_min_m=-50, x_max_m=50, y_min_m=-50, y_max_m=50, z_min_m=-20, z_max_m=20, **kw)
+
+
+def test_finds_a_tilted_plane_within_the_limit_and_removes_it():
+    ground = plane_of(5.0)
+    cloud = np.vstack([ground, box_on_ground()])
+    result = Region(wide_region(max_ground_tilt_deg=10.0)).process(cloud)
+    assert result.ground_found
+    assert result.ground.tilt_deg == pytest.approx(5.0, abs=0.3)
+    # the refined normal is the plane's: (-sin 5, 0, cos 5)
+    assert result.ground.normal == pytest.approx([-np.sin(np.radians(5)), 0, np.cos(np.radians(5))], abs=0.01)
+    assert result.ground_points >= 0.98 * len(ground)
+    # the object standing on the plane survives (its points are all well above the plane at x<=4)
+    assert len(result.points) >= 490
+
+
+def test_rejects_a_plane_tilted_beyond_the_limit_and_passes_the_cloud_through():
+    cloud = plane_of(20.0)
+    result = Region(wide_region(max_ground_tilt_deg=10.0)).process(cloud)
+    assert not result.ground_found
+    assert len(result.points) == len(cloud)
+
+
+def test_passthrough_bounds_are_inclusive_boxes():
+    pts = np.array([[0, 0, 1], [41, 0, 1], [0, -26, 1], [0, 0, 6], [39.9, 39.9, 4.9]], dtype=np.float32)
+    mask = Region(RegionParams()).roi_mask(pts)
+    assert mask.tolist() == [True, False, False, False, True]
+
+
+def test_horizontal_ground_at_height_is_removed_with_the_threshold():
+    rng = np.random.default_rng(3)
+    ground = np.column_stack([rng.uniform(-20, 20, (3000, 2)), rng.normal(0.3, 0.03, 3000)]).astype(np.float32)
+    low_object = np.column_stack([rng.uniform(0, 1, (100, 2)), np.full(100, 0.3 + 0.4)]).astype(np.float32)
+    result = Region(RegionParams(ground_distance_threshold_m=0.15)).process(np.vstack([ground, low_object]))
+    assert result.ground.height_at(0, 0) == pytest.approx(0.3, abs=0.02)
+    assert len(result.points) == pytest.approx(100, abs=5)
+
+
+def test_bounds_must_be_ordered():
+    with pytest.raises(ParamsError, match="x_min_m"):
+        apply_patch(Params(), {"region": {"x_min_m": 10, "x_max_m": 5}})
