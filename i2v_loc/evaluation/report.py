@@ -14,6 +14,7 @@ import numpy as np
 from i2v_loc.evaluation import published as pub
 from i2v_loc.evaluation.summary import MANEUVERS, summarize_groups
 
+STAGE_ORDER = ["concatenation", "region", "clustering", "classification", "centroid", "tracking", "orientation"]
 LEAD_COLUMNS = ["method", "subset", "recording", "tag", "frame", "stamp_s", "kind", "gt_id", "vehicle", "maneuver",
                 "est_id", "est_vehicle"]
 
@@ -300,7 +301,9 @@ def _latency_table(res, methods, primary) -> list[str]:
     lines = ["## Latency per stage [ms] (mean / p50 / p95)", ""]
     for m in methods:
         s = res[m][primary]["overall"]
-        stages = sorted({k[len("latency_"):-len("_ms_mean")] for k in s if k.startswith("latency_") and k.endswith("_ms_mean")})
+        found = {k[len("latency_"):-len("_ms_mean")] for k in s if k.startswith("latency_") and k.endswith("_ms_mean")}
+        found.discard("")  # latency_ms_mean is the total
+        stages = sorted(found, key=lambda st: (STAGE_ORDER.index(st) if st in STAGE_ORDER else len(STAGE_ORDER), st))
         if not stages and "latency_ms_mean" not in s:
             lines += [f"{m}: no latency in the state lines.", ""]
             continue

@@ -152,3 +152,17 @@ def _run_dask(tasks, func, workers, address, bar) -> list:
 
 def base_params(params_file: str | None) -> dict:
     return load_params(params_file).model_dump(mode="json")
+
+
+def compare_task(item: dict) -> dict:
+    """Compare already computed state lines with the truth (e.g. a saved ``i2v-loc run`` log):
+    ``item`` holds ``states``, ``ground_truth`` (GT lines), ``params`` (dump) and ``task``
+    (method, subset, recording, tag). Same output as ``run_task``."""
+    from i2v_loc.evaluation.matching import match_states
+
+    params = validate_params(item.get("params") or {}, source="parameters")
+    records, frames = match_states(item["states"], item["ground_truth"], params, item.get("gate_m", 4.0))
+    tags = {"method": "paper", "subset": "all", "recording": "", "tag": "", **item.get("task", {})}
+    for row in itertools.chain(records, frames):
+        row.update(tags)
+    return {"task": tags, "records": records, "frames": frames}
