@@ -5,6 +5,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import json
+import math
 from pathlib import Path
 
 from fastapi import APIRouter, Depends, FastAPI, HTTPException, Query, Request, WebSocket, WebSocketDisconnect
@@ -179,9 +180,24 @@ async def _json_body(request: Request):
     if not body.strip():
         raise HTTPException(400, "empty body: send a JSON object, e.g. {\"clustering\": {\"tolerance_m\": 0.5}}")
     try:
-        return json.loads(body)
+        return json.loads(body, parse_constant=_non_finite, parse_float=_finite_float)
     except (UnicodeDecodeError, json.JSONDecodeError) as err:
         raise HTTPException(400, f"the body is not valid JSON: {err}") from None
+    except ValueError as err:
+        raise HTTPException(400, str(err)) from None
+    except RecursionError:
+        raise HTTPException(400, "the body is nested too deeply") from None
+
+
+def _non_finite(word: str):
+    raise ValueError(f"the body holds {word}: numbers must be finite")
+
+
+def _finite_float(text: str) -> float:
+    value = float(text)
+    if not math.isfinite(value):
+        raise ValueError(f"the body holds {text}, which is out of range for a number")
+    return value
 
 
 def _rejected(err: PatchRejected) -> JSONResponse:

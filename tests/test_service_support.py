@@ -22,6 +22,7 @@ from service.core import build_service
 REPO = Path(__file__).resolve().parents[1]
 SAMPLES = REPO / "samples"
 TOKEN = "test-token-5f2c"
+PIPELINE_FACTORY = None  # None: the real i2v_loc.pipeline.Pipeline
 
 
 def sample_recording() -> Path:
@@ -67,6 +68,7 @@ def make_service(recording: Path, params_file: Path | None = None, token: str | 
     source = ReplaySource(recording, loop=loop)
     existing = params_file if params_file is not None and params_file.is_file() else None
     params = load_params(source.sensors_file, existing)
+    pipeline_factory = pipeline_factory or PIPELINE_FACTORY
     extra = {"pipeline_factory": pipeline_factory} if pipeline_factory else {}
     return build_service(source, params, params_file, AuthConfig(token, require_token_for_reads), **extra, **kwargs)
 
