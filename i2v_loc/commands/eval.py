@@ -121,6 +121,9 @@ def print_summary(summary: dict) -> None:
     primary = summary["primary_subset"]
     for method in summary["methods"]:
         for vehicle, s in summary["results"][method][primary]["by_vehicle"].items():
+            if not s["gt_vehicle_frames"]:
+                print(f"{method:>10} {vehicle:>10}: not in the ground truth; {s['false_vehicles']} false detections")
+                continue
             def f(key, digits=2):
                 v = s.get(key)
                 return "-" if v is None or v != v else f"{v:.{digits}f}"

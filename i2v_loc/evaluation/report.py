@@ -201,7 +201,7 @@ def _table2(res, methods, primary) -> list[str]:
     for vehicle in _vehicles(res, methods, primary):
         for m in methods:
             s = res[m][primary]["by_vehicle"].get(vehicle)
-            if s is None:
+            if s is None or not s["gt_vehicle_frames"]:  # only false detections under this name
                 continue
             lines.append(
                 f"| {_name(vehicle)} | ours: {m} | {s['gt_vehicle_frames']} "
@@ -334,7 +334,7 @@ def _subset_tables(res, methods, subsets) -> list[str]:
             marks = " | ".join("✓" if s in members else "-" for s in sensors)
             for m in methods:
                 s = res[m].get(subset, {}).get("by_vehicle", {}).get(vehicle)
-                if s:
+                if s and s["gt_vehicle_frames"]:
                     lines.append(f"| {marks} | ours: {m} | {_pair(s['truck_pos_rmse_m'], s['truck_yaw_rmse_deg'])} "
                                  f"| {_pair(s['trailer_pos_rmse_m'], s['trailer_yaw_rmse_deg'])} "
                                  f"| {_f(s['hitch_rmse_deg'])} | {_f(s.get('latency_ms_mean'), 1)} |")
