@@ -33,6 +33,8 @@ class Service:
     source_info: dict
 
     def start(self) -> None:
+        if self.store.path is not None and not self.store.path.exists():
+            self.store.save()  # the file exists from the start, holding the parameters in force
         self.runner.start()
 
     def stop(self) -> None:
@@ -86,6 +88,7 @@ class Service:
             "last_frame_age_s": None if age is None else round(age, 3),
             **runner.status(),
             "websocket_clients": self.hub.client_count,
+            "websocket": self.hub.stats(),
             "sensors": {s["name"]: {k: v for k, v in s.items() if k != "name"} for s in sensors},
         }
 

@@ -86,6 +86,10 @@ class Hub:
     def client_count(self) -> int:
         return len(self._clients)
 
+    def stats(self) -> list[dict]:
+        """Per connected client: messages sent and states replaced before it took them."""
+        return [{"sent": c.sent, "dropped": c.dropped, "points": c.want_points} for c in list(self._clients)]
+
     def add(self, want_points: bool) -> Client:
         client = Client(want_points=want_points)
         self._clients.add(client)

@@ -36,10 +36,14 @@ def sample_recording() -> Path:
 class LiveServer:
     """uvicorn serving ``app`` in a thread on 127.0.0.1:<free port>."""
 
-    def __init__(self, app):
+    def __init__(self, app, send_buffer_bytes: int | None = None):
         self.app = app
         self.sock = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
         self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        if send_buffer_bytes:
+            # Accepted connections inherit it (Linux): a stalled client then backs up within a few
+            # messages instead of after megabytes of kernel buffer.
+            self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, send_buffer_bytes)
         self.sock.bind(("127.0.0.1", 0))
         self.port = self.sock.getsockname()[1]
         self.url = f"http://127.0.0.1:{self.port}"
@@ -73,9 +77,9 @@ def make_service(recording: Path, params_file: Path | None = None, token: str | 
     return build_service(source, params, params_file, AuthConfig(token, require_token_for_reads), **extra, **kwargs)
 
 
-def serve(recording: Path, **kwargs) -> tuple[LiveServer, object]:
+def serve(recording: Path, send_buffer_bytes: int | None = None, **kwargs) -> tuple[LiveServer, object]:
     service = make_service(recording, **kwargs)
-    return LiveServer(create_app(service)), service
+    return LiveServer(create_app(service), send_buffer_bytes), service
 
 
 async def next_state(ws, timeout_s: float = 10.0, where=lambda m: True) -> dict:

@@ -100,8 +100,6 @@ def _serve(args, sock, source, params, params_file, auth) -> int:
 
     logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
     service = build_service(source, params, params_file, auth, realtime=not args.no_realtime, points_cap=args.max_points)
-    if params_file is not None and not params_file.exists():
-        service.store.save()
     app = create_app(service)
     host, port = sock.getsockname()[:2]
     shown = f"[{host}]" if ":" in host else host

@@ -1,0 +1,334 @@
+"""The live service over real HTTP and WebSocket clients (uvicorn on a free loopback port),
+replaying the committed sample recording through the real pipeline."""
+
+from __future__ import annotations
+
+import asyncio
+import base64
+import json
+import os
+import socket
+import time
+
+import httpx
+import pytest
+import websockets
+import yaml
+
+from i2v_loc.params import json_schema, load_params
+from test_service_support import TOKEN, next_state, sample_recording, serve, wait_for
+
+pytestmark = pytest.mark.timeout(60)
+
+STATE_KEYS = {"type", "frame", "stamp_s", "latency_ms", "faults", "dropped", "clusters", "vehicles"}
+AUTH = {"Authorization": f"Bearer {TOKEN}"}
+
+
+@pytest.fixture(scope="module")
+def live(tmp_path_factory):
+    params_file = tmp_path_factory.mktemp("params") / "params.yaml"
+    server, service = serve(sample_recording(), params_file=params_file, send_buffer_bytes=32768)
+    with server:
+        wait_for(lambda: service.runner.frames_processed >= 2, what="the first frames")
+        yield server, service, params_file
+
+
+@pytest.fixture
+def client(live):
+    server = live[0]
+    with httpx.Client(base_url=server.url, timeout=10) as c:
+        yield c
+
+
+def _ws(server, points=False):
+    return websockets.connect(server.ws_url + "/ws/states" + ("?points=true" if points else ""), max_size=2**24)
+
+
+# ------------------------------------------------------------------ reads
+
+
+def test_health_state_sensors_vehicles(client, live):
+    _, service, _ = live
+    sensors = service.runner.source.sensor_names
+    health = client.get("/api/v1/health").json()
+    assert health["live"] is True and health["ready"] is True and health["status"] in ("ok", "degraded")
+    assert set(health["sensors"]) >= set(sensors) and health["frames_processed"] >= 2
+    state = client.get("/api/v1/state").json()
+    assert STATE_KEYS <= set(state) and state["type"] == "state" and state["params_version"] == 0
+    listed = client.get("/api/v1/sensors").json()["sensors"]
+    by_name = {s["name"]: s for s in listed}
+    for name in sensors:
+        assert by_name[name]["last_stamp_s"] is not None and by_name[name]["drops"] >= 0
+        assert set(by_name[name]["position"]) == {"x_m", "y_m", "z_m", "yaw_deg"}
+    vehicles = client.get("/api/v1/vehicles").json()
+    assert isinstance(vehicles["vehicles"], list)
+    missing = client.get("/api/v1/vehicles/987654")
+    assert missing.status_code == 404 and "no vehicle with id 987654" in missing.json()["detail"]
+
+
+def test_vehicle_found_by_id(client):
+    state = wait_for(lambda: (s := client.get("/api/v1/state").json())["vehicles"] and s, what="a vehicle in the state")
+    vid = state["vehicles"][0]["id"]
+    found = wait_for(lambda: (r := client.get(f"/api/v1/vehicles/{vid}")).status_code == 200 and r.json(),
+                     what=f"vehicle {vid}")
+    assert found["id"] == vid and "hitch_deg" in found and {"truck", "trailer"} <= set(found)
+
+
+def test_params_and_schema(client, live):
+    _, service, _ = live
+    body = client.get("/api/v1/params").json()
+    assert body["params"] == service.store.params.model_dump(mode="json")
+    assert client.get("/api/v1/params/schema").json() == json_schema()
+    history = client.get("/api/v1/params/history").json()
+    assert history["versions"][0]["source"] == "start"
+
+
+def test_openapi_docs_and_dashboard(client):
+    spec = client.get("/openapi.json").json()
+    assert {"/api/v1/state", "/api/v1/params", "/api/v1/params/rollback/{version}"} <= set(spec["paths"])
+    assert "text/html" in client.get("/docs").headers["content-type"]
+    page = client.get("/")
+    assert page.status_code == 200 and '<canvas id="yard"' in page.text
+    assert client.get("/static/app.js").status_code == 200
+
+
+# ------------------------------------------------------------------ stream
+
+
+def test_states_stream_at_the_sensor_rate(live):
+    server, service, _ = live
+    rate_hz = service.runner.source.rate_hz
+
+    async def collect():
+        async with _ws(server) as ws:
+            t0 = time.monotonic()
+            got = [await next_state(ws) for _ in range(12)]
+            return got, time.monotonic() - t0
+
+    states, elapsed_s = asyncio.run(collect())
+    frames = [s["frame"] for s in states]
+    assert all(b > a for a, b in zip(frames, frames[1:])), frames
+    for a, b in zip(states, states[1:]):  # stamps advance by one sensor period per frame
+        assert b["stamp_s"] - a["stamp_s"] == pytest.approx((b["frame"] - a["frame"]) / rate_hz, abs=0.02)
+    # Real-time pacing: never more frames than the sensors delivered in that time.
+    assert len(states) - 1 <= elapsed_s * rate_hz + 2
+    assert all(STATE_KEYS <= set(s) and "foreground" not in s for s in states)
+
+
+def test_points_are_opt_in_and_capped(live):
+    server, service, _ = live
+
+    async def one():
+        async with _ws(server, points=True) as ws:
+            return await next_state(ws, where=lambda m: "foreground" in m)
+
+    state = asyncio.run(one())
+    xy = state["foreground"]["xy"]
+    assert len(xy) % 2 == 0 and 0 < len(xy) // 2 <= service.runner.points_cap
+
+
+# ------------------------------------------------------------------ writes
+
+
+def test_writes_need_the_right_token(client):
+    missing = client.patch("/api/v1/params", json={"clustering": {"tolerance_m": 0.5}})
+    assert missing.status_code == 401 and missing.headers["www-authenticate"] == "Bearer"
+    wrong = client.patch("/api/v1/params", json={"clustering": {"tolerance_m": 0.5}},
+                         headers={"Authorization": "Bearer nope"})
+    assert wrong.status_code == 403
+    assert client.post("/api/v1/params/rollback/0").status_code == 401
+    assert client.get("/api/v1/params").json()["version"] == 0
+
+
+def test_invalid_patch_gives_422_and_changes_nothing(client, live):
+    _, service, params_file = live
+    before = client.get("/api/v1/params").json()
+    file_before = params_file.read_text()
+    bad = client.patch("/api/v1/params", json={"clustering": {"tolerance_m": 50, "min_points": 3}}, headers=AUTH)
+    assert bad.status_code == 422
+    (error,) = bad.json()["errors"]
+    assert error["field"] == "clustering.tolerance_m" and error["value"] == 50
+    assert "<= 5.0" in error["allowed"] and "> 0.0" in error["allowed"]
+    unknown = client.patch("/api/v1/params", json={"clustering": {"tolerance": 0.5}}, headers=AUTH)
+    assert unknown.status_code == 422 and unknown.json()["errors"][0]["field"] == "clustering.tolerance"
+    assert client.get("/api/v1/params").json() == before
+    assert params_file.read_text() == file_before and service.runner.pipeline.params.clustering.min_points == 10
+
+
+def test_malformed_requests_get_4xx_with_a_message(client):
+    cases = [
+        (dict(content=b"{not json", headers={**AUTH, "Content-Type": "application/json"}), 400, "not valid JSON"),
+        (dict(content=b'{"region": {"x_min_m": NaN}}', headers={**AUTH, "Content-Type": "application/json"}), 400, "finite"),
+        (dict(content=b"x=1", headers={**AUTH, "Content-Type": "text/plain"}), 415, "Content-Type"),
+        (dict(content=b"", headers={**AUTH, "Content-Type": "application/json"}), 400, "empty body"),
+        (dict(json=[1, 2], headers=AUTH), 422, "JSON object"),
+    ]
+    for kwargs, status, words in cases:
+        response = client.patch("/api/v1/params", **kwargs)
+        assert response.status_code == status and words in response.json()["detail"], response.text
+    assert client.get("/api/v1/vehicles/abc").status_code == 422
+    assert client.post("/api/v1/params/rollback/12345", headers=AUTH).status_code == 404
+    assert client.get("/api/v1/health").json()["live"] is True
+
+
+def test_valid_patch_changes_the_next_frame_and_rolls_back(client, live):
+    server, service, params_file = live
+    start_version = client.get("/api/v1/params").json()["version"]
+
+    async def clusters_at(version, n=4):
+        async with _ws(server) as ws:
+            states = [await next_state(ws, where=lambda m: m["params_version"] == version) for _ in range(n)]
+        return [len(s["clusters"]) for s in states]
+
+    before = asyncio.run(clusters_at(start_version))
+    response = client.patch("/api/v1/params", headers={**AUTH, "Content-Type": "application/merge-patch+json"},
+                            content=json.dumps({"clustering": {"tolerance_m": 0.12, "min_points": 1}}))
+    assert response.status_code == 200, response.text
+    version = response.json()["version"]
+    assert version == start_version + 1
+    after = asyncio.run(clusters_at(version))
+    assert min(after) > max(before), (before, after)  # finer tolerance: the vehicle falls apart
+    assert service.runner.pipeline.params.clustering.tolerance_m == 0.12
+    saved = yaml.safe_load(params_file.read_text())
+    assert saved["clustering"]["tolerance_m"] == 0.12
+    history = client.get("/api/v1/params/history").json()
+    assert history["current"] == version and history["versions"][-1]["patch"] == {"clustering": {"tolerance_m": 0.12, "min_points": 1}}
+
+    back = client.post(f"/api/v1/params/rollback/{start_version}", headers=AUTH)
+    assert back.status_code == 200 and back.json()["version"] == version + 1
+    assert back.json()["params"]["clustering"] == {"tolerance_m": 0.7, "min_points": 10, "max_points": 200000}
+    assert load_params(params_file).clustering.tolerance_m == 0.7
+    restored = asyncio.run(clusters_at(version + 1))
+    assert max(restored) < min(after)
+
+
+def test_params_message_on_the_websocket(client, live):
+    server, _, _ = live
+
+    async def run():
+        async with _ws(server) as ws:
+            await next_state(ws)
+            response = await asyncio.to_thread(
+                client.patch, "/api/v1/params", json={"tracking": {"max_distance_m": 1.5}}, headers=AUTH)
+            async def params_message():
+                while True:
+                    message = json.loads(await ws.recv())
+                    if message["type"] == "params":
+                        return message
+            return response.json(), await asyncio.wait_for(params_message(), 10)
+
+    accepted, message = asyncio.run(run())
+    assert message["version"] == accepted["version"] and message["patch"] == {"tracking": {"max_distance_m": 1.5}}
+    assert message["params"]["tracking"]["max_distance_m"] == 1.5
+
+
+# ------------------------------------------------------------------ slow clients, metrics
+
+
+def _stalled_websocket(port: int, path: str) -> socket.socket:
+    """A client that completes the handshake and then never reads (tiny receive buffer)."""
+    sock = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
+    sock.connect(("127.0.0.1", port))
+    key = base64.b64encode(os.urandom(16)).decode()
+    sock.sendall((f"GET {path} HTTP/1.1\r\nHost: 127.0.0.1:{port}\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n"
+                  f"Sec-WebSocket-Key: {key}\r\nSec-WebSocket-Version: 13\r\n\r\n").encode())
+    reply = sock.recv(1024)
+    assert b" 101 " in reply.split(b"\r\n", 1)[0], reply
+    return sock
+
+
+def test_stalled_client_does_not_slow_the_others(live):
+    server, service, _ = live
+    stalled = _stalled_websocket(server.port, "/ws/states?points=true")
+    try:
+        async def follow():
+            async with _ws(server, points=True) as ws:
+                frames = [(await next_state(ws))["frame"] for _ in range(25)]
+                stats = service.hub.stats()
+                return frames, stats
+
+        frames, stats = asyncio.run(follow())
+    finally:
+        stalled.close()
+    assert all(b > a for a, b in zip(frames, frames[1:]))
+    stalled_stats = min(stats, key=lambda s: s["sent"])
+    reader_stats = max(stats, key=lambda s: s["sent"])
+    assert stalled_stats["dropped"] > 0, stats  # the stalled client lost states to newer ones...
+    assert reader_stats["dropped"] == 0 and reader_stats["sent"] >= 25, stats  # ...the reader lost none
+
+
+def test_metrics(client, live):
+    _, service, _ = live
+    text = client.get("/metrics").text
+    assert "text/plain" in client.get("/metrics").headers["content-type"]
+    processed = float(next(line.split()[-1] for line in text.splitlines() if line.startswith("i2v_loc_frames_processed_total")))
+    assert processed >= 2
+    assert 'i2v_loc_frames_dropped_total{reason="source_error"}' in text
+    assert 'i2v_loc_stage_latency_seconds_bucket{le="0.5",stage="total"}' in text
+    for name in service.runner.source.sensor_names:
+        assert f'i2v_loc_sensor_rate_hz{{sensor="{name}"}}' in text
+    assert "i2v_loc_websocket_clients " in text
+
+
+# ------------------------------------------------------------------ other configurations
+
+
+def test_no_token_configured_refuses_writes_with_a_hint(tmp_path):
+    server, _ = serve(sample_recording(), token=None)
+    with server, httpx.Client(base_url=server.url) as c:
+        response = c.patch("/api/v1/params", json={"clustering": {"tolerance_m": 0.5}}, headers=AUTH)
+        assert response.status_code == 403 and "I2V_LOC_API_TOKEN" in response.json()["detail"]
+        assert c.get("/api/v1/params").status_code == 200
+
+
+def test_reads_can_require_the_token(tmp_path):
+    server, _ = serve(sample_recording(), require_token_for_reads=True)
+    with server, httpx.Client(base_url=server.url) as c:
+        assert c.get("/api/v1/state").status_code == 401
+        assert c.get("/metrics", headers={"Authorization": "Bearer nope"}).status_code == 403
+        wait_for(lambda: c.get("/api/v1/state", headers=AUTH).status_code == 200, what="a state with the token")
+        assert c.get("/").status_code == 200  # the page itself holds no data
+
+        async def ws_attempts():
+            async with websockets.connect(server.ws_url + "/ws/states") as ws:
+                await ws.send(json.dumps({"token": "nope"}))
+                refused = json.loads(await ws.recv())
+                with pytest.raises(websockets.ConnectionClosed) as closed:
+                    await ws.recv()
+            async with websockets.connect(server.ws_url + "/ws/states", additional_headers=AUTH) as ws:
+                state = await next_state(ws)
+            return refused, closed.value.rcvd.code, state
+
+        refused, code, state = asyncio.run(ws_attempts())
+        assert refused["status"] == 403 and code == 1008 and state["type"] == "state"
+
+
+def test_parameter_file_survives_a_restart(tmp_path):
+    params_file = tmp_path / "params.yaml"
+    server, _ = serve(sample_recording(), params_file=params_file)
+    with server, httpx.Client(base_url=server.url) as c:
+        assert c.patch("/api/v1/params", json={"tracking": {"max_age_frames": 7}}, headers=AUTH).status_code == 200
+    server, service = serve(sample_recording(), params_file=params_file)
+    with server, httpx.Client(base_url=server.url) as c:
+        assert c.get("/api/v1/params").json()["params"]["tracking"]["max_age_frames"] == 7
+        assert service.runner.pipeline.params.tracking.max_age_frames == 7
+
+
+def test_a_failing_source_frame_is_counted_and_skipped(tmp_path):
+    server, service = serve(sample_recording())
+    source = service.runner.source
+    real_frame = source.frame
+
+    def flaky(k):
+        if k % 3 == 1:
+            raise OSError(f"simulated read error at frame {k}")
+        return real_frame(k)
+
+    source.frame = flaky
+    with server, httpx.Client(base_url=server.url) as c:
+        wait_for(lambda: service.runner.frames_processed >= 4, what="frames after read errors")
+        health = c.get("/api/v1/health").json()
+        assert health["frames_dropped"]["source_error"] >= 1 and health["live"] is True
+        frame = c.get("/api/v1/state").json()["frame"]
+        assert frame % 3 != 1
