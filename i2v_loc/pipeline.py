@@ -172,9 +172,9 @@ class Pipeline:
         timer.lap("region")
         clustering = self.clustering.process(region.points)
         timer.lap("clustering")
-        units, cluster_lines = self._classify(clustering.clusters)
-        timer.lap("classification")
         ground_z = region.ground.height_at if region.ground else (lambda x, y: 0.0)
+        units, cluster_lines = self._classify(clustering.clusters, ground_z)
+        timer.lap("classification")
         for unit in units:
             unit.corrected = self._correct(unit, params.vehicles[unit.vehicle], ground_z)
         timer.lap("centroid")
@@ -188,12 +188,13 @@ class Pipeline:
                            {k: v for k, v in merged.dropped.items() if k != "missing"},
                            cluster_lines, vehicles, region.ground_found, len(merged.points))
 
-    def _classify(self, clusters: list[Cluster]) -> tuple[list[_UnitCandidate], list[dict]]:
+    def _classify(self, clusters: list[Cluster], ground_z) -> tuple[list[_UnitCandidate], list[dict]]:
         units, lines = [], []
         for group, cluster in enumerate(clusters):
             status = cluster.status
             if status == "candidate":
-                result = self.classifier.process(cluster.points, cluster.candidates)
+                center = cluster.center
+                result = self.classifier.process(cluster.points, cluster.candidates, ground_z(center[0], center[1]))
                 status = f"vehicle:{result.vehicle}" if result.vehicle else "unmatched"
                 for kind, pts in (("truck", result.truck), ("trailer", result.trailer)):
                     if result.vehicle and pts is not None:

@@ -5,9 +5,9 @@ turned towards it, so the centroid is pulled towards them; the true centre lies 
 dimension behind a seen face plane: c_u = plane_u -+ D_u / 2, i.e. C + (D_u - 2 d_u) / 2 with d_u
 the centroid-to-plane distance (the paper's Eq. 7 with d the distance to the plane). Which end of
 the measured extent is a face: the one whose end slab spreads wider across the other axis (a face
-perpendicular to the axis; an end cut by occlusion is only the edge of a side wall); on a tie the
-end closest to the centroid (the paper's rule). When the measured extent already covers the
-dimension the centre is the middle of the extent.
+perpendicular to the axis; an end cut by occlusion, or the chassis rails behind a cab, is only a
+narrow edge). When both ends look alike: the middle of the extent if it covers the dimension,
+else the end closest to the centroid (the paper's rule).
 The axes come from the yaw hint (the unit's last estimated yaw) when given, else from the
 L-shape fit of the unit's points (closeness criterion), its longer extent matched to the longer
 known dimension.
@@ -50,7 +50,7 @@ class CentroidCorrector:
         if not self.params.enabled:
             return CorrectedUnit(centroid, centroid, yaw, (float(extent[0]), float(extent[1])), len(pts))
         known = np.array([dims.length_m, dims.width_m])
-        shift = np.where(extent >= known, (low + high) / 2, self._from_face_plane(local, low, high, known))
+        shift = self._from_face_plane(local, low, high, known)
         center_xy = centroid[:2] + shift @ axes
         center_z = ground_z_m + dims.floor_m + dims.height_m / 2
         return CorrectedUnit(np.array([*center_xy, center_z]), centroid, yaw,
@@ -59,17 +59,20 @@ class CentroidCorrector:
     @staticmethod
     def _from_face_plane(local: np.ndarray, low: np.ndarray, high: np.ndarray, known: np.ndarray) -> np.ndarray:
         """Centre offset (local axes) half a dimension behind the seen face plane of each axis."""
-        low_is_face = np.empty(2, dtype=bool)
+        offset = np.empty(2)
         for axis in (0, 1):
             other = local[:, 1 - axis]
-            at_low = local[:, axis] <= low[axis] + FACE_SLAB_M
-            at_high = local[:, axis] >= high[axis] - FACE_SLAB_M
-            spread_low, spread_high = np.ptp(other[at_low]), np.ptp(other[at_high])
-            if abs(spread_low - spread_high) > FACE_SLAB_M:
-                low_is_face[axis] = spread_low > spread_high
-            else:
-                low_is_face[axis] = -low[axis] < high[axis]
-        return np.where(low_is_face, low + known / 2, high - known / 2)
+            spread_low = np.ptp(other[local[:, axis] <= low[axis] + FACE_SLAB_M])
+            spread_high = np.ptp(other[local[:, axis] >= high[axis] - FACE_SLAB_M])
+            if abs(spread_low - spread_high) > FACE_SLAB_M:  # one end is a face, the other a cut edge
+                low_is_face = spread_low > spread_high
+            elif high[axis] - low[axis] >= known[axis]:  # both ends are faces: middle of the extent
+                offset[axis] = (low[axis] + high[axis]) / 2
+                continue
+            else:  # the paper's rule: the plane closest to the centroid
+                low_is_face = -low[axis] < high[axis]
+            offset[axis] = low[axis] + known[axis] / 2 if low_is_face else high[axis] - known[axis] / 2
+        return offset
 
     @staticmethod
     def _axis_yaw(points: np.ndarray, dims: UnitDimensions, yaw_hint_rad: float | None) -> float:

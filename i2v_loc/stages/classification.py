@@ -2,14 +2,19 @@
 
 A second Euclidean clustering with the trailer's tolerance finds the trailer (its own volume
 gate V_trailer +- dV_trailer, and not longer than the trailer plus ``max_length_excess_m``);
-the truck is the vehicle cluster minus the trailer points.
+the truck is the vehicle cluster minus the trailer points, and must hold ``min_truck_points``
+(a car-sized box alone passing the Twizy's trailer gate is not an articulated vehicle).
 
-The second clustering runs on the xy projection: the cab and the trailer front are separated by
-a horizontal gap (about 0.7 m on the MAN, 1.3 m on the Volvo), while the 32-beam rings on one
-side wall are up to 0.5 m apart vertically at 20 m; in 3D an epsilon below the gap would cut the
-walls into rings, in xy the rings of one wall fall on one line. So epsilon must be below the
-cab-trailer gap and above the horizontal point spacing (about 0.1 m after the voxel grid):
-0.35 m by default.
+Why the second clustering runs on the trailer *body* in xy: the tractor's chassis rails,
+fifth wheel, drawbar and wheels connect the cab to the trailer at low height, so the second
+clustering only looks at points higher than the trailer's floor (+ ``floor_margin_m``) above
+the ground. There the cab and the trailer front are separated by a horizontal gap (about
+0.7 m on the MAN, 1.3 m on the Volvo), while the 32-beam rings on one wall are up to 0.5 m apart
+vertically at 20 m: in 3D an epsilon below the gap would cut walls into rings; in xy the rings
+of one wall fall on one line. So epsilon must be below the cab-trailer gap and above the
+horizontal point spacing (about 0.1-0.25 m): 0.35 m by default. Points below the floor inside
+the trailer body's footprint (its wheels, landing legs, and the fifth wheel under it) join the
+trailer; everything else is the truck.
 """
 
 from __future__ import annotations
@@ -19,15 +24,16 @@ from dataclasses import dataclass
 import numpy as np
 
 from i2v_loc.params import ClassificationParams, VehicleConfig
-from i2v_loc.stages.primitives import euclidean_labels, oriented_box_volume, split_by_label, voxel_keys
+from i2v_loc.stages.primitives import euclidean_labels, min_area_rect, oriented_box_volume, split_by_label, voxel_keys
 
 XY_GRID_M = 0.05  # the xy projection is thinned to this grid before the second clustering
+FOOTPRINT_MARGIN_M = 0.1
 
 
 @dataclass
 class Classification:
     vehicle: str | None  # configured vehicle name, None when no trailer passed the gate
-    truck: np.ndarray | None  # (N, 3) points, None when nothing is left after removing the trailer
+    truck: np.ndarray | None  # (N, 3) points; at least min_truck_points when vehicle is set
     trailer: np.ndarray | None
 
 
@@ -36,17 +42,32 @@ class TruckTrailerClassifier:
         self.params = params
         self.vehicles = vehicles
 
-    def process(self, points: np.ndarray, candidates: list[str]) -> Classification:
-        groups = self.sub_clusters(points)
+    def process(self, points: np.ndarray, candidates: list[str], ground_z_m: float = 0.0) -> Classification:
+        """The candidate vehicle whose trailer gate fits best (error / tolerance) wins."""
+        best, best_score = Classification(None, None, None), np.inf
         for name in candidates:
-            trailer_idx = self._best_trailer(points, groups, self.vehicles[name])
-            if trailer_idx is None:
+            vehicle = self.vehicles[name]
+            body = np.flatnonzero(points[:, 2] - ground_z_m >= vehicle.trailer.floor_m + self.params.floor_margin_m)
+            found = self._best_trailer(points[body], self.sub_clusters(points[body]), vehicle)
+            if found is None:
                 continue
-            rest = np.ones(len(points), dtype=bool)
-            rest[trailer_idx] = False
-            truck = points[rest] if rest.sum() >= self.params.min_truck_points else None
-            return Classification(name, truck, points[trailer_idx])
-        return Classification(None, None, None)
+            trailer_body, error = found
+            is_trailer = self._in_footprint(points, points[body[trailer_body]])
+            if (~is_trailer).sum() < self.params.min_truck_points:
+                continue  # a lone box is not an articulated vehicle (the truck may be occluded, not absent)
+            score = error / vehicle.trailer_volume_tolerance_m3
+            if score < best_score:
+                best, best_score = Classification(name, points[~is_trailer], points[is_trailer]), score
+        return best
+
+    def _in_footprint(self, points: np.ndarray, body: np.ndarray) -> np.ndarray:
+        """Points whose xy falls inside the body's oriented rectangle (plus a small margin)."""
+        rect = min_area_rect(body[:, :2])
+        d = points[:, :2] - rect.center_xy
+        along = np.abs(d @ [np.cos(rect.yaw_rad), np.sin(rect.yaw_rad)])
+        across = np.abs(d @ [-np.sin(rect.yaw_rad), np.cos(rect.yaw_rad)])
+        margin = FOOTPRINT_MARGIN_M
+        return (along <= rect.length_m / 2 + margin) & (across <= rect.width_m / 2 + margin)
 
     def sub_clusters(self, points: np.ndarray) -> list[np.ndarray]:
         """Point indices of the xy clusters with at least ``min_trailer_points`` points."""
@@ -58,7 +79,8 @@ class TruckTrailerClassifier:
         labels = cell_labels[inverse.reshape(-1)]
         return [g for g in split_by_label(labels) if len(g) >= self.params.min_trailer_points]
 
-    def _best_trailer(self, points: np.ndarray, groups: list[np.ndarray], vehicle: VehicleConfig) -> np.ndarray | None:
+    def _best_trailer(self, points: np.ndarray, groups: list[np.ndarray], vehicle: VehicleConfig):
+        """(indices, volume error) of the sub-cluster closest to the trailer volume inside its gate."""
         expected = vehicle.trailer.volume_m3
         best, best_error = None, np.inf
         for idx in groups:
@@ -67,4 +89,4 @@ class TruckTrailerClassifier:
             too_long = rect.length_m > vehicle.trailer.length_m + self.params.max_length_excess_m
             if error <= vehicle.trailer_volume_tolerance_m3 and not too_long and error < best_error:
                 best, best_error = idx, error
-        return best
+        return None if best is None else (best, best_error)

@@ -11,10 +11,13 @@ from scipy.spatial import ConvexHull, QhullError, cKDTree
 
 
 def voxel_keys(points: np.ndarray, voxel_m: float) -> np.ndarray:
-    """One int64 key per point for the voxel it falls in (paper Eq. 1, origin at the cloud minimum)."""
+    """One int64 key per point for the voxel (or 2D cell) it falls in (paper Eq. 1, origin at the cloud minimum)."""
     ijk = np.floor((points - points.min(axis=0)) / voxel_m).astype(np.int64)
     dims = ijk.max(axis=0) + 1
-    return (ijk[:, 0] * dims[1] + ijk[:, 1]) * dims[2] + ijk[:, 2]
+    keys = ijk[:, 0]
+    for axis in range(1, ijk.shape[1]):
+        keys = keys * dims[axis] + ijk[:, axis]
+    return keys
 
 
 def voxel_centroids(points: np.ndarray, voxel_m: float, values: np.ndarray | None = None):

@@ -1,0 +1,106 @@
+"""The Pipeline on constructed frames: faults never raise, parameter patches, end-to-end geometry."""
+
+import json
+import threading
+
+import numpy as np
+import pytest
+
+from i2v_loc.frame import Frame, SensorScan
+from i2v_loc.params import Extrinsics, Params, ParamsError, SensorConfig
+from i2v_loc.pipeline import Pipeline
+from test_stage_classification import articulated_points, articulated_poses
+
+
+def yard_params(vehicle=None, **sections):
+    """One sensor at the yard origin (identity extrinsics) plus three that can be missing."""
+    params = Params(sensors=[SensorConfig(name=n, extrinsics=Extrinsics()) for n in ("l1", "l2", "l3", "l4")], **sections)
+    if vehicle:
+        params = params.model_copy(update={"vehicles": {vehicle: params.vehicles[vehicle]}})
+    return params
+
+
+def ground(seed=0, half_m=25.0, n=20000):
+    rng = np.random.default_rng(seed)
+    return np.column_stack([rng.uniform(-half_m, half_m, (n, 2)), rng.normal(0, 0.02, n)])
+
+
+def frame_of(index, stamp_s, clouds: dict):
+    return Frame(index, {name: SensorScan(name, stamp_s, pts, None) for name, pts in clouds.items()})
+
+
+def test_missing_sensor_empty_cloud_and_nans_are_processed_and_counted():
+    pipeline = Pipeline(yard_params())
+    cloud = ground()
+    nan_cloud = cloud.copy()
+    nan_cloud[:5] = np.nan
+    frame = frame_of(0, 1.0, {"l1": cloud, "l2": np.zeros((0, 3)), "l3": nan_cloud})
+    result = pipeline.process(frame)
+    line = result.to_json()
+    assert line["faults"] == {"l2": "empty", "l3": "nan_points", "l4": "missing"}
+    assert line["dropped"] == {"out_of_sync": 0, "empty": 1, "nan_points": 5}
+    json.dumps(line)  # the state line is plain JSON
+    assert pipeline.counters["missing"] == 1 and pipeline.counters["nan_points"] == 5
+    empty = pipeline.process(Frame(1, {}))
+    assert empty.to_json()["vehicles"] == [] and empty.to_json()["stamp_s"] is None
+    assert pipeline.counters["missing"] == 5 and pipeline.counters["frames"] == 2
+
+
+def test_update_params_applies_at_the_next_frame_and_rejects_bad_patches():
+    pipeline = Pipeline(yard_params())
+    box = np.array(np.meshgrid(np.arange(0, 2, 0.1), np.arange(0, 2, 0.1), np.arange(0.5, 2.5, 0.2))).reshape(3, -1).T
+    cloud = np.vstack([ground(), box, box + [20.4 - 18.0, 0, 0]])  # two boxes 0.4 m apart
+    frame = frame_of(0, 1.0, {"l1": cloud})
+    assert len(pipeline.process(frame).clusters) == 1
+    with pytest.raises(ParamsError):
+        pipeline.update_params({"clustering": {"tolerance_m": -1}})
+    done = threading.Event()
+    threading.Thread(target=lambda: (pipeline.update_params({"clustering": {"tolerance_m": 0.3}}), done.set())).start()
+    done.wait(5)
+    assert pipeline.params.clustering.tolerance_m == 0.3
+    assert len(pipeline.process(frame).clusters) == 2
+
+
+def test_unknown_method_is_refused():
+    with pytest.raises(ValueError, match="paper"):
+        Pipeline(Params(), method="magic")
+
+
+def run_vehicle(name, n_frames, truck_yaw_deg, hitch_deg, speed_m_s):
+    params = yard_params(name, tracking={"min_hits": 2})
+    pipeline = Pipeline(params)
+    v = params.vehicles[name]
+    fwd = np.array([np.cos(np.radians(truck_yaw_deg)), np.sin(np.radians(truck_yaw_deg))])
+    results = []
+    for k in range(n_frames):
+        axle = np.array([-4.0, -2.0]) + fwd * speed_m_s * 0.1 * k
+        truck, trailer = articulated_points(v, axle, truck_yaw_deg, hitch_deg)
+        results.append(pipeline.process(frame_of(k, 0.1 * k, {"l1": np.vstack([ground(k), truck, trailer])})))
+    return results, articulated_poses(v, axle, truck_yaw_deg, hitch_deg)
+
+
+def test_moving_volvo_is_localized_with_both_units_and_one_vehicle_id():
+    results, ((tc, ty), (rc, ry)) = run_vehicle("volvo_fh", 12, 30.0, 0.0, 2.0)
+    line = results[-1].to_json()
+    assert len(line["vehicles"]) == 1
+    veh = line["vehicles"][0]
+    assert veh["vehicle"] == "volvo_fh"
+    assert veh["truck"]["center"][:2] == pytest.approx(tc, abs=0.1)
+    assert veh["trailer"]["center"][:2] == pytest.approx(rc, abs=0.1)
+    assert veh["truck"]["yaw_deg"] == pytest.approx(30.0, abs=1.0)
+    assert veh["trailer"]["yaw_deg"] == pytest.approx(30.0, abs=1.0)
+    assert veh["hitch_deg"] == pytest.approx(0.0, abs=1.0)
+    t = np.array(veh["tractor_to_trailer"])
+    # the truck's origin seen from the trailer frame: straight ahead by the centre distance
+    assert t[:2, 3] == pytest.approx([np.hypot(*(tc - rc)), 0.0], abs=0.15)
+    assert [c["status"] for c in line["clusters"]].count("vehicle:volvo_fh") == 1
+    assert set(line["latency_ms"]) >= {"concatenation", "region", "clustering", "classification",
+                                       "centroid", "tracking", "orientation", "total"}
+
+
+@pytest.mark.parametrize("hitch_deg", [30.0, -30.0])
+def test_standing_twizy_hitch_angle_from_the_unit_shapes(hitch_deg):
+    results, _ = run_vehicle("twizy", 4, -60.0, hitch_deg, 0.0)
+    veh = results[-1].to_json()["vehicles"][0]
+    assert veh["truck"]["yaw_deg"] == pytest.approx(-60.0, abs=1.0)
+    assert veh["hitch_deg"] == pytest.approx(hitch_deg, abs=1.5)

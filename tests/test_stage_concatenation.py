@@ -1,0 +1,70 @@
+"""Concatenation stage: extrinsics, voxel centroids (Eq. 1-2), synchronisation (Eq. 3), faults."""
+
+import numpy as np
+import pytest
+
+from i2v_loc.frame import SensorScan
+from i2v_loc.params import ConcatenationParams, Extrinsics, SensorConfig
+from i2v_loc.stages.concatenation import Concatenation, MotionHint
+from i2v_loc.stages.primitives import voxel_centroids
+
+SENSORS = [
+    SensorConfig(name="a", extrinsics=Extrinsics(x_m=10, y_m=0, z_m=4, yaw_deg=90)),
+    SensorConfig(name="b", extrinsics=Extrinsics(x_m=0, y_m=0, z_m=4)),
+]
+
+
+def scan(name, stamp, points, offsets=None):
+    return SensorScan(name, stamp, np.asarray(points, dtype=np.float32), offsets)
+
+
+def test_points_reach_the_yard_frame_through_the_extrinsics():
+    stage = Concatenation(ConcatenationParams(voxel_size_m=0), SENSORS)
+    result = stage.process({"a": scan("a", 1.0, [[5, 0, -4]]), "b": scan("b", 1.0, [[3, 2, -3]])})
+    assert sorted(map(tuple, np.round(result.points, 4).tolist())) == [(3.0, 2.0, 1.0), (10.0, 5.0, 0.0)]
+    assert result.faults == {} and result.stamp_s == 1.0
+
+
+def test_voxel_centroids_average_the_points_of_each_voxel():
+    pts = np.array([[0.01, 0.01, 0.01], [0.09, 0.05, 0.03], [1.05, 0, 0]], dtype=np.float32)
+    centroids, _ = voxel_centroids(pts, 0.1)
+    assert sorted(centroids.tolist()) == [pytest.approx([0.05, 0.03, 0.02]), pytest.approx([1.05, 0, 0])]
+
+
+def test_sweeps_outside_the_tolerance_are_dropped_and_the_reference_is_the_earliest_in_sync():
+    sensors = SENSORS + [SensorConfig(name="c", time_offset_s=-0.5)]
+    stage = Concatenation(ConcatenationParams(voxel_size_m=0, sync_tolerance_s=0.05), sensors)
+    result = stage.process({"a": scan("a", 2.02, [[5, 0, -4]]), "b": scan("b", 2.0, [[3, 2, -3]]),
+                            "c": scan("c", 2.6, [[1, 1, 1]])})  # c on the common clock: 2.1
+    assert result.faults == {"c": "out_of_sync"}
+    assert result.dropped["out_of_sync"] == 1
+    assert result.stamp_s == pytest.approx(2.0)
+    assert len(result.points) == 2
+
+
+def test_missing_empty_and_nan_are_counted_not_raised():
+    sensors = SENSORS + [SensorConfig(name="c")]
+    stage = Concatenation(ConcatenationParams(voxel_size_m=0), sensors)
+    bad = [[np.nan, 0, 0], [np.inf, 1, 1], [3, 0, 0]]
+    result = stage.process({"a": scan("a", 1.0, np.zeros((0, 3))), "b": scan("b", 1.0, bad), "x": scan("x", 1.0, [[1, 1, 1]])})
+    assert result.faults == {"a": "empty", "b": "nan_points", "c": "missing", "x": "unknown_sensor"}
+    assert result.dropped == {"out_of_sync": 0, "empty": 1, "missing": 1, "nan_points": 2}
+    assert result.points.tolist() == [[3.0, 0.0, 4.0]]
+    assert np.isfinite(result.points).all()
+
+
+def test_no_usable_sweep_gives_an_empty_cloud():
+    result = Concatenation(ConcatenationParams(), SENSORS).process({})
+    assert result.points.shape == (0, 3) and np.isnan(result.stamp_s)
+
+
+def test_motion_interpolation_moves_points_of_a_moving_object_to_the_reference_time():
+    stage = Concatenation(ConcatenationParams(voxel_size_m=0, reference="earliest"), SENSORS[1:])
+    # two points captured 0.05 s after the sweep start; one on a vehicle moving +x at 2 m/s
+    pts = [[10, 0, -3], [30, 0, -3]]
+    hint = MotionHint((10.0, 0.0), 0.0, 3.0, 1.5, (2.0, 0.0))
+    result = stage.process({"b": scan("b", 1.0, pts, [0.05, 0.05])}, [hint])
+    # back to t_ref = 1.0: the moving point goes 0.1 m back, the static one stays
+    assert result.points[:, 0].tolist() == pytest.approx([9.9, 30.0], abs=1e-5)
+    off = Concatenation(ConcatenationParams(voxel_size_m=0, motion_interpolation=False), SENSORS[1:])
+    assert off.process({"b": scan("b", 1.0, pts, [0.05, 0.05])}, [hint]).points[:, 0].tolist() == [10.0, 30.0]
