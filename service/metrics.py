@@ -16,8 +16,9 @@ class ServiceMetrics:
             "i2v_loc_frames_dropped", "Frames not processed, by reason (source_error, pipeline_error, late)",
             ["reason"], registry=r,
         )
-        self.pipeline_drops = Counter(
-            "i2v_loc_pipeline_drops", "Sensor sweeps the pipeline dropped, by reason (its counters)", ["reason"], registry=r,
+        self.pipeline_events = Counter(
+            "i2v_loc_pipeline_events", "The pipeline's own counters: dropped sweeps and refused clusters, by reason",
+            ["reason"], registry=r,
         )
         self.stage_latency = Histogram(
             "i2v_loc_stage_latency_seconds", "Pipeline stage latency", ["stage"], buckets=LATENCY_BUCKETS_S, registry=r,

@@ -19,6 +19,7 @@ from collections.abc import Callable
 
 import numpy as np
 
+from i2v_loc.geometry import extrinsics_matrix, transform_points
 from service.hub import Hub, Message
 from service.metrics import ServiceMetrics
 from service.params_store import Version
@@ -90,11 +91,41 @@ def foreground_xy(result, cap: int) -> np.ndarray | None:
     points = getattr(result, "foreground", None)
     if points is None or cap <= 0:
         return None
-    points = np.asarray(points)
+    return _decimated_xy(np.asarray(points), cap)
+
+
+def _decimated_xy(points: np.ndarray, cap: int) -> np.ndarray | None:
     if points.ndim != 2 or points.shape[1] < 2 or len(points) == 0:
         return None
     step = max(1, int(np.ceil(len(points) / cap)))
     return points[::step, :2]
+
+
+ABOVE_GROUND_M = 0.3
+
+
+class ApproximateForeground:
+    """Display-only foreground when the pipeline result carries none: a decimated sample of
+    every sweep in yard coordinates, inside the region of interest and above a flat ground."""
+
+    def __init__(self, params):
+        self.region = params.region
+        self.poses = {s.name: extrinsics_matrix(s.extrinsics) for s in params.sensors}
+
+    def xy(self, frame, cap: int) -> np.ndarray | None:
+        total = sum(len(s.points) for s in frame.scans.values())
+        if cap <= 0 or total == 0:
+            return None
+        step = max(1, total // (4 * cap))  # most points are ground or outside: sample 4x the cap
+        parts = [transform_points(self.poses[name], scan.points[::step].astype(np.float64))
+                 for name, scan in frame.scans.items() if name in self.poses]
+        if not parts:
+            return None
+        pts = np.concatenate(parts)
+        r = self.region
+        keep = ((pts[:, 0] >= r.x_min_m) & (pts[:, 0] <= r.x_max_m) & (pts[:, 1] >= r.y_min_m)
+                & (pts[:, 1] <= r.y_max_m) & (pts[:, 2] > ABOVE_GROUND_M) & (pts[:, 2] <= r.z_max_m))
+        return _decimated_xy(pts[keep], cap)
 
 
 def _json_default(obj):
@@ -146,6 +177,8 @@ class PipelineRunner:
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, name="i2v-loc-pipeline", daemon=True)
         self._pipeline_counters: dict[str, int] = {}
+        self._approximate: ApproximateForeground | None = None
+        self._approximate_version = -1
 
     # ------------------------------------------------------------------ control (any thread)
 
@@ -253,13 +286,24 @@ class PipelineRunner:
         self._record(frame, state, now)
         plain = dumps(state)
         with_points = None
-        xy = foreground_xy(result, self.points_cap) if self.points_cap else None
+        xy = self._foreground(result, frame)
         if xy is not None:
             flat = np.round(np.asarray(xy, dtype=np.float64), 2).ravel().tolist()
             with_points = plain[:-1] + ',"foreground":{"xy":' + dumps(flat) + "}}"
         with self._latest_lock:
             self._latest = state
         self.hub.publish(Message("state", plain, with_points))
+
+    def _foreground(self, result, frame) -> np.ndarray | None:
+        if not self.points_cap or not self.hub.client_count:
+            return None
+        xy = foreground_xy(result, self.points_cap)
+        if xy is None and getattr(result, "foreground", None) is None:
+            if self._approximate is None or self._approximate_version != self.params_version:
+                self._approximate = ApproximateForeground(self.pipeline.params)
+                self._approximate_version = self.params_version
+            xy = self._approximate.xy(frame, self.points_cap)
+        return xy
 
     def _record(self, frame, state: dict, now: float) -> None:
         self.frames_processed += 1
@@ -281,10 +325,10 @@ class PipelineRunner:
         m.vehicles.set(len(state.get("vehicles") or []))
         counters = getattr(self.pipeline, "counters", None) or {}
         for reason, value in counters.items():
-            if isinstance(value, (int, float)):
+            if reason != "frames" and isinstance(value, (int, float)):
                 delta = value - self._pipeline_counters.get(reason, 0)
                 if delta > 0:
-                    m.pipeline_drops.labels(str(reason)).inc(delta)
+                    m.pipeline_events.labels(str(reason)).inc(delta)
                 self._pipeline_counters[reason] = value
 
     # ------------------------------------------------------------------ summaries
