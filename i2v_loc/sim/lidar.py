@@ -68,7 +68,7 @@ class LidarModel:
         return {
             "name": self.name, "model": self.model, "beams": self.beams, "columns": self.columns,
             "rate_hz": self.rate_hz, "beam_altitude_deg": [round(float(a), 4) for a in self.beam_altitude_deg],
-            "phase_s": round(self.phase_s, 6), "clock_offset_s": round(self.clock_offset_s, 6),
+            "phase_s": round(self.phase_s, 9), "clock_offset_s": round(self.clock_offset_s, 9),
             "range_noise_m": self.range_noise_m, "dropout_rate": self.dropout_rate,
             "min_range_m": self.min_range_m, "max_range_m": self.max_range_m,
         }
@@ -108,20 +108,27 @@ class YardCaster:
         self.objects = objects
         self.object_scenes = [_scene(o.mesh) for o in objects]
         self.slices = slices
-        self._static_cache: dict[str, np.ndarray] = {}
-        self._dir_cache: dict[str, np.ndarray] = {}
+        self._static_cache: dict[tuple, np.ndarray] = {}
+        self._dir_cache: dict[tuple, np.ndarray] = {}
+
+    @staticmethod
+    def _key(lidar: LidarModel) -> tuple:
+        return lidar.name, lidar.beams, lidar.columns, lidar.pose.tobytes()
 
     def _directions(self, lidar: LidarModel) -> np.ndarray:
-        if lidar.name not in self._dir_cache:
-            self._dir_cache[lidar.name] = lidar.yard_directions()
-        return self._dir_cache[lidar.name]
+        key = self._key(lidar)
+        if key not in self._dir_cache:
+            self._dir_cache[key] = lidar.yard_directions()
+        return self._dir_cache[key]
 
     def static_ranges(self, lidar: LidarModel) -> np.ndarray:
-        if lidar.name not in self._static_cache:
+        """Ranges to the static yard (cast once per sensor: neither moves)."""
+        key = self._key(lidar)
+        if key not in self._static_cache:
             d = self._directions(lidar).reshape(-1, 3)
             origins = np.broadcast_to(lidar.pose[:3, 3], d.shape)
-            self._static_cache[lidar.name] = _cast(self.static_scene, origins, d).reshape(lidar.beams, lidar.columns)
-        return self._static_cache[lidar.name]
+            self._static_cache[key] = _cast(self.static_scene, origins, d).reshape(lidar.beams, lidar.columns)
+        return self._static_cache[key]
 
     def cast_sweep(self, lidar: LidarModel, sweep_start_s: float) -> tuple[np.ndarray, np.ndarray]:
         """True ranges (beams, columns) in metres (inf = no hit) and the id of what each ray hit."""
