@@ -123,7 +123,7 @@ def simulated_recording(spec: SimSpec, cache_dir: str | Path | None = None, quie
     partial = cache / f".{spec.cache_name()}.partial-{os.getpid()}"
     shutil.rmtree(partial, ignore_errors=True)
     cmd = [
-        sys.executable, "-m", "i2v_loc.cli", "sim",
+        *_i2v_loc_command(), "sim",
         "--vehicle", spec.vehicle, "--scenario", spec.scenario,
         "--seed", str(spec.seed), "--duration", f"{spec.duration_s:g}", "--out", str(partial),
     ]
@@ -141,6 +141,12 @@ def simulated_recording(spec: SimSpec, cache_dir: str | Path | None = None, quie
     except OSError:  # another process won the race: use its recording
         shutil.rmtree(partial, ignore_errors=True)
     return target
+
+
+def _i2v_loc_command() -> list[str]:
+    """The ``i2v-loc`` console script of this interpreter's environment, else the module."""
+    script = Path(sys.executable).with_name("i2v-loc")
+    return [str(script)] if script.is_file() else [sys.executable, "-m", "i2v_loc.cli"]
 
 
 _SPEC = re.compile(r"^(?P<kind>sim|replay)(?::(?P<arg>.*))?$")
