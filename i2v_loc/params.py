@@ -181,7 +181,7 @@ class CalibrationParams(Section):
 
 class ConcatenationParams(Section):
     voxel_size_m: float = Field(0.1, ge=0.0, le=2.0, description="Voxel edge of the centroid grid (Eq. 1-2); 0 disables it")
-    sync_tolerance_s: float = Field(0.06, gt=0.0, le=1.0, description="Sensor frames further than this from the reference time are dropped")
+    sync_tolerance_s: float = Field(0.1, gt=0.0, le=1.0, description="Sensor frames further than this from the reference time are dropped; one sweep period, as sensor phases are unsynchronised")
     reference: Literal["earliest", "latest", "mean"] = Field("earliest", description="Which sensor stamp is the frame's reference time")
     motion_interpolation: bool = Field(True, description="Interpolate each point to the reference time (Eq. 3)")
 
@@ -210,6 +210,7 @@ class RegionParams(Section):
 
 class ClusteringParams(Section):
     tolerance_m: float = Field(0.7, gt=0.0, le=5.0, description="ε of Eq. 4")
+    voxel_size_m: float = Field(0.2, ge=0.0, le=2.0, description="Neighbour search on voxel centroids of this size (0 = every point)")
     min_points: int = Field(10, ge=1)
     max_points: int = Field(200000, ge=1)
 

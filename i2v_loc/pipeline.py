@@ -26,7 +26,11 @@ from i2v_loc.stages.orientation import OrientationEstimator, UnitObservation
 from i2v_loc.stages.region import Region
 from i2v_loc.stages.tracking import Detection, Tracker, Track
 
-METHODS = ("paper",)
+# "paper": the stages as published (yaw from PCA on the centroid history alone).
+# "default": the same stages with the unit's shape axis as the yaw axis (PCA keeps the history,
+# the travel test and the 180 deg resolution); measured far lower hitch error in turns.
+METHODS = ("paper", "default")
+METHOD_PATCHES = {"paper": {}, "default": {"orientation": {"shape_weight": 1.0}}}
 STAGES = ("concatenation", "region", "clustering", "classification", "centroid", "tracking", "orientation")
 MOTION_HINT_MIN_SPEED_M_S = 0.1
 MOTION_HINT_MARGIN_M = 0.5
@@ -120,6 +124,8 @@ class Pipeline:
         if method not in METHODS:
             raise ValueError(f"unknown method {method!r}; known: {', '.join(METHODS)}")
         self.method = method
+        if METHOD_PATCHES[method]:
+            params = apply_patch(params, METHOD_PATCHES[method], source=f"method {method}")
         self._lock = threading.Lock()
         self._pending: Params | None = None
         self._active = params

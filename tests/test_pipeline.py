@@ -55,7 +55,7 @@ def test_update_params_applies_at_the_next_frame_and_rejects_bad_patches():
     with pytest.raises(ParamsError):
         pipeline.update_params({"clustering": {"tolerance_m": -1}})
     done = threading.Event()
-    threading.Thread(target=lambda: (pipeline.update_params({"clustering": {"tolerance_m": 0.3}}), done.set())).start()
+    threading.Thread(target=lambda: (pipeline.update_params({"clustering": {"tolerance_m": 0.3, "voxel_size_m": 0.0}}), done.set())).start()
     done.wait(5)
     assert pipeline.params.clustering.tolerance_m == 0.3
     assert len(pipeline.process(frame).clusters) == 2

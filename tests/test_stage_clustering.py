@@ -41,7 +41,7 @@ def test_oriented_box_volume_is_rectangle_area_times_height():
 
 def test_volume_gate_statuses():
     params = Params()
-    twizy = params.vehicles["twizy"]
+    twizy = params.vehicles["twizy"].model_copy(update={"vehicle_volume_tolerance_m3": 10.0})
     only_twizy = {"twizy": twizy}
     stage = Clustering(ClusteringParams(tolerance_m=0.7, min_points=5), only_twizy)
     v_e = twizy.vehicle_volume_m3  # about 15.6 m3, gate +- 10 m3

@@ -38,11 +38,18 @@ def voxel_centroids(points: np.ndarray, voxel_m: float, values: np.ndarray | Non
     return means[:, :3].astype(points.dtype), means[:, 3:]
 
 
-def euclidean_labels(points: np.ndarray, tolerance_m: float) -> np.ndarray:
-    """Cluster label per point: connected components of the 'closer than tolerance' graph (Eq. 4)."""
+def euclidean_labels(points: np.ndarray, tolerance_m: float, voxel_m: float = 0.0) -> np.ndarray:
+    """Cluster label per point: connected components of the 'closer than tolerance' graph (Eq. 4).
+
+    With ``voxel_m`` > 0 the graph is built on the voxel centroids and the labels copied back.
+    """
     n = len(points)
     if n == 0:
         return np.zeros(0, dtype=np.int64)
+    if voxel_m > 0:
+        _, first, inverse = np.unique(voxel_keys(points, voxel_m), return_index=True, return_inverse=True)
+        centroids, _ = voxel_centroids(points, voxel_m)  # same key order as np.unique above
+        return euclidean_labels(centroids, tolerance_m)[inverse.reshape(-1)]
     pairs = cKDTree(points).query_pairs(tolerance_m, output_type="ndarray")
     graph = coo_matrix((np.ones(len(pairs), dtype=np.int8), (pairs[:, 0], pairs[:, 1])), shape=(n, n))
     _, labels = connected_components(graph, directed=False)
