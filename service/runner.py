@@ -116,7 +116,7 @@ class ApproximateForeground:
         total = sum(len(s.points) for s in frame.scans.values())
         if cap <= 0 or total == 0:
             return None
-        step = max(1, total // (4 * cap))  # most points are ground or outside: sample 4x the cap
+        step = max(1, total // (10 * cap))  # most points are ground or outside: sample 10x the cap
         parts = [transform_points(self.poses[name], scan.points[::step].astype(np.float64))
                  for name, scan in frame.scans.items() if name in self.poses]
         if not parts:

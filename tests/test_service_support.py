@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import json
 import socket
+import tempfile
 import threading
 import time
 from pathlib import Path
@@ -14,7 +15,7 @@ from pathlib import Path
 import uvicorn
 
 from i2v_loc.params import load_params
-from i2v_loc.sources import ReplaySource
+from i2v_loc.sources import ReplaySource, SimSpec, simulated_recording
 from service.app import create_app
 from service.auth import AuthConfig
 from service.core import build_service
@@ -26,11 +27,13 @@ PIPELINE_FACTORY = None  # None: the real i2v_loc.pipeline.Pipeline
 
 
 def sample_recording() -> Path:
-    """The committed sample recording the service tests replay (smallest one with a vehicle)."""
-    candidates = sorted(p.parent for p in SAMPLES.glob("*/meta.yaml"))
-    if not candidates:
-        raise FileNotFoundError(f"no sample recording under {SAMPLES}")
-    return candidates[0]
+    """A committed sample recording of the docking scenario if there is one, else a 4 s one
+    simulated once into the temp folder (about 3 s)."""
+    candidates = sorted(p.parent for p in SAMPLES.glob("**/meta.yaml") if "dock" in p.parent.name)
+    if candidates:
+        return candidates[0]
+    spec = SimSpec(scenario="docking", vehicle="man_tgx", seed=1, duration_s=4.0)
+    return simulated_recording(spec, Path(tempfile.gettempdir()) / "i2v-loc-test-sim", quiet=True)
 
 
 class LiveServer:
