@@ -7,6 +7,7 @@ import json
 import math
 from pathlib import Path
 
+import numpy as np
 import pytest
 import yaml
 
@@ -123,3 +124,20 @@ def test_committed_samples_evaluate(tmp_path):
         if s["gt_vehicle_frames"]:
             assert all(key in s for key in REQUIRED), vehicle
             assert _finite_or_none(s["heading_flip_rate"], 0.0, 1.0)
+
+
+def test_openlabel_labels_score_like_the_jsonl_truth(recording):
+    """The simulator's OpenLABEL export, read as user labels, gives the same errors as its GT lines."""
+    from i2v_loc.evaluation.runner import Task, base_params, run_tasks
+
+    params = base_params(None)
+    label_file = str(recording / "ground_truth.openlabel.json")
+    jsonl, labels = run_tasks([Task(str(recording), "paper", None, params),
+                               Task(str(recording), "paper", None, params, labels=label_file)], progress=False)
+    keys = ("truck_pos_err_m", "trailer_pos_err_m", "truck_yaw_err_deg", "hitch_gt_deg", "static_dT_m")
+    a = np.array([[r[k] for k in keys] for r in jsonl["records"] if r["kind"] == "gt"])
+    b = np.array([[r[k] for k in keys] for r in labels["records"] if r["kind"] == "gt"])
+    assert a.shape == b.shape == (15, len(keys))
+    assert np.allclose(a, b, atol=1e-6, equal_nan=True)
+    assert np.isfinite(a[:, 3]).all()
+    assert {r["maneuver"] for r in labels["records"] if r["kind"] == "gt"} == {"long_curve"}

@@ -65,14 +65,17 @@ def _blend_vehicle(v0: dict, v1: dict, w: float) -> dict:
     return out
 
 
-def interpolate_ground_truth(lines: list[dict], stamp_s: float, max_gap_s: float | None = None) -> dict:
+def interpolate_ground_truth(lines: list[dict], stamp_s: float, max_gap_s: float | None = None,
+                             times: np.ndarray | None = None) -> dict:
     """The truth at ``stamp_s``: poses linearly interpolated between the two GT lines around it
     (yaw along the shorter arc); labels and point counts from the nearer line. A vehicle must be
     in both lines. Stamps outside the GT span by more than ``max_gap_s`` (default half a frame
-    period) give no vehicles."""
+    period) give no vehicles. ``times`` are the lines' stamps, precomputed by callers that
+    interpolate many times."""
     if not lines:
         return {"frame": None, "stamp_s": stamp_s, "vehicles": []}
-    times = np.array([line["stamp_s"] for line in lines], float)
+    if times is None:
+        times = np.array([line["stamp_s"] for line in lines], float)
     step = float(np.median(np.diff(times))) if len(times) > 1 else 0.1
     gap = step / 2.0 if max_gap_s is None else max_gap_s
     i1 = int(np.searchsorted(times, stamp_s, side="left"))
@@ -225,7 +228,8 @@ def load_openlabel(path: str | Path, rate_hz: float = 10.0, transform=None, stam
             except ValueError as err:
                 raise GroundTruthError(f"{file}: frame key {key!r} is not an integer") from err
             stamp = (frame.get("frame_properties") or {}).get("timestamp")
-            frames.append((number, stamp, _openlabel_units(frame, file, transform)))
+            static = data["openlabel"].get("objects") or {}
+            frames.append((number, stamp, _openlabel_units(frame, static, file, transform)))
     if not label_files:
         raise GroundTruthError(f"{path}: no OpenLABEL files (none has a top-level 'openlabel' key)")
     frames.sort(key=lambda f: f[0])
@@ -238,11 +242,14 @@ def load_openlabel(path: str | Path, rate_hz: float = 10.0, transform=None, stam
     ]
 
 
-def _openlabel_units(frame: dict, file: Path, transform) -> list[dict]:
+def _openlabel_units(frame: dict, static: dict, file: Path, transform) -> list[dict]:
+    """Units of one frame. The class and static attributes may sit in the frame's object (as in
+    TUMTraf) or, per the standard, in the top-level ``objects`` under the same key."""
     units = []
     for key, obj in (frame.get("objects") or {}).items():
         data = obj.get("object_data") or {}
-        kind = _unit_kind(str(data.get("type", "")))
+        fixed = static.get(key) or {}
+        kind = _unit_kind(str(data.get("type") or obj.get("type") or fixed.get("type") or ""))
         cuboid = data.get("cuboid")
         if kind is None or not cuboid:
             continue
@@ -255,7 +262,7 @@ def _openlabel_units(frame: dict, file: Path, transform) -> list[dict]:
             "kind": kind, "key": key, "center": val[0:3], "dimensions": val[7:10],
             "yaw_deg": yaw_from_quaternion_deg(*val[3:7]),
             "points": int(points) if points is not None else None,
-            "vehicle": _attribute(attrs, "text", "vehicle"),
+            "vehicle": _attribute(attrs, "text", "vehicle") or _attribute(fixed.get("object_data") or {}, "text", "vehicle"),
             "maneuver": _attribute(attrs, "text", "maneuver"),
         }
         units.append(_apply_transform(unit, transform))

@@ -145,10 +145,11 @@ def match_states(states: list[dict], gt_lines: list[dict], params: Params, gate_
     to its ``stamp_s`` (falling back to the GT line of the same frame when it has no stamp)."""
     records, frames = [], []
     by_frame = {line.get("frame"): line for line in gt_lines}
+    times = np.array([line["stamp_s"] for line in gt_lines], float)
     for state in states:
         stamp = state.get("stamp_s")
         if stamp is not None and np.isfinite(stamp):
-            gt = interpolate_ground_truth(gt_lines, float(stamp))
+            gt = interpolate_ground_truth(gt_lines, float(stamp), times=times)
         else:
             gt = by_frame.get(state.get("frame"), {"vehicles": []})
         records += match_frame(state, gt, params, gate_m)

@@ -79,7 +79,12 @@ def run_task(task: Task) -> dict:
     from i2v_loc.evaluation.matching import match_states
 
     try:
-        gt_lines = load_ground_truth(task.labels or task.recording)
+        if task.labels:
+            from i2v_loc.recording import Recording
+
+            gt_lines = load_ground_truth(task.labels, rate_hz=Recording(task.recording).rate_hz)
+        else:
+            gt_lines = load_ground_truth(task.recording)
         states = run_pipeline(task)
         params = recording_params(task.params, task.recording, task.sensors)
         records, frames = match_states(states, gt_lines, params, task.gate_m)
