@@ -15,7 +15,7 @@ import pytest
 import websockets
 import yaml
 
-from i2v_loc.params import json_schema, load_params
+from i2v_loc.params import Params, json_schema, load_params
 from test_service_support import TOKEN, next_state, sample_recording, serve, wait_for
 
 pytestmark = pytest.mark.timeout(60)
@@ -152,7 +152,7 @@ def test_invalid_patch_gives_422_and_changes_nothing(client, live):
     unknown = client.patch("/api/v1/params", json={"clustering": {"tolerance": 0.5}}, headers=AUTH)
     assert unknown.status_code == 422 and unknown.json()["errors"][0]["field"] == "clustering.tolerance"
     assert client.get("/api/v1/params").json() == before
-    assert params_file.read_text() == file_before and service.runner.pipeline.params.clustering.min_points == 10
+    assert params_file.read_text() == file_before and service.runner.pipeline.params.clustering == Params().clustering
 
 
 def test_malformed_requests_get_4xx_with_a_message(client):
@@ -196,8 +196,9 @@ def test_valid_patch_changes_the_next_frame_and_rolls_back(client, live):
 
     back = client.post(f"/api/v1/params/rollback/{start_version}", headers=AUTH)
     assert back.status_code == 200 and back.json()["version"] == version + 1
-    assert back.json()["params"]["clustering"] == {"tolerance_m": 0.7, "min_points": 10, "max_points": 200000}
-    assert load_params(params_file).clustering.tolerance_m == 0.7
+    default = Params().clustering
+    assert back.json()["params"]["clustering"] == default.model_dump(mode="json")
+    assert load_params(params_file).clustering == default
     restored = asyncio.run(clusters_at(version + 1))
     assert max(restored) < min(after)
 
