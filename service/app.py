@@ -167,7 +167,48 @@ def create_app(service: Service) -> FastAPI:
         await _serve_states(service, websocket, points)
 
     app.include_router(api)
+    _document_patch_body(app)
     return app
+
+
+def patch_schema_components() -> dict[str, dict]:
+    """OpenAPI components for a parameter patch: the parameter model with nothing required."""
+    schema = json_schema()
+    defs = schema.pop("$defs", {})
+
+    def convert(node):
+        if isinstance(node, dict):
+            out = {k: convert(v) for k, v in node.items() if k != "required"}
+            ref = out.get("$ref")
+            if isinstance(ref, str) and ref.startswith("#/$defs/"):
+                out["$ref"] = "#/components/schemas/ParamsPatch_" + ref.split("/")[-1]
+            return out
+        if isinstance(node, list):
+            return [convert(v) for v in node]
+        return node
+
+    components = {f"ParamsPatch_{name}": convert(d) for name, d in defs.items()}
+    root = convert(schema)
+    root.update(title="ParamsPatch", description="A JSON merge patch of the parameters: any subset of the sections")
+    components["ParamsPatch"] = root
+    return components
+
+
+def _document_patch_body(app: FastAPI) -> None:
+    """Describe PATCH /params' body with the parameter model (the handler parses it itself)."""
+    generate = app.openapi
+
+    def openapi() -> dict:
+        if app.openapi_schema is None:
+            spec = generate()
+            spec.setdefault("components", {}).setdefault("schemas", {}).update(patch_schema_components())
+            content = spec["paths"]["/api/v1/params"]["patch"]["requestBody"]["content"]
+            for media in content.values():
+                media["schema"] = {"$ref": "#/components/schemas/ParamsPatch"}
+            app.openapi_schema = spec
+        return app.openapi_schema
+
+    app.openapi = openapi
 
 
 async def _json_body(request: Request):

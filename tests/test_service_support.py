@@ -23,7 +23,6 @@ from service.core import build_service
 REPO = Path(__file__).resolve().parents[1]
 SAMPLES = REPO / "samples"
 TOKEN = "test-token-5f2c"
-PIPELINE_FACTORY = None  # None: the real i2v_loc.pipeline.Pipeline
 
 
 def sample_recording() -> Path:
@@ -71,13 +70,12 @@ class LiveServer:
 
 
 def make_service(recording: Path, params_file: Path | None = None, token: str | None = TOKEN,
-                 require_token_for_reads: bool = False, loop: bool = True, pipeline_factory=None, **kwargs):
+                 require_token_for_reads: bool = False, loop: bool = True, **kwargs):
+    """A service with the real pipeline replaying ``recording``."""
     source = ReplaySource(recording, loop=loop)
     existing = params_file if params_file is not None and params_file.is_file() else None
     params = load_params(source.sensors_file, existing)
-    pipeline_factory = pipeline_factory or PIPELINE_FACTORY
-    extra = {"pipeline_factory": pipeline_factory} if pipeline_factory else {}
-    return build_service(source, params, params_file, AuthConfig(token, require_token_for_reads), **extra, **kwargs)
+    return build_service(source, params, params_file, AuthConfig(token, require_token_for_reads), **kwargs)
 
 
 def serve(recording: Path, send_buffer_bytes: int | None = None, **kwargs) -> tuple[LiveServer, object]:
