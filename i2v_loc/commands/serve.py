@@ -139,9 +139,8 @@ def _announce(args, source, service, params_file, auth, url) -> None:
     ]
     if auth.require_token_for_reads:
         lines.append("  reads      need the bearer token")
-    host = sock_host = args.host
-    if sock_host not in ("127.0.0.1", "localhost", "::1") and not auth.require_token_for_reads:
-        lines.append(f"  warning    listening on {host}: reads are open to the network")
+    if args.host not in ("127.0.0.1", "localhost", "::1") and not auth.require_token_for_reads:
+        lines.append(f"  warning    listening on {args.host}: reads are open to the network")
     print("\n".join(lines), file=sys.stderr, flush=True)
 
 
