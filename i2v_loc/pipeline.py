@@ -34,6 +34,7 @@ METHOD_PATCHES = {"paper": {}, "default": {"orientation": {"shape_weight": 1.0}}
 STAGES = ("concatenation", "region", "clustering", "classification", "centroid", "tracking", "orientation")
 MOTION_HINT_MIN_SPEED_M_S = 0.1
 MOTION_HINT_MARGIN_M = 0.5
+SQUARE_ASPECT = 1.3  # units with length < 1.3 x width have their shape axis known modulo 90 deg only
 
 
 def _r(value: float, digits: int = 4) -> float:
@@ -233,7 +234,8 @@ class Pipeline:
     def _orient(self, tracks: list[Track], stamp_s: float, params: Params) -> list[VehicleResult]:
         seen = [t for t in tracks if t.detection is not None]
         observations = [UnitObservation(t.track_id, t.vehicle_id, t.kind, t.detection.center,
-                                        float(np.degrees(t.detection.payload.corrected.axis_yaw_rad)) % 180.0)
+                                        float(np.degrees(t.detection.payload.corrected.shape_yaw_rad)) % 180.0,
+                                        self._shape_period_deg(t.detection.payload.dims))
                         for t in seen]
         yaws = self.orientation.process(observations, stamp_s, {t.track_id for t in tracks})
         self._last_yaw = {(t.kind, t.track_id): (t.detection.center[:2], yaws[t.track_id])
@@ -248,6 +250,11 @@ class Pipeline:
                 t.track_id, t.detection.center, yaws.get(t.track_id), payload.dims, payload.corrected.points)
             names[t.vehicle_id] = t.vehicle
         return [self._vehicle_result(vid, names[vid], units) for vid, units in sorted(by_vehicle.items())]
+
+    @staticmethod
+    def _shape_period_deg(dims: tuple[float, float, float]) -> float:
+        length, width, _ = dims
+        return 180.0 if length >= SQUARE_ASPECT * width else 90.0
 
     def _vehicle_result(self, vehicle_id: int, name: str, units: dict[str, UnitResult]) -> VehicleResult:
         truck, trailer = units.get("truck"), units.get("trailer")

@@ -29,7 +29,8 @@ FACE_SLAB_M = 0.3  # points this close to an end of the extent belong to that en
 class CorrectedUnit:
     center: np.ndarray  # (3,) corrected box centre, yard frame
     centroid: np.ndarray  # (3,) raw centroid (Eq. 6)
-    axis_yaw_rad: float  # direction of the unit's length axis (defined modulo pi)
+    axis_yaw_rad: float  # direction of the unit's length axis used here (defined modulo pi)
+    shape_yaw_rad: float  # the L-shape fit of the points alone (modulo pi; modulo pi/2 for a square unit)
     extent_m: tuple[float, float]  # measured extent along (length, width) axes
     points: int
 
@@ -42,18 +43,19 @@ class CentroidCorrector:
                 yaw_hint_rad: float | None = None) -> CorrectedUnit:
         pts = np.asarray(points, dtype=np.float64)
         centroid = pts.mean(axis=0)
-        yaw = self._axis_yaw(pts, dims, yaw_hint_rad)
+        shape_yaw = self._shape_yaw(pts, dims)
+        yaw = shape_yaw if yaw_hint_rad is None else float(yaw_hint_rad)
         axes = unit_axes(yaw)
         local = (pts[:, :2] - centroid[:2]) @ axes.T  # (N, 2): u forward, v left
         low, high = local.min(axis=0), local.max(axis=0)
         extent = high - low
         if not self.params.enabled:
-            return CorrectedUnit(centroid, centroid, yaw, (float(extent[0]), float(extent[1])), len(pts))
+            return CorrectedUnit(centroid, centroid, yaw, shape_yaw, (float(extent[0]), float(extent[1])), len(pts))
         known = np.array([dims.length_m, dims.width_m])
         shift = self._from_face_plane(local, low, high, known)
         center_xy = centroid[:2] + shift @ axes
         center_z = ground_z_m + dims.floor_m + dims.height_m / 2
-        return CorrectedUnit(np.array([*center_xy, center_z]), centroid, yaw,
+        return CorrectedUnit(np.array([*center_xy, center_z]), centroid, yaw, shape_yaw,
                              (float(extent[0]), float(extent[1])), len(pts))
 
     @staticmethod
@@ -75,9 +77,7 @@ class CentroidCorrector:
         return offset
 
     @staticmethod
-    def _axis_yaw(points: np.ndarray, dims: UnitDimensions, yaw_hint_rad: float | None) -> float:
-        if yaw_hint_rad is not None:
-            return float(yaw_hint_rad)
+    def _shape_yaw(points: np.ndarray, dims: UnitDimensions) -> float:
         yaw = l_shape_yaw(points[:, :2])
         local = (points[:, :2] - points[:, :2].mean(axis=0)) @ unit_axes(yaw).T
         along_is_longer = np.ptp(local[:, 0]) >= np.ptp(local[:, 1])

@@ -28,6 +28,7 @@ from i2v_loc.stages.primitives import euclidean_labels, min_area_rect, oriented_
 
 XY_GRID_M = 0.05  # the xy projection is thinned to this grid before the second clustering
 FOOTPRINT_MARGIN_M = 0.1
+TOLERANCE_FACTORS = (1.0, 0.6, 0.4)  # retries of the second clustering with smaller epsilon
 
 
 @dataclass
@@ -48,7 +49,7 @@ class TruckTrailerClassifier:
         for name in candidates:
             vehicle = self.vehicles[name]
             body = np.flatnonzero(points[:, 2] - ground_z_m >= vehicle.trailer.floor_m + self.params.floor_margin_m)
-            found = self._best_trailer(points[body], self.sub_clusters(points[body]), vehicle)
+            found = self._find_trailer(points[body], vehicle)
             if found is None:
                 continue
             trailer_body, error = found
@@ -69,13 +70,22 @@ class TruckTrailerClassifier:
         margin = FOOTPRINT_MARGIN_M
         return (along <= rect.length_m / 2 + margin) & (across <= rect.width_m / 2 + margin)
 
-    def sub_clusters(self, points: np.ndarray) -> list[np.ndarray]:
+    def _find_trailer(self, body: np.ndarray, vehicle: VehicleConfig):
+        """Second clustering at the trailer tolerance; when the cab still touches the trailer (the
+        inner corners close in at large hitch angles) retry with smaller tolerances."""
+        for factor in TOLERANCE_FACTORS:
+            found = self._best_trailer(body, self.sub_clusters(body, self.params.trailer_tolerance_m * factor), vehicle)
+            if found is not None:
+                return found
+        return None
+
+    def sub_clusters(self, points: np.ndarray, tolerance_m: float | None = None) -> list[np.ndarray]:
         """Point indices of the xy clusters with at least ``min_trailer_points`` points."""
         if len(points) == 0:
             return []
         xy = points[:, :2].astype(np.float64)
         _, first, inverse = np.unique(voxel_keys(xy, XY_GRID_M), return_index=True, return_inverse=True)
-        cell_labels = euclidean_labels(xy[first], self.params.trailer_tolerance_m)
+        cell_labels = euclidean_labels(xy[first], tolerance_m or self.params.trailer_tolerance_m)
         labels = cell_labels[inverse.reshape(-1)]
         return [g for g in split_by_label(labels) if len(g) >= self.params.min_trailer_points]
 

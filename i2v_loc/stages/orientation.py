@@ -9,7 +9,8 @@ by continuity with the previous yaw, and for a first estimate of a lone unit by 
 of travel. Below ``min_travel_m`` of travel over the history the last yaw is held; a unit with
 no yaw yet takes its shape axis (minimum-area rectangle). The per-frame yaw change is bounded
 by ``max_yaw_rate_deg_s`` and then exponentially smoothed. ``shape_weight`` blends the
-measured axis with the unit's shape axis (0 = the paper's pure PCA).
+measured axis with the unit's shape axis (0 = the paper's pure PCA); for a nearly square unit the
+shape axis is only known modulo 90 deg and the PCA axis picks the equivalent.
 """
 
 from __future__ import annotations
@@ -30,6 +31,7 @@ class UnitObservation:
     kind: str  # "truck" | "trailer"
     center: np.ndarray  # (3,) corrected centre
     shape_axis_deg: float  # long axis of the unit's points, modulo 180
+    shape_period_deg: float = 180.0  # 90 for a nearly square unit (its long axis is ambiguous)
 
 
 @dataclass
@@ -89,7 +91,7 @@ class OrientationEstimator:
             return None  # standing still: hold
         else:
             axis_deg = unit.shape_axis_deg
-        axis_deg = self._blend_with_shape(axis_deg, unit.shape_axis_deg)
+        axis_deg = self._blend_with_shape(axis_deg, unit.shape_axis_deg, unit.shape_period_deg)
         return self._resolve_direction(axis_deg, forward, state.yaw_deg, travel)
 
     @staticmethod
@@ -100,11 +102,13 @@ class OrientationEstimator:
         v = eigvecs[:, np.argmax(eigvals)]
         return float(np.degrees(np.arctan2(v[1], v[0])))
 
-    def _blend_with_shape(self, axis_deg: float, shape_axis_deg: float) -> float:
+    def _blend_with_shape(self, axis_deg: float, shape_axis_deg: float, period_deg: float = 180.0) -> float:
+        """The measured axis moved towards the shape axis (its equivalent nearest the measured one,
+        modulo 180 deg, or modulo 90 deg for a nearly square unit such as a tractor cab)."""
         w = self.params.shape_weight
         if w <= 0:
             return axis_deg
-        shape = axis_deg + wrap_deg(2 * (shape_axis_deg - axis_deg)) / 2  # nearest equivalent axis
+        shape = axis_deg + (shape_axis_deg - axis_deg + period_deg / 2) % period_deg - period_deg / 2
         return float(axis_deg + w * (shape - axis_deg))
 
     @staticmethod
