@@ -50,4 +50,5 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    # Run through the package so exception classes are the ones the commands import.
+    from i2v_loc.__main__ import main as _main  # noqa: F401  (runs and exits)
