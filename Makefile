@@ -1,16 +1,19 @@
-# make demo  - set everything up and run the main job on the built-in simulated yard
+# make demo  - set everything up and run the main job (the yard service) on the built-in simulated yard
 # make test  - set everything up and run the tests
 PYTHON ?= python3
 VENV   := .venv
 BIN    := $(VENV)/bin
 OUT    ?= out
+PORT   ?= 8000
 
 .PHONY: demo test setup setup-test clean
 
+# The yard service on the simulated yard (MAN TGX docking in a loop), dashboard on
+# http://127.0.0.1:8000/. Parameter changes persist in $(OUT)/yard-params.yaml; set
+# I2V_LOC_API_TOKEN to allow them. Stop with Ctrl-C.
 demo: setup
-	$(BIN)/i2v-loc sim --vehicle man_tgx --scenario docking --seed 1 --duration 30 \
-		--out $(OUT)/demo --preview $(OUT)/demo/preview.png
-	@echo "recording and preview written to $(OUT)/demo"
+	@mkdir -p $(OUT)
+	$(BIN)/i2v-loc serve --source sim:docking --params $(OUT)/yard-params.yaml --port $(PORT)
 
 test: setup-test
 	$(BIN)/python -m pytest
