@@ -42,10 +42,12 @@ class TruckTrailerClassifier:
     def __init__(self, params: ClassificationParams, vehicles: dict[str, VehicleConfig]):
         self.params = params
         self.vehicles = vehicles
+        self._cache: dict = {}
 
     def process(self, points: np.ndarray, candidates: list[str], ground_z_m: float = 0.0) -> Classification:
         """The candidate vehicle whose trailer gate fits best (error / tolerance) wins."""
         best, best_score = Classification(None, None, None), np.inf
+        self._cache: dict = {}  # sub-clusters per (floor, tolerance): vehicles often share a floor height
         for name in candidates:
             vehicle = self.vehicles[name]
             body = np.flatnonzero(points[:, 2] - ground_z_m >= vehicle.trailer.floor_m + self.params.floor_margin_m)
@@ -74,7 +76,10 @@ class TruckTrailerClassifier:
         """Second clustering at the trailer tolerance; when the cab still touches the trailer (the
         inner corners close in at large hitch angles) retry with smaller tolerances."""
         for factor in TOLERANCE_FACTORS:
-            found = self._best_trailer(body, self.sub_clusters(body, self.params.trailer_tolerance_m * factor), vehicle)
+            key = (vehicle.trailer.floor_m, factor)
+            if key not in self._cache:
+                self._cache[key] = self.sub_clusters(body, self.params.trailer_tolerance_m * factor)
+            found = self._best_trailer(body, self._cache[key], vehicle)
             if found is not None:
                 return found
         return None
