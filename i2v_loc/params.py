@@ -198,6 +198,7 @@ class RegionParams(Section):
     ransac_sample_voxel_m: float = Field(0.5, ge=0.0, le=5.0, description="Voxel size of the cloud RANSAC samples from; 0 uses every point")
     max_ground_tilt_deg: float = Field(10.0, ge=0.0, le=45.0, description="Planes tilted more than this from horizontal are not ground")
     min_ground_fraction: float = Field(0.1, ge=0.0, le=1.0, description="A plane supported by fewer sampled points than this fraction is not ground")
+    ground_refit_frames: int = Field(1, ge=1, le=1000, description="Fit the ground plane every this many frames and keep it in between (1 = every frame; the ground is static)")
 
     @model_validator(mode="after")
     def _check_bounds(self) -> "RegionParams":
@@ -210,7 +211,9 @@ class RegionParams(Section):
 
 class ClusteringParams(Section):
     tolerance_m: float = Field(0.7, gt=0.0, le=5.0, description="ε of Eq. 4")
+    algorithm: Literal["kdtree", "grid"] = Field("kdtree", description="kdtree: Eq. 4 on voxel centroids; grid: 26-connected components of a voxel occupancy grid of grid_voxel_m")
     voxel_size_m: float = Field(0.2, ge=0.0, le=2.0, description="Neighbour search on voxel centroids of this size (0 = every point)")
+    grid_voxel_m: float = Field(0.5, ge=0.1, le=2.0, description="Voxel of the grid algorithm (0.3 m splits a vehicle: 32-beam rings are 0.5 m apart at 20 m)")
     min_points: int = Field(10, ge=1)
     max_points: int = Field(200000, ge=1)
 
@@ -239,6 +242,9 @@ class TrackingParams(Section):
     min_hits: int = Field(3, ge=1, le=100)
     process_noise: float = Field(1.0, gt=0.0)
     measurement_noise_m: float = Field(0.15, gt=0.0)
+    confirm_paired: bool = Field(False, description="A unit found together with its partner unit (truck and trailer of one classified cluster) is confirmed at once")
+    reacquire_distance_m: float = Field(0.0, ge=0.0, le=20.0, description="A new unit this close to the last position of a lost track of its kind continues it (ID, yaw); 0 = never")
+    reacquire_max_age_s: float = Field(5.0, ge=0.0, le=600.0, description="Lost tracks can be continued for this long")
 
 
 class OrientationParams(Section):
@@ -247,6 +253,32 @@ class OrientationParams(Section):
     max_yaw_rate_deg_s: float = Field(45.0, gt=0.0, le=720.0, description="Bound on the yaw change between frames")
     smoothing: float = Field(0.5, ge=0.0, lt=1.0, description="Weight of the previous yaw in the smoothed yaw")
     shape_weight: float = Field(0.0, ge=0.0, le=1.0, description="Blend of the unit's shape axis into the PCA axis (0 = pure PCA, the paper)")
+    history_gap_s: float = Field(1.0, gt=0.0, le=60.0, description="A unit unseen for longer restarts its centroid history (its yaw is kept)")
+
+
+class BackgroundParams(Section):
+    """Static background (yard, parked objects) learned online as a voxel occupancy map over the region."""
+
+    enabled: bool = Field(False, description="Remove the learned background (the default method turns it on)")
+    voxel_size_m: float = Field(0.2, ge=0.05, le=2.0, description="Edge of the occupancy voxels")
+    dilation_voxels: int = Field(1, ge=0, le=3, description="Background grown by this many voxels (range noise)")
+    window_frames: int = Field(30, ge=2, le=255, description="Learning samples in the sliding window (N)")
+    learn_every_frames: int = Field(2, ge=1, le=100, description="One learning sample every this many frames")
+    occupied_fraction: float = Field(0.8, gt=0.0, le=1.0, description="A voxel occupied in at least this share of the window's samples is background")
+    forget_fraction: float = Field(0.0, ge=0.0, lt=1.0, description="A background voxel occupied in at most this share of the window's samples is background no more")
+    min_samples: int = Field(25, ge=1, le=255, description="Learning samples before the map is used (the frames before fall back to no background); a vehicle standing still from the start longer than this becomes background")
+    protect_margin_m: float = Field(1.0, ge=0.0, le=10.0, description="Voxels within this of a protected track's box are never learned")
+    keep_margin_m: float = Field(0.3, ge=0.0, le=5.0, description="Points within this of a protected track's box are never background (small: a docked trailer's rear is 0.3 m from the wall)")
+    protect_min_travel_m: float = Field(2.0, ge=0.0, le=100.0, description="A confirmed track is protected once its filtered position has moved this far from its first one (0: every confirmed track), so a parked object becomes background but a vehicle that stops does not")
+    max_voxels: int = Field(20_000_000, ge=1000, le=200_000_000, description="Refuse a region / voxel size giving a larger grid")
+
+    @model_validator(mode="after")
+    def _check_samples(self) -> "BackgroundParams":
+        if self.min_samples > self.window_frames:
+            raise ValueError(f"min_samples ({self.min_samples}) must not exceed window_frames ({self.window_frames})")
+        if self.forget_fraction >= self.occupied_fraction:
+            raise ValueError(f"forget_fraction ({self.forget_fraction}) must be below occupied_fraction ({self.occupied_fraction})")
+        return self
 
 
 class Params(Section):
@@ -257,6 +289,7 @@ class Params(Section):
     calibration: CalibrationParams = Field(default_factory=CalibrationParams)
     concatenation: ConcatenationParams = Field(default_factory=ConcatenationParams)
     region: RegionParams = Field(default_factory=RegionParams)
+    background: BackgroundParams = Field(default_factory=BackgroundParams)
     clustering: ClusteringParams = Field(default_factory=ClusteringParams)
     classification: ClassificationParams = Field(default_factory=ClassificationParams)
     centroid: CentroidParams = Field(default_factory=CentroidParams)

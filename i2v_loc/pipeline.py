@@ -17,24 +17,48 @@ import numpy as np
 
 from i2v_loc.frame import Frame
 from i2v_loc.geometry import planar_pose
-from i2v_loc.params import Params, VehicleConfig, apply_patch
+from i2v_loc.params import Params, ParamsError, VehicleConfig, apply_patch
+from i2v_loc.stages.background import BackgroundMap, ProtectedBox, check_grid, region_box
 from i2v_loc.stages.centroid import CentroidCorrector, CorrectedUnit
 from i2v_loc.stages.classification import TruckTrailerClassifier
 from i2v_loc.stages.clustering import Cluster, Clustering
 from i2v_loc.stages.concatenation import Concatenation, MotionHint
 from i2v_loc.stages.orientation import OrientationEstimator, UnitObservation
+from i2v_loc.stages.primitives import voxel_centroids
 from i2v_loc.stages.region import Region
 from i2v_loc.stages.tracking import Detection, Tracker, Track
 
 # "paper": the stages as published (yaw from PCA on the centroid history alone).
-# "default": the same stages with the unit's shape axis as the yaw axis (PCA keeps the history,
-# the travel test and the 180 deg resolution); measured far lower hitch error in turns.
+# "default": the unit's shape axis as the yaw axis (PCA keeps the history, the travel test and
+# the 180 deg resolution; far lower hitch error in turns), the learned static background removed
+# before anything else (interpolation, voxel grid and clustering run on the foreground only),
+# voxel-grid connected components, the ground refitted once a second, lost tracks re-acquired
+# with their ID and yaw, truck + trailer pairs reported from their first frame.
 METHODS = ("paper", "default")
-METHOD_PATCHES = {"paper": {}, "default": {"orientation": {"shape_weight": 1.0}}}
-STAGES = ("concatenation", "region", "clustering", "classification", "centroid", "tracking", "orientation")
+METHOD_PATCHES = {
+    "paper": {},
+    "default": {
+        "orientation": {"shape_weight": 1.0},
+        "background": {"enabled": True},
+        "clustering": {"algorithm": "grid"},
+        "region": {"ground_refit_frames": 10},
+        "tracking": {"confirm_paired": True, "reacquire_distance_m": 3.0},
+    },
+}
+STAGES = ("concatenation", "background", "region", "clustering", "classification", "centroid", "tracking",
+          "orientation")
 MOTION_HINT_MIN_SPEED_M_S = 0.1
 MOTION_HINT_MARGIN_M = 0.5
+PREDICTION_S = 0.1  # protected boxes are moved ahead by one frame of the track's velocity
 SQUARE_ASPECT = 1.3  # units with length < 1.3 x width have their shape axis known modulo 90 deg only
+
+
+def _check_background(params: Params) -> None:
+    if params.background.enabled:
+        try:
+            check_grid(params.background, params.region)
+        except ValueError as err:
+            raise ParamsError(f"background: {err}") from err
 
 
 def _r(value: float, digits: int = 4) -> float:
@@ -84,6 +108,7 @@ class FrameResult:
     vehicles: list[VehicleResult]
     ground_found: bool = True
     points: int = 0  # points after concatenation
+    foreground: np.ndarray | None = None  # (N, 3) non-ground (and non-background) points, yard frame; not in to_json()
 
     def to_json(self) -> dict:
         """The state line of docs/formats.md."""
@@ -127,12 +152,14 @@ class Pipeline:
         self.method = method
         if METHOD_PATCHES[method]:
             params = apply_patch(params, METHOD_PATCHES[method], source=f"method {method}")
+        _check_background(params)
         self._lock = threading.Lock()
         self._pending: Params | None = None
         self._active = params
         self.counters: Counter = Counter()
         self.tracker = Tracker(params.tracking)
         self.orientation = OrientationEstimator(params.orientation)
+        self.background: BackgroundMap | None = None
         self._build(params)
         self._motion: list[MotionHint] = []
         self._last_yaw: dict[tuple[str, int], tuple[np.ndarray, float]] = {}
@@ -148,6 +175,7 @@ class Pipeline:
     def update_params(self, patch: dict) -> Params:
         with self._lock:
             new = apply_patch(self._pending or self._active, patch)
+            _check_background(new)
             self._pending = new
         return new
 
@@ -166,6 +194,28 @@ class Pipeline:
         self.centroid = CentroidCorrector(params.centroid)
         self.tracker.params = params.tracking  # tracks and yaw histories survive a parameter change
         self.orientation.params = params.orientation
+        self._build_background(params)
+
+    def _build_background(self, params: Params) -> None:
+        """The learned map survives a parameter change unless its grid or learning rule changed."""
+        if not params.background.enabled:
+            self.background = None
+            return
+        old = self.background
+        if old is not None and old.params == params.background and old.region_box == region_box(params.region):
+            return
+        self.background = BackgroundMap(params.background, params.region)
+
+    def save_background(self, path) -> None:
+        """Write the learned background map (.npz); ``load_background`` restores it."""
+        if self.background is None:
+            raise ValueError("the background map is disabled (background.enabled is false)")
+        self.background.save(path)
+
+    def load_background(self, path) -> None:
+        if self.background is None:
+            raise ValueError("the background map is disabled (background.enabled is false)")
+        self.background.load(path)
 
     # ----------------------------------------------------------------- processing
 
@@ -173,10 +223,7 @@ class Pipeline:
         self._apply_pending()
         params = self._active
         timer = _Timer()
-        merged = self.concatenation.process(frame.scans, self._motion)
-        timer.lap("concatenation")
-        region = self.region.process(merged.points)
-        timer.lap("region")
+        merged, region, n_points = self._foreground(frame, timer)
         clustering = self.clustering.process(region.points)
         timer.lap("clustering")
         ground_z = region.ground.height_at if region.ground else (lambda x, y: 0.0)
@@ -193,7 +240,42 @@ class Pipeline:
         self._count(merged, region, clustering, cluster_lines)
         return FrameResult(frame.index, merged.stamp_s, timer.total(), merged.faults,
                            {k: v for k, v in merged.dropped.items() if k != "missing"},
-                           cluster_lines, vehicles, region.ground_found, len(merged.points))
+                           cluster_lines, vehicles, region.ground_found, n_points, region.points)
+
+    def _foreground(self, frame: Frame, timer: _Timer):
+        """(merged, region, points after concatenation): ``region.points`` are the non-ground points the
+        clustering sees (for the default method: off the background, interpolated, voxel-downsampled)."""
+        if self.background is None:  # the paper's order
+            merged = self.concatenation.process(frame.scans, self._motion)
+            timer.lap("concatenation")
+            region = self.region.process(merged.points)
+            timer.lap("region")
+            return merged, region, len(merged.points)
+        merged = self.concatenation.merge(frame.scans)
+        timer.lap("concatenation")
+        split = self.background.process(merged.points, self._protected_boxes())
+        timer.lap("background")
+        region = self.region.process(merged.points, split.in_region, split.foreground)
+        points = region.points.copy()
+        if self._active.concatenation.motion_interpolation and self._motion:
+            self.concatenation.interpolate(points, merged.lag_s[region.index], self._motion)
+        region.points, _ = voxel_centroids(points, self._active.concatenation.voxel_size_m)
+        region.index = None
+        timer.lap("region")
+        return merged, region, len(merged.points)
+
+    def _protected_boxes(self) -> list[ProtectedBox]:
+        """Boxes of the live and lost tracks that have travelled: their voxels are not learned."""
+        boxes = []
+        for t in self.tracker.tracks + self.tracker.lost:
+            if not t.confirmed or t.travel_m < self._active.background.protect_min_travel_m or t.last_detection is None:
+                continue
+            unit: _UnitCandidate = t.last_detection.payload
+            length, width, _ = unit.dims
+            # where the unit is now: the filter's prediction for a live track, the last sighting for a lost one
+            center = t.position[:2] + t.velocity * PREDICTION_S if t.lost_at_s is None else t.last_detection.center[:2]
+            boxes.append(ProtectedBox(tuple(center), unit.corrected.axis_yaw_rad, length / 2, width / 2))
+        return boxes
 
     def _classify(self, clusters: list[Cluster], ground_z) -> tuple[list[_UnitCandidate], list[dict]]:
         units, lines = [], []

@@ -45,6 +45,7 @@ class ConcatenationResult:
     sensors_used: list[str]
     faults: dict[str, str] = field(default_factory=dict)  # sensor -> reason
     dropped: dict[str, int] = field(default_factory=dict)  # reason -> count (sweeps; points for nan_points)
+    lag_s: np.ndarray | None = None  # (N,) reference time minus each point's capture time (``merge`` only)
 
 
 @dataclass
@@ -62,6 +63,18 @@ class Concatenation:
         self._to_yard = {s.name: extrinsics_matrix(s.extrinsics).astype(np.float32) for s in sensors}
 
     def process(self, scans: dict[str, SensorScan], motion: list[MotionHint] = ()) -> ConcatenationResult:
+        """Merged, motion-interpolated and voxel-downsampled cloud (the paper's order)."""
+        merged = self.merge(scans)
+        points = merged.points
+        if self.params.motion_interpolation and motion:
+            self.interpolate(points, merged.lag_s, motion)
+        merged.points, _ = voxel_centroids(points, self.params.voxel_size_m)
+        merged.lag_s = None
+        return merged
+
+    def merge(self, scans: dict[str, SensorScan]) -> ConcatenationResult:
+        """Cleaned, synchronised sweeps in the yard frame with each point's lag to the reference time;
+        neither interpolated nor downsampled (the default method does both on the foreground only)."""
         faults: dict[str, str] = {}
         dropped = dict.fromkeys(DROP_REASONS, 0)
         sweeps = self._clean_all(scans, faults, dropped)
@@ -71,9 +84,8 @@ class Concatenation:
                 faults[sweep.name] = "out_of_sync"
                 dropped["out_of_sync"] += 1
         kept = [s for s, ok in zip(sweeps, in_sync) if ok]
-        points = self._merge(kept, reference_s, motion)
-        points, _ = voxel_centroids(points, self.params.voxel_size_m)
-        return ConcatenationResult(points.astype(np.float32), reference_s, [s.name for s in kept], faults, dropped)
+        points, lag_s = self._merge(kept, reference_s)
+        return ConcatenationResult(points, reference_s, [s.name for s in kept], faults, dropped, lag_s)
 
     # ----------------------------------------------------------------- cleaning
 
@@ -131,21 +143,18 @@ class Concatenation:
 
     # ----------------------------------------------------------------- merging
 
-    def _merge(self, sweeps: list[_CleanSweep], reference_s: float, motion: list[MotionHint]) -> np.ndarray:
+    def _merge(self, sweeps: list[_CleanSweep], reference_s: float) -> tuple[np.ndarray, np.ndarray]:
         if not sweeps:
-            return np.zeros((0, 3), dtype=np.float32)
+            return np.zeros((0, 3), dtype=np.float32), np.zeros(0, dtype=np.float32)
         clouds, lags = [], []
         for sweep in sweeps:
             t = self._to_yard[sweep.name]
-            clouds.append(sweep.points @ t[:3, :3].T + t[:3, 3])
-            lags.append(reference_s - (sweep.stamp_s + sweep.time_offset_s))
-        points = np.concatenate(clouds)
-        if self.params.motion_interpolation and motion:
-            self._interpolate(points, np.concatenate(lags).astype(np.float32), motion)
-        return points
+            clouds.append(np.asarray(sweep.points, dtype=np.float32) @ t[:3, :3].T + t[:3, 3])
+            lags.append(np.float32(reference_s - sweep.stamp_s) - sweep.time_offset_s.astype(np.float32))
+        return np.concatenate(clouds), np.concatenate(lags)
 
     @staticmethod
-    def _interpolate(points: np.ndarray, lag_s: np.ndarray, motion: list[MotionHint]) -> None:
+    def interpolate(points: np.ndarray, lag_s: np.ndarray, motion: list[MotionHint]) -> None:
         """Move the points of each moving object to the reference time (in place); a point inside
         several boxes (truck and trailer overlap at the hitch) moves once, with the first box."""
         moved = np.zeros(len(points), dtype=bool)

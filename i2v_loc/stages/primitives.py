@@ -5,9 +5,14 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy import ndimage
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import ConvexHull, QhullError, cKDTree
+
+
+DENSE_KEYS_PER_POINT = 8  # voxel_centroids bins by key directly when the key range is this small
+DENSE_KEYS_MIN = 1 << 16
 
 
 def voxel_keys(points: np.ndarray, voxel_m: float) -> np.ndarray:
@@ -21,21 +26,42 @@ def voxel_keys(points: np.ndarray, voxel_m: float) -> np.ndarray:
 
 
 def voxel_centroids(points: np.ndarray, voxel_m: float, values: np.ndarray | None = None):
-    """Centroid of the points of each occupied voxel (paper Eq. 2).
+    """Centroid of the points of each occupied voxel (paper Eq. 2), voxels in key order.
 
     ``values`` (N, k) are averaged per voxel along with the points; returns (centroids, means or None).
     """
     if voxel_m <= 0 or len(points) == 0:
         return points, values
-    _, inverse, counts = np.unique(voxel_keys(points, voxel_m), return_inverse=True, return_counts=True)
     data = points if values is None else np.hstack([points, values.reshape(len(points), -1)])
-    sums = np.zeros((len(counts), data.shape[1]))
-    for col in range(data.shape[1]):
-        sums[:, col] = np.bincount(inverse, weights=data[:, col], minlength=len(counts))
+    keys = voxel_keys(points, voxel_m)
+    n_keys = int(keys.max()) + 1
+    if n_keys <= DENSE_KEYS_PER_POINT * len(points) + DENSE_KEYS_MIN:
+        # small key range: per-key sums straight from bincount, no sort (same order as np.unique)
+        counts = np.bincount(keys, minlength=n_keys)
+        occupied = np.flatnonzero(counts)
+        sums = np.column_stack([np.bincount(keys, weights=data[:, c], minlength=n_keys)[occupied]
+                                for c in range(data.shape[1])])
+        counts = counts[occupied]
+    else:
+        _, inverse, counts = np.unique(keys, return_inverse=True, return_counts=True)
+        sums = np.column_stack([np.bincount(inverse, weights=data[:, c], minlength=len(counts))
+                                for c in range(data.shape[1])])
     means = sums / counts[:, None]
     if values is None:
         return means[:, :3].astype(points.dtype), None
     return means[:, :3].astype(points.dtype), means[:, 3:]
+
+
+def grid_labels(points: np.ndarray, voxel_m: float) -> np.ndarray:
+    """Cluster label per point: 26-connected components of the occupied voxels of size ``voxel_m``
+    (neighbouring voxels join: points up to about 2 * sqrt(3) * voxel apart, never closer ones split)."""
+    if len(points) == 0:
+        return np.zeros(0, dtype=np.int64)
+    ijk = np.floor((points - points.min(axis=0)) / voxel_m).astype(np.int64)
+    occupied = np.zeros(tuple(ijk.max(axis=0) + 1), dtype=bool)
+    occupied[ijk[:, 0], ijk[:, 1], ijk[:, 2]] = True
+    labels, _ = ndimage.label(occupied, structure=np.ones((3, 3, 3), dtype=bool))
+    return labels[ijk[:, 0], ijk[:, 1], ijk[:, 2]].astype(np.int64) - 1
 
 
 def euclidean_labels(points: np.ndarray, tolerance_m: float, voxel_m: float = 0.0) -> np.ndarray:

@@ -39,6 +39,7 @@ class RegionResult:
     ground: GroundPlane | None
     roi_points: int
     ground_points: int
+    index: np.ndarray | None = None  # indices of ``points`` in the input cloud
 
     @property
     def ground_found(self) -> bool:
@@ -49,14 +50,31 @@ class Region:
     def __init__(self, params: RegionParams, seed: int = 0):
         self.params = params
         self.rng = np.random.default_rng(seed)
+        self._plane: GroundPlane | None = None
+        self._frames_since_fit = 0
 
-    def process(self, points: np.ndarray) -> RegionResult:
-        roi = points[self.roi_mask(points)]
-        plane = self.fit_ground(roi)
+    def process(self, points: np.ndarray, in_region: np.ndarray | None = None,
+                candidates: np.ndarray | None = None) -> RegionResult:
+        """Points inside the region and off the ground. ``in_region`` (bool mask) replaces the
+        passthrough box; ``candidates`` (bool mask inside the region, e.g. the foreground) limits
+        which points are kept, while the ground is still fitted on the whole region."""
+        in_region = self.roi_mask(points) if in_region is None else in_region
+        roi_index = np.flatnonzero(in_region)
+        plane = self.ground(points[roi_index])
+        index = roi_index if candidates is None else np.flatnonzero(candidates)
+        kept = points[index]
         if plane is None:
-            return RegionResult(roi, None, len(roi), 0)
-        above = plane.height_m(roi) > self.params.ground_distance_threshold_m
-        return RegionResult(roi[above], plane, len(roi), int(len(roi) - above.sum()))
+            return RegionResult(kept, None, len(roi_index), 0, index)
+        above = plane.height_m(kept) > self.params.ground_distance_threshold_m
+        return RegionResult(kept[above], plane, len(roi_index), int(len(kept) - above.sum()), index[above])
+
+    def ground(self, roi: np.ndarray) -> GroundPlane | None:
+        """The ground plane, refitted every ``ground_refit_frames`` frames (and while none is found)."""
+        self._frames_since_fit += 1
+        if self._plane is None or self._frames_since_fit >= self.params.ground_refit_frames:
+            self._plane = self.fit_ground(roi)
+            self._frames_since_fit = 0
+        return self._plane
 
     def roi_mask(self, points: np.ndarray) -> np.ndarray:
         p = self.params

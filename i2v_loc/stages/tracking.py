@@ -44,6 +44,11 @@ class Track:
     misses: int = 0
     confirmed: bool = False
     detection: Detection | None = None
+    last_detection: Detection | None = None  # kept while the track is unseen or lost
+    origin_xy: np.ndarray | None = None  # first position: how far the unit has travelled
+    travel_m: float = 0.0  # largest distance from origin_xy so far
+    lost_at_s: float | None = None  # stamp when it left the live tracks (re-acquisition)
+    reacquired: bool = False  # continued a lost track in this frame
 
     @property
     def position(self) -> np.ndarray:
@@ -58,6 +63,7 @@ class Track:
 class TrackingResult:
     tracks: list[Track]  # confirmed tracks updated in this frame
     all_tracks: list[Track] = field(default_factory=list)  # every live track (for motion hints)
+    lost_tracks: list[Track] = field(default_factory=list)  # dead tracks that may still be re-acquired
 
 
 class Tracker:
@@ -67,12 +73,14 @@ class Tracker:
         self._track_ids = itertools.count(1)
         self._vehicle_ids = itertools.count(1)
         self._last_stamp_s: float | None = None
+        self.lost: list[Track] = []
 
     def process(self, detections: list[Detection], stamp_s: float) -> TrackingResult:
         dt = self._step(stamp_s)
         for track in self.tracks:
             self._set_dt(track.kf, dt)
             track.kf.predict()
+            track.reacquired = False
         matches, unmatched = self._associate(detections)
         for t_idx, d_idx in matches:
             self._update(self.tracks[t_idx], detections[d_idx])
@@ -82,11 +90,12 @@ class Tracker:
                 track.misses += 1
                 track.detection = None
         for d_idx in unmatched:
-            self.tracks.append(self._new_track(detections[d_idx]))
-        self.tracks = [t for t in self.tracks if t.misses <= self.params.max_age_frames]
+            self.tracks.append(self._reacquire(detections[d_idx]) or self._new_track(detections[d_idx]))
+        self._retire(stamp_s)
         self._share_vehicle_ids()
+        self._confirm_pairs()
         reported = [t for t in self.tracks if t.confirmed and t.detection is not None]
-        return TrackingResult(reported, list(self.tracks))
+        return TrackingResult(reported, list(self.tracks), list(self.lost))
 
     # ----------------------------------------------------------------- internals
 
@@ -114,19 +123,67 @@ class Tracker:
         track.z_m = float(detection.center[2])
         track.hits += 1
         track.misses = 0
-        track.detection = detection
+        track.detection = track.last_detection = detection
         track.vehicle = detection.vehicle
         track.confirmed = track.confirmed or track.hits >= self.params.min_hits
+        # filtered position: the raw centre of a static object jumps when another sub-cluster wins
+        track.travel_m = max(track.travel_m, float(np.hypot(*(track.position[:2] - track.origin_xy))))
 
-    def _new_track(self, detection: Detection) -> Track:
+    def _retire(self, stamp_s: float) -> None:
+        """Tracks unseen too long leave the live list; confirmed ones wait in ``lost`` for re-acquisition."""
+        now = stamp_s if np.isfinite(stamp_s) else (self._last_stamp_s or 0.0)
+        dead = [t for t in self.tracks if t.misses > self.params.max_age_frames]
+        self.tracks = [t for t in self.tracks if t.misses <= self.params.max_age_frames]
+        if self.params.reacquire_distance_m > 0:
+            for t in dead:
+                if t.confirmed:
+                    t.lost_at_s = now
+                    self.lost.append(t)
+        self.lost = [t for t in self.lost if now - t.lost_at_s <= self.params.reacquire_max_age_s]
+
+    def _reacquire(self, detection: Detection) -> Track | None:
+        """The nearest lost track of the detection's kind within the gate, continued from the detection
+        (ID, vehicle ID, confirmation and travel kept; the filter restarts at the detection)."""
+        gate = self.params.reacquire_distance_m
+        near = [(float(np.hypot(*(t.last_detection.center[:2] - detection.center[:2]))), i)
+                for i, t in enumerate(self.lost) if t.kind == detection.kind]
+        near = [(d, i) for d, i in near if d <= gate]
+        if not near:
+            return None
+        track = self.lost.pop(min(near)[1])
+        track.kf, track.z_m = self._new_filter(detection.center), float(detection.center[2])
+        track.misses, track.hits, track.lost_at_s, track.reacquired = 0, track.hits + 1, None, True
+        track.detection = track.last_detection = detection
+        track.vehicle = detection.vehicle
+        return track
+
+    def _confirm_pairs(self) -> None:
+        """With ``confirm_paired``: truck and trailer classified together in one cluster are confirmed
+        at once (the classification is the evidence that min_hits stands in for)."""
+        if not self.params.confirm_paired:
+            return
+        kinds: dict[int, set[str]] = {}
+        for t in self.tracks:
+            if t.detection is not None:
+                kinds.setdefault(t.detection.group, set()).add(t.kind)
+        for t in self.tracks:
+            if t.detection is not None and kinds[t.detection.group] >= {"truck", "trailer"}:
+                t.confirmed = True
+
+    def _new_filter(self, center: np.ndarray) -> KalmanFilter:
         kf = KalmanFilter(dim_x=4, dim_z=2)
-        kf.x = np.array([[detection.center[0]], [0.0], [detection.center[1]], [0.0]])
+        kf.x = np.array([[center[0]], [0.0], [center[1]], [0.0]])
         kf.H = np.array([[1.0, 0, 0, 0], [0, 0, 1.0, 0]])
         kf.R *= self.params.measurement_noise_m**2
         kf.P = np.diag([self.params.measurement_noise_m**2, 4.0, self.params.measurement_noise_m**2, 4.0])
         self._set_dt(kf, 0.1)
+        return kf
+
+    def _new_track(self, detection: Detection) -> Track:
+        kf = self._new_filter(detection.center)
         return Track(next(self._track_ids), 0, detection.kind, detection.vehicle, kf, float(detection.center[2]),
-                     confirmed=self.params.min_hits <= 1, detection=detection)
+                     confirmed=self.params.min_hits <= 1, detection=detection, last_detection=detection,
+                     origin_xy=np.asarray(detection.center[:2], dtype=float).copy())
 
     def _set_dt(self, kf: KalmanFilter, dt: float) -> None:
         kf.F = np.array([[1.0, dt, 0, 0], [0, 1.0, 0, 0], [0, 0, 1.0, dt], [0, 0, 0, 1.0]])
