@@ -230,6 +230,7 @@ class ClassificationParams(Section):
     min_truck_points: int = Field(10, ge=1, description="Fewer points left after removing the trailer: the truck is not seen")
     max_length_excess_m: float = Field(1.0, ge=0.0, le=20.0, description="A trailer candidate longer than the trailer plus this is rejected")
     floor_margin_m: float = Field(0.1, ge=-1.0, le=2.0, description="The second clustering uses points higher than the trailer floor plus this above the ground")
+    truck_one_end: bool = Field(False, description="The truck is the rest of the cluster at one end of the trailer only (the end holding most of it)")
 
 
 class CentroidParams(Section):
@@ -254,6 +255,7 @@ class OrientationParams(Section):
     smoothing: float = Field(0.5, ge=0.0, lt=1.0, description="Weight of the previous yaw in the smoothed yaw")
     shape_weight: float = Field(0.0, ge=0.0, le=1.0, description="Blend of the unit's shape axis into the PCA axis (0 = pure PCA, the paper)")
     history_gap_s: float = Field(1.0, gt=0.0, le=60.0, description="A unit unseen for longer restarts its centroid history (its yaw is kept)")
+    prefer_continuity: bool = Field(False, description="A unit seen in the previous frames keeps its direction; the trailer-to-truck direction decides only for new or re-acquired units")
 
 
 class BackgroundParams(Section):
@@ -269,7 +271,7 @@ class BackgroundParams(Section):
     min_samples: int = Field(25, ge=1, le=255, description="Learning samples before the map is used (the frames before fall back to no background); a vehicle standing still from the start longer than this becomes background")
     protect_margin_m: float = Field(1.0, ge=0.0, le=10.0, description="Voxels within this of a protected track's box are never learned")
     keep_margin_m: float = Field(0.3, ge=0.0, le=5.0, description="Points within this of a protected track's box are never background (small: a docked trailer's rear is 0.3 m from the wall)")
-    protect_min_travel_m: float = Field(2.0, ge=0.0, le=100.0, description="A confirmed track is protected once its filtered position has moved this far from its first one (0: every confirmed track), so a parked object becomes background but a vehicle that stops does not")
+    protect_min_travel_m: float = Field(2.0, ge=0.0, le=100.0, description="A confirmed track is protected while younger than the window (window_frames x learn_every_frames frames) and once its filtered position has moved this far from its first one (0: always), so a parked object becomes background but a vehicle that stops does not")
     max_voxels: int = Field(20_000_000, ge=1000, le=200_000_000, description="Refuse a region / voxel size giving a larger grid")
 
     @model_validator(mode="after")

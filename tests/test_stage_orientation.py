@@ -71,3 +71,30 @@ def test_yaw_change_is_rate_bounded():
     turned = est.process([UnitObservation(1, 1, "truck", np.array([1.0, 1.0, 0]), 0.0)], 0.2, {1})[1]
     assert first == pytest.approx(0.0, abs=1e-6)
     assert turned == pytest.approx(1.0, abs=1e-6)  # 90 deg measured, 10 deg/s * 0.1 s allowed
+
+
+@pytest.mark.parametrize("truck_yaw_deg", [120.0, -150.0, 10.0])
+def test_new_square_cab_takes_the_shape_equivalent_ahead_of_its_trailer(truck_yaw_deg):
+    """A re-acquired (new) square cab: its shape axis is known modulo 90 deg only; the trailer-to-truck
+    direction picks the right one of the four, whatever equivalent the shape fit returned."""
+    est = OrientationEstimator(PARAMS.model_copy(update={"shape_weight": 1.0}))
+    heading = np.radians(truck_yaw_deg)
+    trailer = np.array([3.0, -2.0, 1.0])
+    truck = trailer + [8.0 * np.cos(heading), 8.0 * np.sin(heading), 0.0]
+    for shape_deg in ((truck_yaw_deg + 90.0) % 180.0, truck_yaw_deg % 90.0):
+        est.states.clear()
+        yaws = est.process([UnitObservation(1, 1, "truck", truck, shape_deg, 90.0),
+                            UnitObservation(2, 1, "trailer", trailer, truck_yaw_deg % 180.0)], 0.0, {1, 2})
+        assert abs(((yaws[1] - truck_yaw_deg) + 180.0) % 360.0 - 180.0) < 1e-6
+        assert abs(((yaws[2] - truck_yaw_deg) + 180.0) % 360.0 - 180.0) < 1e-6
+
+
+def test_reacquired_unit_keeps_its_yaw_and_restarts_its_history():
+    est = OrientationEstimator(PARAMS.model_copy(update={"history_gap_s": 0.5}))
+    for k in range(10):  # driving north-east
+        yaw = est.process([UnitObservation(1, 1, "trailer", np.array([k * 0.2, k * 0.2, 1.0]), 45.0)], k * 0.1, {1})[1]
+    assert yaw == pytest.approx(45.0, abs=0.5)
+    # back after 2 s, 5 m away to the side: without the restart the jump would be read as travel
+    yaw = est.process([UnitObservation(1, 1, "trailer", np.array([1.8 + 3.5, 1.8 - 3.5, 1.0]), 45.0)], 2.9, {1})[1]
+    assert yaw == pytest.approx(45.0, abs=0.5)
+    assert len(est.states[1].history) == 1

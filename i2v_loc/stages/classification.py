@@ -55,22 +55,33 @@ class TruckTrailerClassifier:
             if found is None:
                 continue
             trailer_body, error = found
-            is_trailer = self._in_footprint(points, points[body[trailer_body]])
-            if (~is_trailer).sum() < self.params.min_truck_points:
+            is_trailer, along_m = self._in_footprint(points, points[body[trailer_body]])
+            is_truck = ~is_trailer
+            if self.params.truck_one_end:
+                is_truck &= self._truck_end(along_m, is_truck)
+            if is_truck.sum() < self.params.min_truck_points:
                 continue  # a lone box is not an articulated vehicle (the truck may be occluded, not absent)
             score = error / vehicle.trailer_volume_tolerance_m3
             if score < best_score:
-                best, best_score = Classification(name, points[~is_trailer], points[is_trailer]), score
+                best, best_score = Classification(name, points[is_truck], points[is_trailer]), score
         return best
 
-    def _in_footprint(self, points: np.ndarray, body: np.ndarray) -> np.ndarray:
-        """Points whose xy falls inside the body's oriented rectangle (plus a small margin)."""
+    @staticmethod
+    def _truck_end(along_m: np.ndarray, rest: np.ndarray) -> np.ndarray:
+        """The tractor is at one end of the trailer: keep the remaining points of the trailer half
+        (along its axis) holding most of them; the other end's (a dock's bumpers, a person) are dropped."""
+        front = along_m > 0
+        return front if (rest & front).sum() >= (rest & ~front).sum() else ~front
+
+    def _in_footprint(self, points: np.ndarray, body: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Points whose xy falls inside the body's oriented rectangle (plus a small margin), and each
+        point's coordinate along the rectangle's long axis from its centre."""
         rect = min_area_rect(body[:, :2])
         d = points[:, :2] - rect.center_xy
-        along = np.abs(d @ [np.cos(rect.yaw_rad), np.sin(rect.yaw_rad)])
+        along = d @ [np.cos(rect.yaw_rad), np.sin(rect.yaw_rad)]
         across = np.abs(d @ [-np.sin(rect.yaw_rad), np.cos(rect.yaw_rad)])
         margin = FOOTPRINT_MARGIN_M
-        return (along <= rect.length_m / 2 + margin) & (across <= rect.width_m / 2 + margin)
+        return (np.abs(along) <= rect.length_m / 2 + margin) & (across <= rect.width_m / 2 + margin), along
 
     def _find_trailer(self, body: np.ndarray, vehicle: VehicleConfig):
         """Second clustering at the trailer tolerance; when the cab still touches the trailer (the

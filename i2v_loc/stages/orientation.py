@@ -10,7 +10,11 @@ of travel. Below ``min_travel_m`` of travel over the history the last yaw is hel
 no yaw yet takes its shape axis (minimum-area rectangle). The per-frame yaw change is bounded
 by ``max_yaw_rate_deg_s`` and then exponentially smoothed. ``shape_weight`` blends the
 measured axis with the unit's shape axis (0 = the paper's pure PCA); for a nearly square unit the
-shape axis is only known modulo 90 deg and the PCA axis picks the equivalent.
+shape axis is only known modulo 90 deg and the PCA axis picks the equivalent (for a first estimate,
+the trailer-to-truck direction does). With ``prefer_continuity`` a unit seen in the previous
+frames keeps its direction (no 180 deg turn-over from one bad truck detection); the
+trailer-to-truck direction then only decides for new or re-acquired units. A unit unseen for
+more than ``history_gap_s`` restarts its centroid history but keeps its yaw.
 """
 
 from __future__ import annotations
@@ -38,6 +42,7 @@ class UnitObservation:
 class _UnitState:
     history: deque
     yaw_deg: float | None = None
+    last_seen_s: float | None = None
 
 
 class OrientationEstimator:
@@ -54,6 +59,10 @@ class OrientationEstimator:
         yaws = {}
         for unit in units:
             state = self.states.setdefault(unit.track_id, _UnitState(deque(maxlen=self.params.history_frames)))
+            recent = self._recent(state, stamp_s)
+            if not recent:  # a re-acquired unit: its old centroids say nothing of its motion now
+                state.history.clear()
+            state.last_seen_s = stamp_s if np.isfinite(stamp_s) else state.last_seen_s
             state.history.append(np.asarray(unit.center[:2], dtype=float))
             measured = self._measure(state, unit, forwards.get(unit.vehicle_id))
             state.yaw_deg = self._bounded_smoothed(state.yaw_deg, measured, dt)
@@ -82,6 +91,12 @@ class OrientationEstimator:
             by_vehicle.setdefault(u.vehicle_id, {})[u.kind] = np.asarray(u.center[:2], dtype=float)
         return {vid: c["truck"] - c["trailer"] for vid, c in by_vehicle.items() if "truck" in c and "trailer" in c}
 
+    def _recent(self, state: _UnitState, stamp_s: float) -> bool:
+        """Seen within ``history_gap_s`` before this frame (a unit seen for the first time is not)."""
+        if state.last_seen_s is None or not np.isfinite(stamp_s):
+            return state.last_seen_s is not None
+        return stamp_s - state.last_seen_s <= self.params.history_gap_s
+
     def _measure(self, state: _UnitState, unit: UnitObservation, forward: np.ndarray | None) -> float | None:
         history = np.array(state.history)
         travel = history[-1] - history[0]
@@ -89,10 +104,21 @@ class OrientationEstimator:
             axis_deg = self._pca_axis_deg(history)
         elif state.yaw_deg is not None:
             return None  # standing still: hold
+        elif forward is not None and np.hypot(*forward) > 1e-6:
+            # first estimate: of the shape axis's equivalents (90 deg apart on a square cab) the one
+            # nearest the trailer-to-truck direction (the truck is ahead of the trailer)
+            axis_deg = float(np.degrees(np.arctan2(forward[1], forward[0])))
+            axis_deg = self._nearest_equivalent(axis_deg, unit.shape_axis_deg, unit.shape_period_deg)
         else:
             axis_deg = unit.shape_axis_deg
         axis_deg = self._blend_with_shape(axis_deg, unit.shape_axis_deg, unit.shape_period_deg)
+        if self.params.prefer_continuity and state.yaw_deg is not None and len(history) >= 2:
+            forward = None  # seen in the last frames: a yaw cannot turn over between two frames
         return self._resolve_direction(axis_deg, forward, state.yaw_deg, travel)
+
+    @staticmethod
+    def _nearest_equivalent(reference_deg: float, axis_deg: float, period_deg: float) -> float:
+        return float(reference_deg + (axis_deg - reference_deg + period_deg / 2) % period_deg - period_deg / 2)
 
     @staticmethod
     def _pca_axis_deg(history_xy: np.ndarray) -> float:
@@ -108,7 +134,7 @@ class OrientationEstimator:
         w = self.params.shape_weight
         if w <= 0:
             return axis_deg
-        shape = axis_deg + (shape_axis_deg - axis_deg + period_deg / 2) % period_deg - period_deg / 2
+        shape = self._nearest_equivalent(axis_deg, shape_axis_deg, period_deg)
         return float(axis_deg + w * (shape - axis_deg))
 
     @staticmethod

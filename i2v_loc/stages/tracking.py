@@ -47,6 +47,7 @@ class Track:
     last_detection: Detection | None = None  # kept while the track is unseen or lost
     origin_xy: np.ndarray | None = None  # first position: how far the unit has travelled
     travel_m: float = 0.0  # largest distance from origin_xy so far
+    age_frames: int = 0  # frames since the track was born
     lost_at_s: float | None = None  # stamp when it left the live tracks (re-acquisition)
     reacquired: bool = False  # continued a lost track in this frame
 
@@ -81,6 +82,7 @@ class Tracker:
             self._set_dt(track.kf, dt)
             track.kf.predict()
             track.reacquired = False
+            track.age_frames += 1
         matches, unmatched = self._associate(detections)
         for t_idx, d_idx in matches:
             self._update(self.tracks[t_idx], detections[d_idx])
