@@ -9,7 +9,7 @@ import pytest
 
 from i2v_loc.evaluation import dcap
 from i2v_loc.evaluation import metrics as m
-from i2v_loc.geometry import pose_matrix
+from i2v_loc.geometry import box_poses, pose_matrix
 from i2v_loc.params import Params
 
 
@@ -102,8 +102,8 @@ def test_front_to_rear_with_known_hitch_angle():
 
 def test_front_to_rear_rotation_is_the_hitch_angle():
     v = Params().vehicles["volvo_fh"]
-    truck = dcap.unit_poses([[5.0, 2.0, 1.75]], [30.0])
-    trailer = dcap.unit_poses([[0.0, 0.0, 2.45]], [10.0])
+    truck = box_poses([[5.0, 2.0, 1.75]], [30.0])
+    trailer = box_poses([[0.0, 0.0, 2.45]], [10.0])
     t = dcap.front_to_rear(truck, trailer, v)[0]
     assert math.degrees(math.atan2(t[1, 0], t[0, 0])) == pytest.approx(20.0)
     assert m.transform_errors(t[None], dcap.static_front_to_rear(v)[None])["rra"][0] == pytest.approx(math.radians(20.0))

@@ -66,6 +66,18 @@ def test_sweep_timing_phase_and_clock_offset(recording):
     assert len({s["phase_s"] for s in meta["sensors"]}) == len(meta["sensors"])
 
 
+def test_true_sensors_undo_the_clock_offsets_and_the_guess_does_not(recording):
+    true, guess = load_params(recording.sensors_file), load_params(recording.sensors_guess_file)
+    for sensor in recording.meta["sensors"]:
+        name = sensor["name"]
+        assert true.sensor(name).time_offset_s == -sensor["clock_offset_s"]
+        assert guess.sensor(name).time_offset_s == 0.0
+        # stamp + time_offset_s is the sweep start on the common clock: frame / rate + phase
+        stamps_s = recording.scans(name).stamp_ns * 1e-9 + true.sensor(name).time_offset_s
+        np.testing.assert_allclose(stamps_s, np.arange(len(recording)) / 10.0 + sensor["phase_s"], atol=2e-9)
+    assert len({s.time_offset_s for s in true.sensors}) == len(true.sensors)  # really per sensor, not all 0
+
+
 def test_sensors_guess_perturbs_all_but_the_reference(recording):
     true = load_params(recording.sensors_file)
     guess = load_params(recording.sensors_guess_file)

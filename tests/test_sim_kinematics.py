@@ -5,6 +5,7 @@ import math
 import numpy as np
 import pytest
 
+from i2v_loc.geometry import wrap_rad
 from i2v_loc.params import Params
 from i2v_loc.sim import kinematics as kin
 from i2v_loc.sim import maneuvers as mv
@@ -42,7 +43,7 @@ def _drive_circle(art: kin.Articulation, radius_m: float, speed_mps: float, dist
 def test_steady_circle_hitch_matches_closed_form(wheelbase, hitch_behind, trailer, radius):
     art = kin.Articulation(wheelbase, hitch_behind, trailer)
     state = _drive_circle(art, radius, 1.5, distance_m=12 * trailer + 60)
-    hitch_deg = math.degrees(kin.wrap_rad(state[3] - state[2]))
+    hitch_deg = math.degrees(wrap_rad(state[3] - state[2]))
     assert hitch_deg == pytest.approx(closed_form_hitch_deg(radius, hitch_behind, trailer), abs=0.1)
     # The rear axle stays on the circle about (0, R) (the start is on it with the right heading).
     assert math.hypot(state[0], state[1] - radius) == pytest.approx(radius, abs=1e-3)
@@ -73,7 +74,7 @@ def test_hitch_controller_tracks_its_reference_while_reversing(vehicle):
     for _ in range(int(12.0 / 0.005)):
         steer = float(np.clip(kin.steer_for_hitch(state, -1.0, reference, art), -math.radians(35), math.radians(35)))
         state = kin.step(state, -1.0, steer, art, 0.005)
-        hitch.append(math.degrees(kin.wrap_rad(state[3] - state[2])))
+        hitch.append(math.degrees(wrap_rad(state[3] - state[2])))
     assert max(abs(h) for h in hitch) < 20.0  # bounded: no jackknife
     assert hitch[-1] == pytest.approx(-15.0, abs=0.5)
     # Reversing with a steady negative hitch turns the trailer clockwise.

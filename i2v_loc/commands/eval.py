@@ -16,7 +16,9 @@ def register(sub) -> None:
     p.add_argument("--out", required=True, help="report folder")
     p.add_argument("--method", default="paper", help="comma-separated methods, e.g. paper,default (default: paper)")
     p.add_argument("--subsets", action="store_true", help="also evaluate all 15 non-empty subsets of the LiDARs")
-    p.add_argument("--params", help="parameter file merged over the defaults (each recording's sensors.yaml wins)")
+    p.add_argument("--params", action="append", default=[], metavar="FILE",
+                   help="parameter file merged after the defaults and each recording's sensors.yaml, as in "
+                        "`i2v-loc run` (repeatable; a sensors section here replaces the recording's sensors)")
     p.add_argument("--labels", help="ground truth other than ground_truth.jsonl: OpenLABEL or labelCloud labels "
                                     "(file or folder); only with a single recording")
     p.add_argument("--gate-m", type=float, default=4.0, help="association gate of estimated to GT vehicles (m)")

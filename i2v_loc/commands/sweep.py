@@ -14,7 +14,9 @@ def register(sub) -> None:
     p.add_argument("--grid", required=True, help="YAML grid, e.g. 'tracking.max_distance_m: [0.5, 1.0, 2.0]'")
     p.add_argument("--out", required=True, help="output folder")
     p.add_argument("--method", default="paper", help="the pipeline method (default: paper)")
-    p.add_argument("--params", help="base parameter file merged over the defaults")
+    p.add_argument("--params", action="append", default=[], metavar="FILE",
+                   help="parameter file merged after the defaults and each recording's sensors.yaml, before the "
+                        "grid values (repeatable)")
     p.add_argument("--gate-m", type=float, default=4.0, help="association gate of estimated to GT vehicles (m)")
     p.add_argument("--workers", type=int, default=1)
     p.add_argument("--executor", choices=["local", "dask"], default="local")
@@ -26,8 +28,8 @@ def register(sub) -> None:
 def run(args) -> int:
     from i2v_loc.commands.eval import check_methods, find_recordings
     from i2v_loc.evaluation import sweep
-    from i2v_loc.evaluation.runner import EvaluationError, Task, run_tasks
-    from i2v_loc.params import load_params
+    from i2v_loc.evaluation.runner import EvaluationError, Task, base_params, run_tasks
+    from i2v_loc.params import deep_merge, load_params
 
     recordings = find_recordings(args.inputs)
     if "," in args.method:
@@ -35,18 +37,19 @@ def run(args) -> int:
     if args.workers < 1:
         raise UserError("--workers must be >= 1")
     check_methods([args.method])
-    base = load_params(args.params)
+    patch = base_params(args.params)
+    base = load_params(*args.params)
     grid = sweep.load_grid(args.grid, base)
     combos = sweep.combinations(grid, base)
-    tasks = [Task(str(rec), args.method, None, params.model_dump(mode="json"), None, args.gate_m, tag=f"c{i}")
-             for i, (_, params) in enumerate(combos) for rec in recordings]
+    tasks = [Task(str(rec), args.method, None, deep_merge(patch, sweep.nested_patch(flat)), None, args.gate_m, tag=f"c{i}")
+             for i, (flat, _) in enumerate(combos) for rec in recordings]
     try:
         results = run_tasks(tasks, workers=args.workers, executor=args.executor, address=args.address,
                             progress=not args.quiet, desc="sweeping")
     except EvaluationError as err:
         raise UserError(str(err).split("\nTraceback")[0]) from err
     rows = sweep.rank(combos, sweep.summarize_by_tag(results, len(combos)))
-    files = sweep.write_sweep(rows, combos, args.out, [r.name for r in recordings])
+    files = sweep.write_sweep(rows, combos, args.out, [r.name for r in recordings], with_sensors="sensors" in patch)
     best = rows[0]
     print(f"best of {len(rows)}: {best['values']} -> hitch RMSE {best['metrics'].get('hitch_rmse_deg')}")
     print(f"best parameters: {files['best_params']}; table: {files['md']}")

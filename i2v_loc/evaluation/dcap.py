@@ -14,21 +14,6 @@ import numpy as np
 from i2v_loc.params import VehicleConfig
 
 
-def unit_poses(centers, yaws_deg) -> np.ndarray:
-    """Stacked planar poses (N, 4, 4) of unit boxes from centres (N, 3) and yaws (N,) in degrees."""
-    c = np.asarray(centers, float).reshape(-1, 3)
-    yaw = np.radians(np.asarray(yaws_deg, float).reshape(-1))
-    out = np.zeros((len(c), 4, 4))
-    out[:, 0, 0] = np.cos(yaw)
-    out[:, 0, 1] = -np.sin(yaw)
-    out[:, 1, 0] = np.sin(yaw)
-    out[:, 1, 1] = np.cos(yaw)
-    out[:, 2, 2] = 1.0
-    out[:, 3, 3] = 1.0
-    out[:, :3, 3] = c
-    return out
-
-
 def _translation(x: float, y: float, z: float) -> np.ndarray:
     t = np.eye(4)
     t[:3, 3] = (x, y, z)

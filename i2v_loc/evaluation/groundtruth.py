@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from i2v_loc.evaluation.metrics import associate
-from i2v_loc.geometry import wrap_deg
+from i2v_loc.geometry import box_poses, wrap_deg
 
 UNITS = ("truck", "trailer")
 UNLABELLED = "unlabelled"
@@ -27,12 +27,7 @@ class GroundTruthError(ValueError):
 
 
 def _unit_pose(unit: dict) -> np.ndarray:
-    yaw = math.radians(unit["yaw_deg"])
-    c, s = math.cos(yaw), math.sin(yaw)
-    t = np.eye(4)
-    t[:2, :2] = [[c, -s], [s, c]]
-    t[:3, 3] = unit["center"]
-    return t
+    return box_poses(unit["center"], unit["yaw_deg"])[0]
 
 
 def tractor_to_trailer(truck: dict, trailer: dict) -> list[list[float]]:

@@ -10,7 +10,7 @@ import numpy as np
 from i2v_loc.evaluation import dcap
 from i2v_loc.evaluation.groundtruth import UNITS, interpolate_ground_truth
 from i2v_loc.evaluation.metrics import angle_error_deg, associate
-from i2v_loc.geometry import wrap_deg
+from i2v_loc.geometry import box_poses, rotation_angle_rad, wrap_deg
 from i2v_loc.params import Params
 
 MIN_POINTS_FOR_DETECTION = 30
@@ -74,7 +74,7 @@ def _both_posed(vehicle: dict | None) -> bool:
 
 def _front_to_rear(vehicle: dict, config) -> np.ndarray:
     truck, trailer = vehicle["truck"], vehicle["trailer"]
-    poses = dcap.unit_poses([truck["center"], trailer["center"]], [truck["yaw_deg"], trailer["yaw_deg"]])
+    poses = box_poses([truck["center"], trailer["center"]], [truck["yaw_deg"], trailer["yaw_deg"]])
     return dcap.front_to_rear(poses[:1], poses[1:], config)[0]
 
 
@@ -83,9 +83,8 @@ def _dcap_fields(prefix: str, estimate: np.ndarray | None, truth: np.ndarray | N
         return {f"{prefix}_dx_m": NAN, f"{prefix}_dy_m": NAN, f"{prefix}_dz_m": NAN,
                 f"{prefix}_dT_m": NAN, f"{prefix}_rra_rad": NAN}
     d = estimate[:3, 3] - truth[:3, 3]
-    cos = (np.trace(estimate[:3, :3].T @ truth[:3, :3]) - 1.0) / 2.0
     return {f"{prefix}_dx_m": float(d[0]), f"{prefix}_dy_m": float(d[1]), f"{prefix}_dz_m": float(d[2]),
-            f"{prefix}_dT_m": float(np.linalg.norm(d)), f"{prefix}_rra_rad": float(np.arccos(np.clip(cos, -1, 1)))}
+            f"{prefix}_dT_m": float(np.linalg.norm(d)), f"{prefix}_rra_rad": rotation_angle_rad(estimate[:3, :3], truth[:3, :3])}
 
 
 def vehicle_record(gt: dict | None, est: dict | None, params: Params) -> dict:

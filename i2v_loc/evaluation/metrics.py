@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
-from i2v_loc.geometry import wrap_deg
+from i2v_loc.geometry import rotation_angle_rad, wrap_deg
 
 HEADING_FLIP_DEG = 90.0
 
@@ -57,9 +57,7 @@ def transform_errors(estimate: np.ndarray, truth: np.ndarray) -> dict[str, np.nd
     est = np.asarray(estimate, float).reshape(-1, 4, 4)
     gt = np.asarray(truth, float).reshape(-1, 4, 4)
     dt = est[:, :3, 3] - gt[:, :3, 3]
-    # trace(R_est^T R_gt) = sum of the element-wise product
-    trace = np.einsum("nij,nij->n", est[:, :3, :3], gt[:, :3, :3])
-    rra = np.arccos(np.clip((trace - 1.0) / 2.0, -1.0, 1.0))
+    rra = rotation_angle_rad(est[:, :3, :3], gt[:, :3, :3])
     return {"delta": dt, "delta_T": np.linalg.norm(dt, axis=1), "rra": rra}
 
 

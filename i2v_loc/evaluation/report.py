@@ -13,6 +13,7 @@ import numpy as np
 
 from i2v_loc.evaluation import published as pub
 from i2v_loc.evaluation.summary import MANEUVERS, summarize_groups
+from i2v_loc.geometry import box_corners
 
 STAGE_ORDER = ["concatenation", "region", "clustering", "classification", "centroid", "tracking", "orientation"]
 LEAD_COLUMNS = ["method", "subset", "recording", "tag", "frame", "stamp_s", "kind", "gt_id", "vehicle", "maneuver",
@@ -349,13 +350,6 @@ def _subset_tables(res, methods, subsets) -> list[str]:
 # --------------------------------------------------------------------------- plots
 
 
-def _box_xy(cx, cy, length, width, yaw_deg) -> np.ndarray:
-    yaw = math.radians(yaw_deg)
-    c, s = math.cos(yaw), math.sin(yaw)
-    corners = np.array([[1, 1], [1, -1], [-1, -1], [-1, 1]]) * [length / 2.0, width / 2.0]
-    return corners @ np.array([[c, s], [-s, c]]) + [cx, cy]
-
-
 def write_plots(summary: dict, out_dir: Path, max_recordings: int = 30) -> list[Path]:
     import matplotlib
 
@@ -394,8 +388,9 @@ def _plot_bev(plt, records: list[dict], path: Path, title: str) -> Path:
                     length, width = r[f"{unit}_length_gt"], r[f"{unit}_width_gt"]
                 if not math.isfinite(length):
                     continue
-                ax.add_patch(Polygon(_box_xy(x, y, length, width, r[f"{unit}_yaw_{tag}"]), closed=True, fill=False,
-                                     edgecolor=styles[(unit, tag)], lw=1.6 if tag == "gt" else 1.0))
+                corners = box_corners((x, y), length, width, math.radians(r[f"{unit}_yaw_{tag}"]))
+                ax.add_patch(Polygon(corners, closed=True, fill=False, edgecolor=styles[(unit, tag)],
+                                     lw=1.6 if tag == "gt" else 1.0))
     for unit, colour in (("truck", "green"), ("trailer", "gold")):
         xs = [r[f"{unit}_x_gt"] for r in gt]
         ys = [r[f"{unit}_y_gt"] for r in gt]

@@ -15,7 +15,7 @@ from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from i2v_loc.params import Params, deep_merge, load_params, read_yaml, validate_params
+from i2v_loc.params import Params, apply_patch, deep_merge, load_params, read_yaml, validate_params
 
 EXECUTORS = ("local", "dask")
 
@@ -29,7 +29,7 @@ class Task:
     recording: str
     method: str
     sensors: tuple[str, ...] | None = None  # None = all sensors of the recording
-    params: dict = field(default_factory=dict, hash=False, compare=False)  # full parameter dump
+    params: dict = field(default_factory=dict, hash=False, compare=False)  # patch applied after REC/sensors.yaml
     labels: str | None = None  # ground truth other than the recording's ground_truth.jsonl
     gate_m: float = 4.0
     tag: str = ""  # free label (the sweep's combination index)
@@ -43,22 +43,22 @@ class Task:
         return f"{Path(self.recording).name} [{self.method}, {self.subset}{', ' + self.tag if self.tag else ''}]"
 
 
-def recording_params(base: dict, recording: str, sensors: Sequence[str] | None) -> Params:
-    """The parameters for a recording: ``base`` with the recording's true sensor extrinsics
-    (its sensors.yaml) and only the chosen sensors."""
+def recording_params(patch: dict, recording: str, sensors: Sequence[str] | None) -> Params:
+    """The parameters for a recording, in the order of ``i2v-loc run``: the defaults, then the
+    recording's sensors.yaml (its true extrinsics), then ``patch`` (the --params files merged, see
+    ``base_params``), then only the chosen sensors."""
     from i2v_loc.recording import Recording
 
     rec = Recording(recording)
-    data = dict(base)
-    if rec.sensors_file.is_file():
-        data = deep_merge(data, {"sensors": read_yaml(rec.sensors_file).get("sensors", data.get("sensors"))})
+    params = load_params(rec.sensors_file if rec.sensors_file.is_file() else None)
+    params = apply_patch(params, patch, source=f"{recording}: parameters after its sensors.yaml")
     if sensors:
-        known = [s["name"] for s in data["sensors"]]
+        known = [s.name for s in params.sensors]
         missing = [s for s in sensors if s not in known]
         if missing:
             raise EvaluationError(f"{recording}: sensors {missing} not in the parameters (known: {known})")
-        data["sensors"] = [s for s in data["sensors"] if s["name"] in sensors]
-    return validate_params(data, source=f"{recording} parameters")
+        params = params.model_copy(update={"sensors": [s for s in params.sensors if s.name in sensors]})
+    return params
 
 
 def run_pipeline(task: Task) -> list[dict]:
@@ -155,8 +155,21 @@ def _run_dask(tasks, func, workers, address, bar) -> list:
             cluster.close()
 
 
-def base_params(params_file: str | None) -> dict:
-    return load_params(params_file).model_dump(mode="json")
+def base_params(params_files: str | Path | Sequence[str | Path] | None = None) -> dict:
+    """The --params files merged in order into one patch (not over the defaults, so that a file
+    without a sensors section keeps each recording's sensors.yaml). Each file is validated over the
+    defaults here, so a bad file fails before any task starts."""
+    if params_files is None:
+        files: list = []
+    elif isinstance(params_files, (str, Path)):
+        files = [params_files]
+    else:
+        files = list(params_files)
+    load_params(*files)
+    patch: dict = {}
+    for path in files:
+        patch = deep_merge(patch, read_yaml(path))
+    return patch
 
 
 def compare_task(item: dict) -> dict:

@@ -10,7 +10,7 @@ import math
 from collections import defaultdict
 from pathlib import Path
 
-from i2v_loc.params import ParamsError, Params, apply_patch, read_yaml, save_params
+from i2v_loc.params import ParamsError, Params, apply_patch, dump_yaml, read_yaml
 
 RANK_KEY = "hitch_rmse_deg"
 TIE_KEYS = ("trailer_yaw_rmse_deg", "truck_yaw_rmse_deg")
@@ -91,7 +91,10 @@ def summarize_by_tag(task_results: list[dict], n_combos: int) -> list[dict]:
     return [summarize(records[f"c{i}"], frames[f"c{i}"]) for i in range(n_combos)]
 
 
-def write_sweep(rows: list[dict], combos: list[tuple[dict, Params]], out_dir: str | Path, recordings: list[str]) -> dict:
+def write_sweep(rows: list[dict], combos: list[tuple[dict, Params]], out_dir: str | Path, recordings: list[str],
+                with_sensors: bool = False) -> dict:
+    """sweep.csv, sweep.json, sweep.md and best_params.yaml. The best parameters leave the sensors
+    out unless ``with_sensors`` (the --params files set them): each recording brings its own."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     keys = list(rows[0]["values"]) if rows else []
@@ -107,7 +110,8 @@ def write_sweep(rows: list[dict], combos: list[tuple[dict, Params]], out_dir: st
                   {"metrics": {k: _json(v) for k, v in row["metrics"].items()}} for row in rows]}, indent=1))
     best = combos[rows[0]["combination"]][1] if rows else None
     if best is not None:
-        save_params(best, out / "best_params.yaml")
+        sections = [k for k in best.model_dump(mode="json") if with_sensors or k != "sensors"]
+        (out / "best_params.yaml").write_text(dump_yaml(best, sections))
     lines = [f"# Parameter sweep ({len(rows)} combinations x {len(recordings)} recordings), ranked by {RANK_KEY}", "",
              "| rank | " + " | ".join(keys) + " | " + " | ".join(SHOWN) + " |",
              "|---|" + "---|" * (len(keys) + len(SHOWN))]

@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial import cKDTree
 
-from i2v_loc.geometry import pose_matrix, wrap_deg
+from i2v_loc.geometry import planar_poses, pose_matrix, rotate_xy, wrap_deg
 from i2v_loc.params import Extrinsics, Params, dump_yaml
 from i2v_loc.recording import SensorScans, meters_to_range_mm, write_recording
 from i2v_loc.sim import kinematics as kin
@@ -72,23 +72,15 @@ class PlacedVehicle:
     def footprint(self, step_s: float = 0.5) -> np.ndarray:
         t = np.arange(0.0, self.trajectory.time_s[-1], step_s)
         truck, trailer, _ = self.unit_poses(t)
-        pts = []
-        for poses, unit in ((truck, self.config.truck), (trailer, self.config.trailer)):
-            for p in poses:
-                pts.append(footprint_points(p[:2, 3], unit.length_m, unit.width_m, math.atan2(p[1, 0], p[0, 0]), 1.0))
-        return np.vstack(pts)
+        return np.vstack([footprint_points(poses[:, :2, 3], unit.length_m, unit.width_m, np.arctan2(poses[:, 1, 0], poses[:, 0, 0]), 1.0)
+                          for poses, unit in ((truck, self.config.truck), (trailer, self.config.trailer))])
 
 
 def _poses(x, y, yaw, center_axle) -> np.ndarray:
-    n = len(x)
-    c, s = np.cos(yaw), np.sin(yaw)
-    t = np.zeros((n, 4, 4))
-    t[:, 0, 0], t[:, 0, 1], t[:, 1, 0], t[:, 1, 1] = c, -s, s, c
-    t[:, 2, 2] = t[:, 3, 3] = 1.0
-    t[:, 0, 3] = x + c * center_axle[0] - s * center_axle[1]
-    t[:, 1, 3] = y + s * center_axle[0] + c * center_axle[1]
-    t[:, 2, 3] = center_axle[2]
-    return t
+    """(n, 4, 4) poses of boxes whose centre sits at ``center_axle`` in the axle frame (x, y, yaw)."""
+    poses = planar_poses(x, y, yaw, center_axle[2])
+    poses[:, :2, 3] += rotate_xy(center_axle[:2], yaw)
+    return poses
 
 
 # --------------------------------------------------------------------------- placement
@@ -168,6 +160,14 @@ def make_lidars(cfg: SimConfig, rng: np.random.Generator) -> list[LidarModel]:
             clock_offset_s=float(rng.uniform(-cfg.max_clock_offset_s, cfg.max_clock_offset_s)),
         ))
     return lidars
+
+
+def with_true_time_offsets(params: Params, lidars: list[LidarModel]) -> Params:
+    """The sensors with ``time_offset_s`` undoing each LiDAR's clock offset: a sweep stamped
+    ``t + clock_offset_s`` started at ``t`` on the common clock, and the offset is added to stamps."""
+    offsets = {l.name: -round(l.clock_offset_s, 9) for l in lidars}
+    sensors = [s.model_copy(update={"time_offset_s": offsets[s.name]}) for s in params.sensors]
+    return params.model_copy(update={"sensors": sensors})
 
 
 def guessed_sensors(cfg: SimConfig, rng: np.random.Generator) -> Params:
@@ -257,19 +257,27 @@ def build_simulation(cfg: SimConfig) -> Simulation:
 
 def _distractor_poses(d, t) -> np.ndarray:
     x, y, yaw = d.path(np.atleast_1d(np.asarray(t, float)))
-    return _poses(np.atleast_1d(x), np.atleast_1d(y), np.atleast_1d(yaw), np.array([0.0, 0.0, d.dimensions[2] / 2]))
+    return planar_poses(x, y, yaw, d.dimensions[2] / 2)
 
 
 def _yaw_deg(t: np.ndarray) -> float:
     return float(wrap_deg(math.degrees(math.atan2(t[1, 0], t[0, 0]))))
 
 
+def _rounded(values, digits: int):
+    """Rounded floats (nested lists for arrays) without the noise sign of -0.0."""
+    values = np.asarray(values, dtype=float)
+    if values.ndim == 0:
+        return round(float(values), digits) + 0.0
+    return [_rounded(v, digits) for v in values]
+
+
 def _unit_gt(pose: np.ndarray, velocity_xy, unit, points: int) -> dict:
     return {
-        "center": [round(float(v), 4) for v in pose[:3, 3]],
+        "center": _rounded(pose[:3, 3], 4),
         "dimensions": [unit.length_m, unit.width_m, unit.height_m],
-        "yaw_deg": round(_yaw_deg(pose), 4),
-        "velocity": [round(float(v), 4) for v in velocity_xy],
+        "yaw_deg": _rounded(_yaw_deg(pose), 4),
+        "velocity": _rounded(velocity_xy, 4),
         "points": int(points),
     }
 
@@ -286,15 +294,15 @@ def ground_truth_line(sim: Simulation, frame: int, counts: dict[int, int]) -> di
         trailer_gt = _unit_gt(t_trailer, (trailer[2, :2, 3] - trailer[0, :2, 3]) / (2 * dt), v.config.trailer, counts.get(2 * v.vehicle_id + 1, 0))
         vehicles.append({
             "id": v.vehicle_id, "vehicle": v.name, "maneuver": str(s["label"][1]),
-            "hitch_deg": round(float(wrap_deg(trailer_gt["yaw_deg"] - truck_gt["yaw_deg"])), 4),
+            "hitch_deg": _rounded(wrap_deg(trailer_gt["yaw_deg"] - truck_gt["yaw_deg"]), 4),
             "truck": truck_gt, "trailer": trailer_gt,
-            "tractor_to_trailer": [[round(float(x), 6) for x in row] for row in np.linalg.inv(t_trailer) @ t_truck],
+            "tractor_to_trailer": _rounded(np.linalg.inv(t_trailer) @ t_truck, 6),
         })
     distractors = []
     for d in sim.yard.distractors:
         pose = sim.tilt @ _distractor_poses(d, [t])[0]
-        distractors.append({"kind": d.kind, "center": [round(float(x), 4) for x in pose[:3, 3]],
-                            "dimensions": list(d.dimensions), "yaw_deg": round(_yaw_deg(pose), 4)})
+        distractors.append({"kind": d.kind, "center": _rounded(pose[:3, 3], 4),
+                            "dimensions": list(d.dimensions), "yaw_deg": _rounded(_yaw_deg(pose), 4)})
     return {"frame": frame, "stamp_s": round(t, 6), "vehicles": vehicles, "distractors": distractors}
 
 
@@ -341,7 +349,7 @@ def openlabel(gt: list[dict], rate_hz: float) -> dict:
                 u = v[unit]
                 q = Rotation.from_euler("z", u["yaw_deg"], degrees=True).as_quat()  # x, y, z, w
                 frame_objects[uid] = {"object_data": {"cuboid": {
-                    "name": "shape3D", "val": [*u["center"], *[round(float(x), 8) for x in q], *u["dimensions"]],
+                    "name": "shape3D", "val": [*u["center"], *_rounded(q, 8), *u["dimensions"]],
                     "attributes": {"num": [{"name": "num_points", "val": u["points"]}, {"name": "hitch_deg", "val": v["hitch_deg"]}],
                                    "text": [{"name": "maneuver", "val": v["maneuver"]}]},
                 }}}
@@ -362,7 +370,8 @@ def run(cfg: SimConfig, out: str | Path, progress=None) -> tuple[Simulation, Pat
     sensors = cfg.params
     if cfg.columns is not None:
         sensors = sensors.model_copy(update={"sensors": [s.model_copy(update={"columns": cfg.columns}) for s in sensors.sensors]})
-    guess = guessed_sensors(SimConfig(**{**cfg.__dict__, "params": sensors}), rng_guess)
+    guess = guessed_sensors(SimConfig(**{**cfg.__dict__, "params": sensors}), rng_guess)  # clocks uncalibrated: offsets 0
+    sensors = with_true_time_offsets(sensors, sim.lidars)
     meta = {
         "generator": GENERATOR, "seed": cfg.seed, "scenario": cfg.scenario, "vehicles": list(cfg.vehicles),
         "rate_hz": sim.rate_hz, "duration_s": cfg.duration_s, "start_s": cfg.start_s, "slope_deg": cfg.slope_deg,

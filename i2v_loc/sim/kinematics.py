@@ -20,6 +20,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from i2v_loc.geometry import wrap_rad
+
 
 @dataclass(frozen=True)
 class Articulation:
@@ -92,10 +94,6 @@ def steer_for_hitch(state: np.ndarray, speed_mps: float, hitch_ref_rad: float, a
     hitch_rate = gain_1pm * abs(speed_mps) * wrap_rad(hitch_ref_rad - hitch)
     yaw_rate = yaw_rate_for_hitch_rate(hitch, speed_mps, hitch_rate, art)
     return math.atan(yaw_rate * art.wheelbase_m / speed_mps)
-
-
-def wrap_rad(angle: float) -> float:
-    return (angle + math.pi) % (2 * math.pi) - math.pi
 
 
 def steady_turn_steer_rad(radius_m: float, art: Articulation) -> float:

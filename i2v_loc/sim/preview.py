@@ -8,16 +8,15 @@ from pathlib import Path
 
 import numpy as np
 
-from i2v_loc.geometry import extrinsics_matrix, transform_points
+from i2v_loc.geometry import box_corners, extrinsics_matrix, transform_points
 from i2v_loc.params import load_params
 from i2v_loc.recording import Recording
 
 
 def _box_outline(center, length_m, width_m, yaw_deg) -> np.ndarray:
-    a = math.radians(yaw_deg)
-    c, s = math.cos(a), math.sin(a)
-    corners = np.array([[1, 1], [1, -1], [-1, -1], [-1, 1], [1, 1]]) * [length_m / 2, width_m / 2]
-    return corners @ np.array([[c, s], [-s, c]]) + np.asarray(center[:2])
+    """The closed ground-plane outline (5, 2) of a box."""
+    corners = box_corners(center, length_m, width_m, math.radians(yaw_deg))
+    return np.vstack([corners, corners[:1]])
 
 
 def render_preview(recording: Recording, out: str | Path, frame: int | None = None, z_min_m: float = 0.2) -> Path:

@@ -9,7 +9,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.spatial import cKDTree
 
-from i2v_loc.geometry import planar_pose
+from i2v_loc.geometry import planar_pose, rotate_xy
 from i2v_loc.sim import meshes as m
 
 FIELD_CENTER_XY = (0.0, 6.0)
@@ -49,13 +49,13 @@ class FreeSpace:
         self.tree = cKDTree(np.vstack([self.tree.data, np.atleast_2d(xy)]))
 
 
-def footprint_points(center_xy, length_m: float, width_m: float, yaw_rad: float, step_m: float = 0.5) -> np.ndarray:
-    """Points filling a rotated rectangle (for clearance checks)."""
+def footprint_points(center_xy, length_m: float, width_m: float, yaw_rad, step_m: float = 0.5) -> np.ndarray:
+    """(M, 2) points filling a rotated rectangle (for clearance checks); with ``center_xy`` (N, 2) and
+    ``yaw_rad`` (N,), the points of N such rectangles stacked."""
     xs = np.linspace(-length_m / 2, length_m / 2, max(2, int(length_m / step_m) + 1))
     ys = np.linspace(-width_m / 2, width_m / 2, max(2, int(width_m / step_m) + 1))
     local = np.array(np.meshgrid(xs, ys)).reshape(2, -1).T
-    c, s = math.cos(yaw_rad), math.sin(yaw_rad)
-    return local @ np.array([[c, s], [-s, c]]) + np.asarray(center_xy, float)
+    return (rotate_xy(local, np.asarray(yaw_rad, float)[..., None]) + np.asarray(center_xy, float)[..., None, :]).reshape(-1, 2)
 
 
 def dock_wall(rear_center_xy, facing_yaw_rad: float, bays: int = 3, bay_width_m: float = 4.0) -> list[m.Mesh]:
