@@ -113,6 +113,20 @@ def default_cache_dir() -> Path:
     return Path(base) / "i2v-loc" / "sim"
 
 
+def check_sim_spec(spec: SimSpec) -> None:
+    """SourceError (one line) for an unknown scenario or vehicle, before the simulator starts."""
+    from i2v_loc.params import load_params
+    from i2v_loc.sim.maneuvers import SCENARIOS
+
+    if spec.scenario not in SCENARIOS:
+        raise SourceError(f"unknown scenario {spec.scenario!r} in sim:{spec.scenario}; known: {', '.join(SCENARIOS)}")
+    vehicles = list(load_params().vehicles)  # the simulator draws the vehicles of the default parameters
+    if spec.vehicle not in vehicles:
+        raise SourceError(f"unknown vehicle {spec.vehicle!r} for the simulated yard; known: {', '.join(vehicles)}")
+    if not spec.duration_s > 0:
+        raise SourceError(f"the simulated recording needs a duration > 0 s, got {spec.duration_s:g}")
+
+
 def simulated_recording(spec: SimSpec, cache_dir: str | Path | None = None, quiet: bool = False) -> Path:
     """Path of a recording of ``spec``; generated with ``i2v-loc sim`` on first use, then cached."""
     cache = Path(cache_dir) if cache_dir else default_cache_dir()
@@ -130,8 +144,10 @@ def simulated_recording(spec: SimSpec, cache_dir: str | Path | None = None, quie
     if not quiet:
         print(f"generating the simulated yard ({spec.vehicle}, {spec.scenario}, {spec.duration_s:g} s) "
               f"into {target} (once; cached)", file=sys.stderr, flush=True)
-    # Progress of the simulator goes straight to the terminal.
-    done = subprocess.run(cmd, stdout=subprocess.DEVNULL if quiet else None, stderr=subprocess.PIPE if quiet else None, text=True)
+    # Progress of the simulator goes straight to the terminal, on stderr like everything the
+    # service prints (stdout stays empty).
+    out = subprocess.DEVNULL if quiet else sys.stderr
+    done = subprocess.run(cmd, stdout=out, stderr=subprocess.PIPE if quiet else None, text=True)
     if done.returncode != 0:
         shutil.rmtree(partial, ignore_errors=True)
         detail = f": {done.stderr.strip()}" if quiet and done.stderr else ""
@@ -170,5 +186,6 @@ def open_source(
             raise SourceError("replay needs a recording directory: replay:REC_DIR")
         return ReplaySource(arg, loop=loop)
     sim = SimSpec(scenario=arg or DEFAULT_SCENARIO, vehicle=vehicle, seed=seed, duration_s=duration_s)
+    check_sim_spec(sim)
     path = simulated_recording(sim, cache_dir)
     return ReplaySource(path, loop=True, label=f"sim:{sim.scenario} ({sim.vehicle}, seed {sim.seed})")

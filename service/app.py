@@ -20,12 +20,15 @@ from i2v_loc import __version__
 from i2v_loc.params import json_schema
 from service.auth import bearer_from_header
 from service.core import Service
-from service.params_store import PatchRejected, UnknownVersion
+from service.params_store import ParamsNotSaved, PatchRejected, UnknownVersion
 
 STATIC_DIR = Path(__file__).with_name("static")
 WS_AUTH_TIMEOUT_S = 5.0
 MAX_PATCH_BYTES = 1_000_000
 PATCH_MEDIA_TYPES = ("application/json", "application/merge-patch+json")
+TRUE_WORDS = ("1", "true", "yes", "on")
+FALSE_WORDS = ("", "0", "false", "no", "off")
+NOT_SAVED_STATUS = 507  # Insufficient Storage: the change is in force, the file could not be written
 
 _bearer = HTTPBearer(auto_error=False, description="The service's API token (I2V_LOC_API_TOKEN or --token-file)")
 
@@ -129,17 +132,21 @@ def create_app(service: Service) -> FastAPI:
     @api.patch("/params", tags=["parameters"], summary="Change parameters with a JSON merge patch",
                dependencies=[write_guard], openapi_extra=patch_body,
                responses={400: _error(400, "Body is not JSON"), 415: _error(415, "Not a JSON body"),
-                          422: _error(422, "Validation failed: field, value and allowed range per error")})
+                          422: _error(422, "Validation failed: field, value and allowed range per error"),
+                          NOT_SAVED_STATUS: _not_saved_doc})
     async def patch_params(request: Request):
         patch = await _json_body(request)
         try:
             version = await asyncio.to_thread(service.store.patch, patch)
         except PatchRejected as err:
             return _rejected(err)
+        except ParamsNotSaved as err:
+            return _not_saved(err)
         return _accepted(version)
 
     @api.post("/params/rollback/{version}", tags=["parameters"], summary="Make an earlier version current again",
-              dependencies=[write_guard], responses={404: _error(404, "Unknown version")})
+              dependencies=[write_guard],
+              responses={404: _error(404, "Unknown version"), NOT_SAVED_STATUS: _not_saved_doc})
     async def rollback(version: int):
         try:
             entry = await asyncio.to_thread(service.store.rollback, version)
@@ -147,6 +154,8 @@ def create_app(service: Service) -> FastAPI:
             raise HTTPException(404, err.args[0]) from None
         except PatchRejected as err:  # an old version that today's model refuses
             return _rejected(err)
+        except ParamsNotSaved as err:
+            return _not_saved(err)
         return _accepted(entry)
 
     # ------------------------------------------------------------------ metrics, dashboard
@@ -162,9 +171,11 @@ def create_app(service: Service) -> FastAPI:
 
     app.mount("/static", StaticFiles(directory=STATIC_DIR), name="static")
 
+    # ``points`` is read by hand: a typed query parameter that fails to parse makes Starlette
+    # refuse the handshake with a bare HTTP 403, which reads like an authentication error.
     @app.websocket("/ws/states")
-    async def ws_states(websocket: WebSocket, points: bool = False):
-        await _serve_states(service, websocket, points)
+    async def ws_states(websocket: WebSocket):
+        await _serve_states(service, websocket, websocket.query_params.get("points"))
 
     app.include_router(api)
     _document_patch_body(app)
@@ -241,6 +252,20 @@ def _finite_float(text: str) -> float:
     return value
 
 
+_not_saved_doc = {
+    "description": "The change is in force but the parameter file could not be written",
+    "content": {"application/json": {"example": {
+        "detail": "parameter version 3 is in force but could not be written to yard.yaml: No space left on device; ...",
+        "version": 3, "in_force": True, "saved": False}}},
+}
+
+
+def _not_saved(err: ParamsNotSaved) -> JSONResponse:
+    body = {"detail": str(err), "version": err.version.version, "in_force": True, "saved": False,
+            "file": str(err.path), **_accepted(err.version)}
+    return JSONResponse(status_code=NOT_SAVED_STATUS, content=jsonable_encoder(body))
+
+
 def _rejected(err: PatchRejected) -> JSONResponse:
     return JSONResponse(status_code=422, content=jsonable_encoder({"detail": str(err), "errors": err.errors}))
 
@@ -250,9 +275,23 @@ def _accepted(version) -> dict:
             "params": version.params.model_dump(mode="json")}
 
 
-async def _serve_states(service: Service, websocket: WebSocket, want_points: bool) -> None:
+def parse_flag(text: str | None) -> bool | None:
+    """A query flag: true / false in the usual spellings (absent = false), None if neither."""
+    word = (text or "").strip().lower()
+    if word in TRUE_WORDS:
+        return True
+    if word in FALSE_WORDS:
+        return False
+    return None
+
+
+async def _serve_states(service: Service, websocket: WebSocket, points: str | None) -> None:
     """One JSON message per frame; a slow client only ever gets the newest state."""
     await websocket.accept()
+    want_points = parse_flag(points)
+    if want_points is None:
+        await _ws_refuse(websocket, 400, f"points must be true or false, got {points!r}")
+        return
     if not await _ws_authorised(service, websocket):
         return
     client = service.hub.add(want_points)
@@ -275,9 +314,12 @@ async def _send_loop(websocket: WebSocket, client) -> None:
 
 
 async def _receive_loop(websocket: WebSocket) -> None:
+    """Clients have nothing to say: any message (text or binary) is ignored; this notices them leave."""
     with contextlib.suppress(WebSocketDisconnect, RuntimeError, OSError):
         while True:
-            await websocket.receive_text()  # clients have nothing to say; this notices them leave
+            message = await websocket.receive()
+            if message.get("type") == "websocket.disconnect":
+                return
 
 
 async def _ws_authorised(service: Service, websocket: WebSocket) -> bool:
@@ -287,16 +329,29 @@ async def _ws_authorised(service: Service, websocket: WebSocket) -> bool:
         return True
     token = bearer_from_header(websocket.headers.get("authorization"))
     if token is None:
-        try:
-            first = await asyncio.wait_for(websocket.receive_text(), WS_AUTH_TIMEOUT_S)
-            token = json.loads(first).get("token")
-        except (asyncio.TimeoutError, ValueError, AttributeError, WebSocketDisconnect, RuntimeError):
-            token = None
-        token = token if isinstance(token, str) and token else None
+        token = await _first_message_token(websocket)
     decision = auth.check(token, write=False)
     if not decision.allowed:
-        with contextlib.suppress(RuntimeError, WebSocketDisconnect):
-            await websocket.send_text(json.dumps({"type": "error", "status": decision.status, "detail": decision.message}))
-            await websocket.close(code=1008, reason=decision.message[:120])
+        await _ws_refuse(websocket, decision.status, decision.message)
         return False
     return True
+
+
+async def _first_message_token(websocket: WebSocket) -> str | None:
+    """The token of a first message {"token": "..."} (text or UTF-8 binary), else None."""
+    try:
+        first = await asyncio.wait_for(websocket.receive(), WS_AUTH_TIMEOUT_S)
+        if first.get("type") == "websocket.disconnect":
+            return None
+        text = first.get("text") if first.get("text") is not None else (first.get("bytes") or b"").decode()
+        token = json.loads(text).get("token")
+    except (asyncio.TimeoutError, ValueError, AttributeError, WebSocketDisconnect, RuntimeError):
+        return None
+    return token if isinstance(token, str) and token else None
+
+
+async def _ws_refuse(websocket: WebSocket, status: int, message: str) -> None:
+    """An error message {"type": "error", "status", "detail"}, then close code 1008 with the reason."""
+    with contextlib.suppress(RuntimeError, WebSocketDisconnect, OSError):
+        await websocket.send_text(json.dumps({"type": "error", "status": status, "detail": message}))
+        await websocket.close(code=1008, reason=message[:120])

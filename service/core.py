@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import logging
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -14,13 +15,16 @@ from service.metrics import ServiceMetrics
 from service.params_store import ParamStore
 from service.runner import PipelineRunner
 
+log = logging.getLogger("i2v_loc.service")
+
 DEFAULT_POINTS_CAP = 2000
+DEFAULT_METHOD = "default"
 
 
-def real_pipeline(params: Params):
+def real_pipeline(params: Params, method: str = DEFAULT_METHOD):
     from i2v_loc.pipeline import Pipeline  # heavy imports only when the service starts
 
-    return Pipeline(params)
+    return Pipeline(params, method=method)
 
 
 @dataclass
@@ -31,16 +35,24 @@ class Service:
     metrics: ServiceMetrics
     auth: AuthConfig
     source_info: dict
+    save_error: str | None = None  # why the parameter file could not be written at shutdown
 
     def start(self) -> None:
         if self.store.path is not None and not self.store.path.exists():
-            self.store.save()  # the file exists from the start, holding the parameters in force
+            try:
+                self.store.save()  # the file exists from the start, holding the parameters in force
+            except OSError as err:  # run anyway: every change then answers 507 saying so
+                log.error("the parameter file %s cannot be written: %s", self.store.path, err.strerror or err)
         self.runner.start()
 
     def stop(self) -> None:
-        """Stop the pipeline thread and save the parameters in force."""
+        """Stop the pipeline thread and save the parameters in force (a failure is logged and kept)."""
         self.runner.stop()
-        self.store.save()
+        try:
+            self.store.save()
+        except OSError as err:
+            self.save_error = f"{self.store.path}: {err.strerror or err}"
+            log.error("the parameters in force could not be saved: %s", self.save_error)
 
     def sensors(self) -> list[dict]:
         now = self.runner.clock()
@@ -84,6 +96,7 @@ class Service:
             "ready": status in ("ok", "degraded"),
             "error": runner.error,
             "source": self.source_info,
+            "method": runner.method,
             "uptime_s": None if runner.started_s is None else round(now - runner.started_s, 3),
             "last_frame_age_s": None if age is None else round(age, 3),
             **runner.status(),
@@ -98,14 +111,18 @@ def build_service(
     params: Params,
     params_file: str | Path | None = None,
     auth: AuthConfig | None = None,
-    pipeline_factory: Callable[[Params], object] = real_pipeline,
+    pipeline_factory: Callable[[Params, str], object] = real_pipeline,
     realtime: bool = True,
     points_cap: int = DEFAULT_POINTS_CAP,
     clock: Callable[[], float] = time.monotonic,
+    method: str = DEFAULT_METHOD,
 ) -> Service:
     metrics = ServiceMetrics()
     hub = Hub(on_drop=metrics.ws_dropped.inc, on_count=metrics.ws_clients.set)
-    pipeline = pipeline_factory(params)
+    pipeline = pipeline_factory(params, method)
+    # The method may set parameters of its own (docs/pipeline.md): version 0 is what the pipeline
+    # really runs with, so /params shows it and every later version is exact.
+    params = getattr(pipeline, "params", None) or params
     expected = [s.name for s in params.sensors]
     runner = PipelineRunner(source, pipeline, hub, metrics, expected, realtime=realtime,
                             points_cap=points_cap, clock=clock)

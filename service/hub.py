@@ -1,20 +1,19 @@
 """Fan-out of messages from the pipeline thread to WebSocket clients.
 
-Each client has a slot holding at most one pending state: a newer state replaces an older one
-that the client has not taken yet (counted as dropped), so a stalled client only ever gets the
-newest state and never holds up the pipeline or the other clients. Parameter messages are rare
-and always delivered (a short separate queue).
+Each client has two slots, one for a pending state and one for a pending parameter message: a
+newer message replaces an older one of its kind that the client has not taken yet (counted as
+dropped), so a stalled client only ever gets the newest of each and never holds up the pipeline
+or the other clients. A client that keeps up gets every message. A parameter message carries the
+whole parameters, so the newest one is all a client needs; the patches of the versions it missed
+are in ``GET /api/v1/params/history``. The parameter message goes out before the state.
 """
 
 from __future__ import annotations
 
 import asyncio
 import threading
-from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
-
-PARAMS_QUEUE_LIMIT = 16
 
 
 @dataclass
@@ -30,29 +29,31 @@ class Message:
 class Client:
     want_points: bool
     state: Message | None = None
-    control: deque = field(default_factory=lambda: deque(maxlen=PARAMS_QUEUE_LIMIT))
-    dropped: int = 0
+    params: Message | None = None
+    dropped: int = 0  # states replaced before the client took them
+    params_dropped: int = 0  # parameter messages replaced before the client took them
     sent: int = 0
     wake: asyncio.Event = field(default_factory=asyncio.Event)
 
     def offer(self, message: Message) -> bool:
-        """Store a message for this client; True if an untaken state was replaced."""
-        replaced = False
+        """Store a message for this client; True if an untaken one of its kind was replaced."""
         if message.kind == "state":
             replaced = self.state is not None
-            if replaced:
-                self.dropped += 1
+            self.dropped += replaced
             self.state = message
         else:
-            self.control.append(message)
+            replaced = self.params is not None
+            self.params_dropped += replaced
+            self.params = message
         self.wake.set()
         return replaced
 
     async def next_text(self) -> str:
-        """The next message to send (parameter messages first), waiting if there is none."""
+        """The next message to send (a parameter message first), waiting if there is none."""
         while True:
-            if self.control:
-                return self._text(self.control.popleft())
+            if self.params is not None:
+                message, self.params = self.params, None
+                return self._text(message)
             if self.state is not None:
                 message, self.state = self.state, None
                 return self._text(message)
@@ -76,7 +77,8 @@ class Hub:
         self.on_count = on_count
 
     def bind(self, loop: asyncio.AbstractEventLoop) -> None:
-        self._loop = loop
+        with self._lock:
+            self._loop = loop
 
     def unbind(self) -> None:
         with self._lock:
@@ -87,8 +89,9 @@ class Hub:
         return len(self._clients)
 
     def stats(self) -> list[dict]:
-        """Per connected client: messages sent and states replaced before it took them."""
-        return [{"sent": c.sent, "dropped": c.dropped, "points": c.want_points} for c in list(self._clients)]
+        """Per connected client: messages sent, states and parameter messages replaced before it took them."""
+        return [{"sent": c.sent, "dropped": c.dropped, "params_dropped": c.params_dropped, "points": c.want_points}
+                for c in list(self._clients)]
 
     def add(self, want_points: bool) -> Client:
         client = Client(want_points=want_points)

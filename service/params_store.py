@@ -1,12 +1,15 @@
 """Versioned parameters of the running service: validation, history, rollback, persistence.
 
-Every accepted change gets the next version number, is written atomically to the parameter file
-(if one is configured) and is handed to ``on_change`` (the pipeline runner, which applies it
-between two frames). An invalid change raises ``PatchRejected`` and changes nothing.
+A change is validated against the parameter model, then handed to ``on_change`` (the pipeline
+runner, which has the pipeline check it at once and apply it between two frames); only then does
+it get the next version number and is written atomically to the parameter file (if one is
+configured). An invalid change, or one the pipeline refuses, raises ``PatchRejected`` and changes
+nothing. A change in force whose file could not be written raises ``ParamsNotSaved``.
 """
 
 from __future__ import annotations
 
+import logging
 import threading
 import time
 from collections.abc import Callable
@@ -18,7 +21,9 @@ from pydantic import ValidationError
 
 from i2v_loc.params import Params, ParamsError, apply_patch, describe_validation_error, save_params
 
-HISTORY_LIMIT = 200
+log = logging.getLogger("i2v_loc.service")
+
+HISTORY_LIMIT = 200  # versions kept; version 0 (the parameters loaded at start) is always kept
 
 
 class PatchRejected(Exception):
@@ -31,6 +36,18 @@ class PatchRejected(Exception):
 
 class UnknownVersion(KeyError):
     pass
+
+
+class ParamsNotSaved(Exception):
+    """A change is in force (``version``) but the parameter file could not be written."""
+
+    def __init__(self, version: "Version", path: Path, error: OSError):
+        reason = error.strerror or str(error)
+        super().__init__(f"parameter version {version.version} is in force but could not be written to {path}: "
+                         f"{reason}; it will be lost at a restart unless a later change or the shutdown saves it")
+        self.version = version
+        self.path = path
+        self.reason = reason
 
 
 @dataclass
@@ -93,8 +110,9 @@ class ParamStore:
         raise UnknownVersion(f"no parameter version {version}; known versions: {known[0]}..{known[-1]}")
 
     def patch(self, patch: Any, source: str = "patch") -> Version:
-        """Validate and apply a JSON merge patch; raises ``PatchRejected``."""
+        """Validate and apply a JSON merge patch; raises ``PatchRejected`` or ``ParamsNotSaved``."""
         with self._lock:
+            _refuse_section_nulls(patch)
             new_params = _validated(self.params, patch)
             return self._commit(new_params, patch, source)
 
@@ -106,18 +124,44 @@ class ParamStore:
             return self._commit(target, patch, f"rollback to {version}")
 
     def save(self) -> None:
+        """Write the parameters in force to the file (OSError if it cannot be written)."""
         if self.path is not None:
             save_params(self.params, self.path)
 
     def _commit(self, params: Params, patch: dict, source: str) -> Version:
         entry = Version(self.current.version + 1, time.time(), source, patch, params)
-        if self.path is not None:
-            save_params(params, self.path)
-        self._history.append(entry)
-        del self._history[:-HISTORY_LIMIT]
         if self.on_change is not None:
-            self.on_change(entry)
+            try:
+                self.on_change(entry)
+            except ValueError as err:  # ParamsError: a check only the pipeline makes (e.g. grid size)
+                raise PatchRejected(f"{source}: the pipeline refused the parameters: {err}", [
+                    {"source": source, "field": "", "value": None, "message": str(err), "allowed": ""}]) from err
+        self._history.append(entry)
+        if len(self._history) > HISTORY_LIMIT:
+            del self._history[1:len(self._history) - HISTORY_LIMIT + 1]
+        if self.path is not None:
+            try:
+                save_params(params, self.path)
+            except OSError as err:
+                failure = ParamsNotSaved(entry, self.path, err)
+                log.error("%s", failure)
+                raise failure from err
         return entry
+
+
+def _refuse_section_nulls(patch: Any) -> None:
+    """``{"section": null}`` would silently reset a whole section (all sensors, all vehicles) to
+    the built-in defaults: refused; ``null`` inside a section (a field, a vehicle) is fine."""
+    if not isinstance(patch, dict):
+        return
+    nulls = sorted(str(k) for k, v in patch.items() if v is None)
+    if nulls:
+        errors = [{"source": "patch", "field": name, "value": None, "allowed": "an object (or a list for sensors)",
+                   "message": "null would reset the whole section to the built-in defaults; "
+                              "send the fields to change (null inside a section resets that field)"}
+                  for name in nulls]
+        raise PatchRejected(f"patch: {', '.join(nulls)} = null: a whole section cannot be deleted; "
+                            "send the fields to change instead", errors)
 
 
 def _validated(params: Params, patch: Any) -> Params:

@@ -1,9 +1,10 @@
 """The pipeline thread: pace the source in real time, run the pipeline, publish every state.
 
 Nothing here waits for an HTTP or WebSocket client: results are handed to the ``Hub`` (which
-never blocks) and kept as the latest state for the REST API. Parameter changes arrive on a queue
-and are applied between two frames. A frame that fails to load or to process is counted and
-skipped. When the pipeline falls behind real time, it jumps to the newest frame (the skipped ones
+never blocks) and kept as the latest state for the REST API. A parameter change is handed to the
+pipeline at once (so the pipeline can refuse it before the store commits it) and takes effect
+between two frames. A frame that fails to load, to process or to publish is counted, logged and
+skipped: nothing about one frame can stop the thread. When the pipeline falls behind real time, it jumps to the newest frame (the skipped ones
 are counted as dropped, reason ``late``), as a live system would.
 """
 
@@ -22,7 +23,7 @@ import numpy as np
 from i2v_loc.geometry import extrinsics_matrix, transform_points
 from service.hub import Hub, Message
 from service.metrics import ServiceMetrics
-from service.params_store import Version
+from service.params_store import Version, merge_patch_diff
 
 log = logging.getLogger("i2v_loc.service")
 
@@ -141,7 +142,11 @@ def dumps(obj) -> str:
 
 
 def _finite(obj):
-    """Replace NaN / inf (not valid JSON) by None, recursively."""
+    """Replace NaN / inf (not valid JSON) by None, recursively, numpy values included."""
+    if isinstance(obj, np.ndarray):
+        obj = obj.tolist()
+    elif isinstance(obj, np.generic):
+        obj = obj.item()
     if isinstance(obj, float):
         return obj if np.isfinite(obj) else None
     if isinstance(obj, dict):
@@ -166,6 +171,7 @@ class PipelineRunner:
         self.params_version = 0
         self.frames_processed = 0
         self.frames_dropped: dict[str, int] = {"source_error": 0, "pipeline_error": 0, "late": 0}
+        self.last_frame_error: dict | None = None  # {frame, reason, error} of the last skipped frame
         self.finished = False
         self.error: str | None = None
         self.started_s: float | None = None
@@ -174,6 +180,10 @@ class PipelineRunner:
         self._latest_lock = threading.Lock()
         self._frame_times: deque = deque(maxlen=50)
         self._updates: queue.SimpleQueue = queue.SimpleQueue()
+        # Held while the thread takes the queued versions and processes a frame, and while a new
+        # version is handed to the pipeline: a frame's params_version is then always the version
+        # the pipeline processed it with.
+        self._apply_lock = threading.Lock()
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, name="i2v-loc-pipeline", daemon=True)
         self._pipeline_counters: dict[str, int] = {}
@@ -195,9 +205,21 @@ class PipelineRunner:
     def alive(self) -> bool:
         return self._thread.is_alive()
 
+    @property
+    def method(self) -> str | None:
+        return getattr(self.pipeline, "method", None)
+
     def submit(self, version: Version) -> None:
-        """Queue a parameter change; applied before the next frame."""
-        self._updates.put(version)
+        """Hand a parameter version to the pipeline, in force from the next frame on.
+
+        The pipeline checks it at once and raises ``ParamsError`` (a ValueError) if it refuses it;
+        then nothing changes. It gets the whole parameters (as the merge patch from its own), so it
+        always ends up with exactly the store's parameters.
+        """
+        with self._apply_lock:
+            current = self.pipeline.params.model_dump(mode="json")
+            self.pipeline.update_params(merge_patch_diff(current, version.params.model_dump(mode="json")))
+            self._updates.put(version)
 
     @property
     def latest(self) -> dict | None:
@@ -225,7 +247,8 @@ class PipelineRunner:
         k = 0
         t0 = self.clock()
         while not self._stop.is_set():
-            self._apply_updates()
+            with self._apply_lock:
+                self._apply_updates()  # also while idle (finished, or waiting for a frame's time)
             if total is not None and k >= total:
                 self.finished = True
                 self._stop.wait(0.05)
@@ -246,21 +269,21 @@ class PipelineRunner:
             k += 1
 
     def _apply_updates(self) -> None:
+        """Take the versions handed to the pipeline since the last frame; call with _apply_lock."""
         while True:
             try:
                 version = self._updates.get_nowait()
             except queue.Empty:
                 return
-            try:
-                self.pipeline.update_params(version.patch)
-            except Exception as err:  # validated by the store already: should not happen
-                log.error("parameter version %d could not be applied: %s", version.version, err)
-                continue
             self.params_version = version.version
             self.metrics.params_version.set(version.version)
-            message = {"type": "params", "version": version.version, "source": version.source,
-                       "patch": version.patch, "params": version.params.model_dump(mode="json")}
-            text = dumps(message)
+            try:
+                message = {"type": "params", "version": version.version, "source": version.source,
+                           "patch": version.patch, "params": version.params.model_dump(mode="json")}
+                text = dumps(_finite(message))
+            except Exception as err:  # should not happen (validated parameters): log, keep running
+                log.error("the message of parameter version %d could not be built: %s", version.version, err)
+                continue
             self.hub.publish(Message("params", text, text))
 
     def _drop(self, reason: str, n: int = 1) -> None:
@@ -271,25 +294,32 @@ class PipelineRunner:
         try:
             frame = self.source.frame(k)
         except Exception as err:
-            self._drop("source_error")
-            log.warning("frame %d could not be read and was skipped: %s", k, err)
+            self._skip(k, "source_error", err)
             return
         try:
-            result = self.pipeline.process(frame)
-            state = _finite(result.to_json())
-        except Exception as err:
-            self._drop("pipeline_error")
-            log.warning("frame %d failed in the pipeline and was skipped: %s: %s", k, type(err).__name__, err)
-            return
-        now = self.clock()
+            with self._apply_lock:
+                self._apply_updates()
+                result = self.pipeline.process(frame)
+            self._publish(frame, result)
+        except Exception as err:  # any part of one frame: process, serialise, record, publish
+            self._skip(k, "pipeline_error", err)
+
+    def _skip(self, k: int, reason: str, err: Exception) -> None:
+        self._drop(reason)
+        detail = f"{type(err).__name__}: {err}"
+        self.last_frame_error = {"frame": k, "reason": reason, "error": detail[:500]}
+        log.warning("frame %d was skipped (%s): %s", k, reason, detail)
+
+    def _publish(self, frame, result) -> None:
+        state = _finite(result.to_json())
         state["params_version"] = self.params_version
-        self._record(frame, state, now)
         plain = dumps(state)
         with_points = None
         xy = self._foreground(result, frame)
         if xy is not None:
-            flat = np.round(np.asarray(xy, dtype=np.float64), 2).ravel().tolist()
+            flat = _finite(np.round(np.asarray(xy, dtype=np.float64), 2).ravel())
             with_points = plain[:-1] + ',"foreground":{"xy":' + dumps(flat) + "}}"
+        self._record(frame, state, self.clock())
         with self._latest_lock:
             self._latest = state
         self.hub.publish(Message("state", plain, with_points))
@@ -306,11 +336,7 @@ class PipelineRunner:
         return xy
 
     def _record(self, frame, state: dict, now: float) -> None:
-        self.frames_processed += 1
-        self.last_frame_s = now
-        self._frame_times.append(now)
         m = self.metrics
-        m.frames_processed.inc()
         for stage, ms in (state.get("latency_ms") or {}).items():
             if isinstance(ms, (int, float)):
                 m.stage_latency.labels(stage).observe(ms / 1000.0)
@@ -330,6 +356,10 @@ class PipelineRunner:
                 if delta > 0:
                     m.pipeline_events.labels(str(reason)).inc(delta)
                 self._pipeline_counters[reason] = value
+        self.frames_processed += 1  # last: a frame that failed above counts as dropped only
+        self.last_frame_s = now
+        self._frame_times.append(now)
+        m.frames_processed.inc()
 
     # ------------------------------------------------------------------ summaries
 
@@ -340,9 +370,11 @@ class PipelineRunner:
         return {
             "frames_processed": self.frames_processed,
             "frames_dropped": dict(self.frames_dropped),
+            "last_frame_error": self.last_frame_error,
             "frame_rate_hz": round(self.frame_rate_hz(), 2),
             "vehicles": vehicles,
             "frame": latest.get("frame"),
             "stamp_s": latest.get("stamp_s"),
             "params_version": self.params_version,
+            "method": self.method,
         }

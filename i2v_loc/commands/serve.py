@@ -14,6 +14,7 @@ from pathlib import Path
 from i2v_loc.cli import UserError
 
 DEFAULT_SOURCE = "sim:docking"
+DEFAULT_METHOD = "default"  # = service.core.DEFAULT_METHOD (not imported here: argparse stays light)
 
 
 def register(sub) -> None:
@@ -23,6 +24,8 @@ def register(sub) -> None:
     )
     p.add_argument("--source", default=DEFAULT_SOURCE,
                    help="sim[:SCENARIO] (simulated yard, loops; default %(default)s) or replay:REC_DIR")
+    p.add_argument("--method", default=DEFAULT_METHOD, metavar="paper|default",
+                   help="pipeline method (default %(default)s: fast enough for 10 Hz; paper: the published one)")
     p.add_argument("--params", type=Path, metavar="FILE",
                    help="parameter file: loaded at start (if it exists) and rewritten on every change")
     p.add_argument("--host", default="127.0.0.1", help="address to bind (default %(default)s: this machine only)")
@@ -46,9 +49,12 @@ def register(sub) -> None:
 
 def run(args) -> int:
     from i2v_loc.params import load_params
+    from i2v_loc.pipeline import METHODS
     from i2v_loc.sources import SourceError, open_source
     from service.auth import AuthConfig, TokenError, load_token
 
+    if args.method not in METHODS:
+        raise UserError(f"unknown method {args.method!r}; known: {', '.join(METHODS)}")
     if not 0 <= args.port <= 65535:
         raise UserError(f"--port must be within 0..65535, got {args.port}")
     if args.max_points < 0:
@@ -95,11 +101,17 @@ def _bind(host: str, port: int) -> socket.socket:
 def _serve(args, sock, source, params, params_file, auth) -> int:
     import uvicorn
 
+    from i2v_loc.params import ParamsError
     from service.app import create_app
     from service.core import build_service
 
     logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
-    service = build_service(source, params, params_file, auth, realtime=not args.no_realtime, points_cap=args.max_points)
+    try:
+        service = build_service(source, params, params_file, auth, realtime=not args.no_realtime,
+                                points_cap=args.max_points, method=args.method)
+    except ParamsError as err:  # the method's own checks (e.g. the background grid) refuse the parameters
+        sock.close()
+        raise UserError(f"method {args.method}: {err}") from err
     app = create_app(service)
     host, port = sock.getsockname()[:2]
     shown = f"[{host}]" if ":" in host else host
@@ -121,9 +133,12 @@ def _serve(args, sock, source, params, params_file, auth) -> int:
     finally:
         if status:
             status.stop()
-    saved = f"; parameters saved to {params_file}" if params_file else ""
+    if service.save_error:
+        saved = f"; parameters NOT saved: {service.save_error}"
+    else:
+        saved = f"; parameters saved to {params_file}" if params_file else ""
     print(f"i2v-loc serve: stopped after {service.runner.frames_processed} frames{saved}", file=sys.stderr)
-    return 0
+    return 1 if service.save_error else 0
 
 
 def _announce(args, source, service, params_file, auth, url) -> None:
@@ -131,6 +146,7 @@ def _announce(args, source, service, params_file, auth, url) -> None:
     lines = [
         f"i2v-loc serve: source {info.get('source')} ({info.get('frames')} frames at {source.rate_hz:g} Hz"
         f"{', looping' if source.n_frames is None else ''})",
+        f"  method     {service.runner.method}",
         f"  dashboard  {url}",
         f"  API        {url}api/v1/  (docs {url}docs)",
         f"  parameters {params_file if params_file else 'not persisted (pass --params FILE to keep changes)'}",
@@ -185,5 +201,5 @@ def format_status(status: dict, ws_clients: int) -> str:
     else:
         shown = "no vehicle"
     drops = sum(status.get("frames_dropped", {}).values())
-    return (f"{status.get('frame_rate_hz', 0):5.1f} fps | frame {status.get('frame')} | {shown} | "
+    return (f"{status.get('method') or '?'} | {status.get('frame_rate_hz', 0):5.1f} fps | frame {status.get('frame')} | {shown} | "
             f"dropped {drops} | params v{status.get('params_version')} | ws {ws_clients}")
