@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import csv
 import json
-import math
 from pathlib import Path
 
 import numpy as np
@@ -21,19 +20,10 @@ REQUIRED = ("truck_pos_rmse_m", "trailer_pos_rmse_m", "truck_yaw_rmse_deg", "tra
 @pytest.fixture(scope="module")
 def recording(tmp_path_factory) -> Path:
     """A 1.5 s simulated recording (15 frames, 512 columns) of a Volvo FH in a long curve."""
-    pytest.importorskip("i2v_loc.pipeline", reason="the pipeline module is not there yet")
     out = tmp_path_factory.mktemp("rec") / "volvo_curve"
-    try:
-        code = main(["sim", "--vehicle", "volvo_fh", "--scenario", "long_curve", "--duration", "1.5", "--start", "6",
-                     "--columns", "512", "--seed", "3", "--out", str(out)])
-    except SystemExit as err:  # argparse: no sim command
-        pytest.skip(f"i2v-loc sim is not available ({err})")
-    assert code == 0
+    assert main(["sim", "--vehicle", "volvo_fh", "--scenario", "long_curve", "--duration", "1.5", "--start", "6",
+                 "--columns", "512", "--seed", "3", "--out", str(out)]) == 0
     return out
-
-
-def _finite_or_none(value, low, high) -> bool:
-    return value is None or (math.isfinite(value) and low <= value <= high)
 
 
 def test_eval_writes_a_sane_report(recording, tmp_path, capsys):
@@ -45,9 +35,11 @@ def test_eval_writes_a_sane_report(recording, tmp_path, capsys):
         assert key in volvo, key
     assert volvo["gt_vehicle_frames"] == 15
     assert 1.0 < volvo["latency_ms_p50"] < 5000.0
-    assert _finite_or_none(volvo["truck_pos_rmse_m"], 0.0, 50.0)
-    assert _finite_or_none(volvo["hitch_rmse_deg"], 0.0, 180.0)
-    assert _finite_or_none(volvo["heading_flip_rate"], 0.0, 1.0)
+    # measured for `paper`: 13 of 15 frames with both units, 0.20 m / 0.07 m position, 4.9° hitch RMSE
+    assert volvo["hitch_frames"] >= 10
+    assert volvo["truck_pos_rmse_m"] < 0.6 and volvo["trailer_pos_rmse_m"] < 0.5
+    assert volvo["hitch_rmse_deg"] < 12.0
+    assert volvo["heading_flip_rate"] == 0.0
     # the static baseline is computed from the truth alone: always there, a few metres at most
     assert 0.0 <= volvo["static_delta_T_m"] < 10.0 and volvo["static_dcap_frames"] == 15
     report = (out / "report.md").read_text()
@@ -100,6 +92,7 @@ def test_sweep_ranks_and_writes_best_params(recording, tmp_path):
     best = yaml.safe_load((out / "best_params.yaml").read_text())
     assert best["tracking"]["max_distance_m"] == data["rows"][0]["values"]["tracking.max_distance_m"]
     assert best["orientation"]["smoothing"] == 0.0
+    assert "sensors" not in best  # `run REC --params best_params.yaml` keeps the recording's sensors
 
 
 def test_sweep_rejects_unknown_parameters(recording, tmp_path, capsys):
@@ -112,18 +105,25 @@ def test_sweep_rejects_unknown_parameters(recording, tmp_path, capsys):
     assert "max_distance_m" in capsys.readouterr().err
 
 
-def test_committed_samples_evaluate(tmp_path):
-    samples = sorted(p.parent for p in (REPO / "samples").glob("*/meta.yaml"))
-    if not samples:
-        pytest.skip("no committed sample recordings under samples/ yet")
-    pytest.importorskip("i2v_loc.pipeline", reason="the pipeline module is not there yet")
+def test_committed_sample_scores_within_honest_bounds(tmp_path):
+    """``default`` on samples/volvo_fh_u_turn (50 frames) measured 0.27 m / 0.6° truck, 0.17 m / 0.8° trailer,
+    0.85° hitch RMSE, every frame detected, no flips, 2 false detections; the bounds leave margin
+    for tuning but fail on a broken pipeline, wrong extrinsics or unsynchronised clocks."""
     out = tmp_path / "report"
-    assert main(["eval", str(samples[0]), "--out", str(out), "--quiet", "--no-plots"]) == 0
-    metrics = json.loads((out / "metrics.json").read_text())
-    for vehicle, s in metrics["vehicles"]["paper"].items():
-        if s["gt_vehicle_frames"]:
-            assert all(key in s for key in REQUIRED), vehicle
-            assert _finite_or_none(s["heading_flip_rate"], 0.0, 1.0)
+    assert main(["eval", str(REPO / "samples" / "volvo_fh_u_turn"), "--method", "default", "--out", str(out),
+                 "--quiet", "--no-plots"]) == 0
+    metrics = json.loads((out / "metrics.json").read_text())["vehicles"]["default"]
+    volvo = metrics["volvo_fh"]
+    assert all(key in volvo for key in REQUIRED)
+    assert volvo["gt_vehicle_frames"] == 50
+    assert volvo["truck_detection_rate"] >= 0.9 and volvo["trailer_detection_rate"] >= 0.9
+    assert volvo["hitch_frames"] >= 45
+    assert volvo["hitch_rmse_deg"] < 3.0
+    assert volvo["trailer_pos_rmse_m"] < 0.5 and volvo["truck_pos_rmse_m"] < 0.6
+    assert volvo["trailer_yaw_rmse_deg"] < 3.0 and volvo["truck_yaw_rmse_deg"] < 3.0
+    assert volvo["heading_flip_rate"] == 0.0 and volvo["vehicle_id_switches"] == 0
+    assert volvo["delta_T_m"] < 0.6 and volvo["delta_T_m"] < volvo["static_delta_T_m"]
+    assert sum(s["false_vehicles"] for s in metrics.values()) <= 5
 
 
 def test_openlabel_labels_score_like_the_jsonl_truth(recording):

@@ -135,3 +135,15 @@ def test_command_writes_recording_and_preview(tmp_path, capsys):
 def test_command_refuses_unknown_vehicle(tmp_path, capsys):
     assert main(["sim", "--vehicle", "bus", "--out", str(tmp_path / "x")]) == 2
     assert "unknown vehicle" in capsys.readouterr().err
+
+
+def test_footprint_points_fill_rotated_rectangles_one_or_many():
+    from i2v_loc.sim.yard import footprint_points
+
+    one = footprint_points((10.0, 5.0), 4.0, 2.0, math.pi / 2, step_m=1.0)
+    assert one.shape == (15, 2)  # 5 x 3 grid
+    np.testing.assert_allclose(one.min(axis=0), [9.0, 3.0], atol=1e-12)  # heading north: 2 m wide in x, 4 m long in y
+    np.testing.assert_allclose(one.max(axis=0), [11.0, 7.0], atol=1e-12)
+    many = footprint_points([[10.0, 5.0], [0.0, 0.0]], 4.0, 2.0, [math.pi / 2, 0.0], step_m=1.0)
+    np.testing.assert_allclose(many[:15], one)
+    np.testing.assert_allclose(many[15:], footprint_points((0.0, 0.0), 4.0, 2.0, 0.0, step_m=1.0))
