@@ -15,7 +15,7 @@ import pytest
 import websockets
 import yaml
 
-from i2v_loc.params import Params, json_schema, load_params
+from i2v_loc.params import json_schema, load_params
 from test_service_support import TOKEN, next_state, sample_recording, serve, wait_for
 
 pytestmark = pytest.mark.timeout(60)
@@ -335,3 +335,77 @@ def test_a_failing_source_frame_is_counted_and_skipped(tmp_path):
         assert health["frames_dropped"]["source_error"] >= 1 and health["live"] is True
         frame = c.get("/api/v1/state").json()["frame"]
         assert frame % 3 != 1
+
+
+# ------------------------------------------------------------------ review fixes
+
+
+def test_binary_and_text_messages_from_a_client_are_ignored(live):
+    server, _, _ = live
+
+    async def chatty():
+        async with _ws(server) as ws:
+            first = await next_state(ws)
+            await ws.send(b"\x00\xffbinary")
+            await ws.send("hello")
+            later = [await next_state(ws) for _ in range(3)]
+            return first, later
+
+    first, later = asyncio.run(chatty())
+    assert all(s["frame"] > first["frame"] for s in later)
+
+
+def test_a_bad_points_flag_is_refused_with_a_reason(live):
+    server, _, _ = live
+
+    async def attempt():
+        async with websockets.connect(server.ws_url + "/ws/states?points=maybe") as ws:
+            refused = json.loads(await ws.recv())
+            with pytest.raises(websockets.ConnectionClosed) as closed:
+                await ws.recv()
+        async with websockets.connect(server.ws_url + "/ws/states?points=1", max_size=2**24) as ws:
+            with_points = await next_state(ws, where=lambda m: "foreground" in m)
+        return refused, closed.value.rcvd, with_points
+
+    refused, close, with_points = asyncio.run(attempt())
+    assert refused == {"type": "error", "status": 400, "detail": "points must be true or false, got 'maybe'"}
+    assert close.code == 1008 and "points must be true or false" in close.reason
+    assert with_points["foreground"]["xy"]
+
+
+def test_null_section_patch_gives_422(client, live):
+    _, service, _ = live
+    version = service.store.version
+    response = client.patch("/api/v1/params", json={"sensors": None}, headers=AUTH)
+    assert response.status_code == 422 and "whole section" in response.json()["detail"]
+    assert response.json()["errors"][0]["field"] == "sensors" and service.store.version == version
+
+
+def test_health_and_metrics_show_the_method_and_no_created_series(client):
+    assert client.get("/api/v1/health").json()["method"] == "paper"
+    assert "_created" not in client.get("/metrics").text
+
+
+def test_unwritable_parameter_file_gives_a_json_507(tmp_path):
+    from service.app import create_app
+    from test_service_support import make_service
+
+    blocker = tmp_path / "not-a-folder"
+    blocker.write_text("x")
+    service = make_service(sample_recording(), params_file=blocker / "params.yaml", method="paper")
+
+    async def requests():  # in-process ASGI, no lifespan: the pipeline thread is not needed here
+        transport = httpx.ASGITransport(app=create_app(service))
+        async with httpx.AsyncClient(transport=transport, base_url="http://service") as c:
+            patched = await c.patch("/api/v1/params", json={"tracking": {"max_age_frames": 9}}, headers=AUTH)
+            return patched, (await c.get("/api/v1/params")).json()
+
+    response, params = asyncio.run(requests())
+    assert response.status_code == 507, response.text
+    body = response.json()
+    assert body["in_force"] is True and body["saved"] is False and body["version"] == 1
+    assert "is in force but could not be written" in body["detail"] and str(blocker) in body["detail"]
+    assert params["version"] == 1 and params["params"]["tracking"]["max_age_frames"] == 9
+    assert service.runner.pipeline.params.tracking.max_age_frames == 9
+    service.stop()  # the save at shutdown fails too: kept for the exit message, no exception
+    assert service.save_error and str(blocker) in service.save_error

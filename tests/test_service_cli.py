@@ -68,6 +68,7 @@ def test_serve_replay_patch_then_sigterm_saves_params(tmp_path):
     finally:
         code = serve.stop(signal.SIGTERM)
     assert code == 0, serve.text
+    assert serve.proc.stdout.read() == ""  # everything the service says goes to stderr
     assert yaml.safe_load(params_file.read_text())["orientation"]["history_frames"] == 12
     assert "stopped after" in serve.text and f"parameters saved to {params_file}" in serve.text
     assert "cli-secret" not in serve.text  # the token is never printed
@@ -86,7 +87,9 @@ def test_serve_sim_source_generates_once_and_stops_on_sigint(tmp_path):
     finally:
         code = serve.stop(signal.SIGINT)
     assert code == 0, serve.text
+    assert serve.proc.stdout.read() == ""  # the simulator's progress too goes to stderr
     assert state["type"] == "state" and health["source"]["scenario"] == "docking"
+    assert health["method"] == "default" and "method     default" in serve.text
     assert health["source"]["loop"] is True
     assert (cache / "man_tgx_docking_seed1_1s" / "meta.yaml").is_file()
     assert response.status_code == 403 and "I2V_LOC_API_TOKEN" in response.json()["detail"]
@@ -98,9 +101,14 @@ def test_serve_sim_source_generates_once_and_stops_on_sigint(tmp_path):
     (["--source", "webcam"], "unknown source"),
     (["--require-token-for-reads"], "--require-token-for-reads needs a token"),
     (["--token-file", "/no/such/token"], "cannot read the token file"),
+    (["--source", "sim:nope"], "unknown scenario 'nope' in sim:nope; known: "),
+    (["--vehicle", "vw_golf"], "unknown vehicle 'vw_golf' for the simulated yard"),
+    (["--method", "fast"], "unknown method 'fast'; known: paper, default"),
 ])
-def test_serve_user_errors(args, message):
+def test_serve_user_errors(args, message, tmp_path):
     env = {k: v for k, v in os.environ.items() if k != "I2V_LOC_API_TOKEN"}
-    done = subprocess.run([I2V_LOC, "serve", "--port", "0", *args],
+    done = subprocess.run([I2V_LOC, "serve", "--port", "0", "--cache-dir", str(tmp_path / "cache"), *args],
                           capture_output=True, text=True, env=env, timeout=60)
     assert done.returncode == 2 and message in done.stderr, done.stderr
+    assert len(done.stderr.strip().splitlines()) == 1, done.stderr  # one line, no usage text
+    assert not (tmp_path / "cache").exists()  # no simulator was started

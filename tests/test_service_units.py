@@ -3,17 +3,24 @@
 from __future__ import annotations
 
 import asyncio
+import json
 
 import numpy as np
 import pytest
 
-from i2v_loc.params import Params, deep_merge, load_params
+from i2v_loc.commands.serve import format_status
+from i2v_loc.frame import Frame
+from i2v_loc.params import Params, ParamsError, apply_patch, deep_merge, load_params
 from i2v_loc.recording import SensorScans, write_recording
 from i2v_loc.sources import ReplaySource, SourceError, open_source
+from service import params_store
+from service.app import parse_flag
 from service.auth import HOW_TO_SET, AuthConfig, TokenError, bearer_from_header, load_token
+from service.core import build_service
 from service.hub import Hub, Message
-from service.params_store import ParamStore, PatchRejected, UnknownVersion, merge_patch_diff
-from service.runner import SensorStats, foreground_xy
+from service.metrics import ServiceMetrics
+from service.params_store import ParamsNotSaved, ParamStore, PatchRejected, UnknownVersion, merge_patch_diff
+from service.runner import PipelineRunner, SensorStats, foreground_xy
 
 
 def _tiny_recording(path, frames=3, rate_hz=10):
@@ -178,3 +185,196 @@ def test_foreground_points_are_decimated_to_the_cap():
     xy = foreground_xy(Result(), cap=1000)
     assert xy.shape == (1000, 2) and xy[1, 0] == 9.0  # every third point, x and y only
     assert foreground_xy(object(), cap=1000) is None
+
+
+# ------------------------------------------------------------------ the pipeline thread (fakes, no server)
+
+
+class FakeSource:
+    rate_hz = 10.0
+    sensor_names: list = []
+
+    def __init__(self, n_frames: int):
+        self.n_frames = n_frames
+
+    def frame(self, k: int) -> Frame:
+        return Frame(index=k, scans={})
+
+
+class FakeResult:
+    def __init__(self, state: dict):
+        self.state = state
+
+    def to_json(self) -> dict:
+        return dict(self.state)
+
+
+class FakePipeline:
+    """Returns ``states[k]`` for frame k; refuses parameters with tracking.max_age_frames == 13
+    (standing in for a check only the pipeline makes, like the background grid size)."""
+
+    method = "fake"
+
+    def __init__(self, params: Params, states: dict | None = None):
+        self.params = params
+        self.states = states or {}
+        self.patches: list[dict] = []
+
+    def update_params(self, patch: dict) -> Params:
+        new = apply_patch(self.params, patch)
+        if new.tracking.max_age_frames == 13:
+            raise ParamsError("tracking.max_age_frames = 13: refused by the pipeline")
+        self.patches.append(patch)
+        self.params = new
+        return new
+
+    def process(self, frame: Frame) -> FakeResult:
+        return FakeResult({"type": "state", "frame": frame.index, **self.states.get(frame.index, {})})
+
+
+def _runner(pipeline, n_frames: int) -> PipelineRunner:
+    return PipelineRunner(FakeSource(n_frames), pipeline, Hub(), ServiceMetrics(), [], realtime=False)
+
+
+def test_a_frame_failing_after_the_pipeline_is_skipped_and_the_thread_goes_on():
+    states = {2: {"vehicles": [{"id": 1, "note": object()}]},  # not JSON: fails when serialised
+              3: {"vehicles": [{"id": 1, "hitch_deg": np.array([np.nan, 2.5])}]}}  # numpy NaN: becomes null
+    runner = _runner(FakePipeline(Params(), states), n_frames=6)
+    runner.start()
+    try:
+        for _ in range(200):
+            if runner.finished:
+                break
+            runner._stop.wait(0.01)
+    finally:
+        runner.stop()
+    assert runner.finished and runner.error is None
+    assert runner.frames_processed == 5 and runner.frames_dropped["pipeline_error"] == 1
+    assert runner.last_frame_error["frame"] == 2 and runner.last_frame_error["reason"] == "pipeline_error"
+    assert "TypeError" in runner.last_frame_error["error"]
+    assert runner.latest["frame"] == 5 and runner.status()["last_frame_error"]["frame"] == 2
+    metrics = runner.metrics.render().decode()
+    assert 'i2v_loc_frames_dropped_total{reason="pipeline_error"} 1.0' in metrics
+
+
+def test_numpy_nan_in_a_state_is_sent_as_null():
+    runner = _runner(FakePipeline(Params(), {0: {"hitch_deg": np.array([np.nan, 2.5]), "yaw": np.float32("inf")}}), 1)
+    runner._step(0)
+    assert runner.frames_dropped["pipeline_error"] == 0
+    assert runner.latest["hitch_deg"] == [None, 2.5] and runner.latest["yaw"] is None
+
+
+def test_the_pipeline_gets_the_stores_whole_parameters_or_nothing_changes(tmp_path):
+    file = tmp_path / "p.yaml"
+    pipeline = FakePipeline(Params())
+    runner = _runner(pipeline, n_frames=1)
+    store = ParamStore(Params(), file, on_change=runner.submit)
+    store.patch({"vehicles": {"twizy": None}, "clustering": {"tolerance_m": 0.4}})
+    assert pipeline.params == store.params and "twizy" not in pipeline.params.vehicles
+    with pytest.raises(PatchRejected, match="the pipeline refused") as info:
+        store.patch({"tracking": {"max_age_frames": 13}})
+    assert info.value.errors[0]["message"].startswith("tracking.max_age_frames = 13")
+    assert store.version == 1 and len(store.history()) == 2 and load_params(file).tracking.max_age_frames != 13
+    assert pipeline.params == store.params
+    # Even if the pipeline's copy had drifted, the next version brings it back to the store's exactly.
+    pipeline.params = apply_patch(pipeline.params, {"region": {"z_max_m": 3.0}})
+    store.patch({"tracking": {"max_age_frames": 7}})
+    assert pipeline.params == store.params
+    runner._step(0)
+    assert runner.params_version == 2 and runner.latest["params_version"] == 2
+
+
+def test_the_real_pipeline_refusal_is_a_422_not_a_stuck_version(tmp_path):
+    from test_service_support import sample_recording
+
+    source = ReplaySource(sample_recording(), loop=True)
+    service = build_service(source, load_params(source.sensors_file), tmp_path / "p.yaml", method="default")
+    assert service.runner.method == "default" and service.health()["method"] == "default"
+    assert service.store.params == service.runner.pipeline.params  # version 0 = what the method runs with
+    with pytest.raises(PatchRejected, match="background"):
+        service.store.patch({"background": {"enabled": True, "voxel_size_m": 0.05, "max_voxels": 1000}})
+    assert service.store.version == 0 and service.runner.pipeline.params == service.store.params
+    accepted = service.store.patch({"vehicles": {"twizy": None}})
+    assert service.runner.pipeline.params == accepted.params and "twizy" not in accepted.params.vehicles
+
+
+def test_history_always_keeps_version_0(monkeypatch):
+    monkeypatch.setattr(params_store, "HISTORY_LIMIT", 4)
+    store = ParamStore(Params())
+    for k in range(10):
+        store.patch({"tracking": {"max_age_frames": 20 + k}})
+    versions = [h["version"] for h in store.history()]
+    assert versions == [0, 8, 9, 10]
+    assert store.rollback(0).params == Params()
+    with pytest.raises(UnknownVersion):
+        store.get(3)
+
+
+def test_a_failing_save_keeps_the_change_in_force_and_says_so(tmp_path):
+    blocker = tmp_path / "not-a-folder"
+    blocker.write_text("x")
+    seen = []
+    store = ParamStore(Params(), blocker / "p.yaml", on_change=seen.append)
+    with pytest.raises(ParamsNotSaved, match="version 1 is in force but could not be written") as info:
+        store.patch({"tracking": {"max_age_frames": 9}})
+    assert info.value.version.version == 1 and store.version == 1 and [v.version for v in seen] == [1]
+    assert store.params.tracking.max_age_frames == 9
+
+
+def test_null_for_a_whole_section_is_refused_null_inside_one_is_not():
+    store = ParamStore(Params())
+    for section in ("sensors", "vehicles", "clustering"):
+        with pytest.raises(PatchRejected, match="whole section") as info:
+            store.patch({section: None})
+        assert info.value.errors[0]["field"] == section
+    assert store.version == 0
+    store.patch({"vehicles": {"twizy": None}, "clustering": {"tolerance_m": None}})
+    assert "twizy" not in store.params.vehicles and len(store.params.sensors) == len(Params().sensors)
+    assert store.params.clustering.tolerance_m == Params().clustering.tolerance_m  # null inside: the default
+
+
+def test_newest_params_message_replaces_an_untaken_one():
+    async def scenario():
+        drops = []
+        hub = Hub(on_drop=lambda: drops.append(1))
+        hub.bind(asyncio.get_running_loop())
+        client = hub.add(want_points=False)
+        for version in (1, 2, 3):
+            hub.publish(Message("params", json.dumps({"type": "params", "version": version})))
+        hub.publish(Message("state", '{"frame":7}'))
+        await asyncio.sleep(0)
+        got = [json.loads(await client.next_text()) for _ in range(2)]
+        return got, client.params_dropped, client.dropped, len(drops), hub.stats()
+
+    got, params_dropped, dropped, drops, stats = asyncio.run(scenario())
+    assert got == [{"type": "params", "version": 3}, {"frame": 7}]
+    assert params_dropped == 2 and dropped == 0 and drops == 2 and stats[0]["params_dropped"] == 2
+
+
+def test_points_flag_parsing():
+    assert [parse_flag(w) for w in ("true", "1", "Yes", "on")] == [True] * 4
+    assert [parse_flag(w) for w in (None, "", "false", "0", "off")] == [False] * 5
+    assert parse_flag("maybe") is None
+
+
+def test_sim_source_rejects_unknown_scenario_and_vehicle_before_simulating(tmp_path):
+    cache = tmp_path / "cache"
+    with pytest.raises(SourceError, match=r"unknown scenario 'nope' .*known: .*docking"):
+        open_source("sim:nope", cache_dir=cache)
+    with pytest.raises(SourceError, match=r"unknown vehicle 'vw_golf'.*man_tgx"):
+        open_source("sim:docking", vehicle="vw_golf", cache_dir=cache)
+    assert not cache.exists()  # the simulator never started
+
+
+def test_status_line_names_the_method():
+    line = format_status({"method": "default", "frame_rate_hz": 9.8, "frame": 12, "frames_dropped": {"late": 2},
+                          "params_version": 1}, ws_clients=3)
+    assert line.startswith("default |") and "9.8 fps" in line and "dropped 2" in line
+
+
+def test_metrics_have_no_created_series():
+    metrics = ServiceMetrics()
+    metrics.frames_processed.inc()
+    metrics.stage_latency.labels("total").observe(0.01)
+    text = metrics.render().decode()
+    assert "i2v_loc_frames_processed_total 1.0" in text and "_created" not in text
