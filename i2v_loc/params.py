@@ -271,7 +271,7 @@ class BackgroundParams(Section):
     min_samples: int = Field(25, ge=1, le=255, description="Learning samples before the map is used (the frames before fall back to no background); a vehicle standing still from the start longer than this becomes background")
     protect_margin_m: float = Field(1.0, ge=0.0, le=10.0, description="Voxels within this of a protected track's box are never learned")
     keep_margin_m: float = Field(0.3, ge=0.0, le=5.0, description="Points within this of a protected track's box are never background (small: a docked trailer's rear is 0.3 m from the wall)")
-    protect_min_travel_m: float = Field(2.0, ge=0.0, le=100.0, description="A confirmed track is protected while younger than the window (window_frames x learn_every_frames frames) and once its filtered position has moved this far from its first one (0: always), so a parked object becomes background but a vehicle that stops does not")
+    protect_min_travel_m: float = Field(2.0, ge=0.0, le=100.0, description="A confirmed track is protected once its filtered position has moved this far from its first one (0: every confirmed track), so a parked object becomes background but a vehicle that stops does not")
     max_voxels: int = Field(20_000_000, ge=1000, le=200_000_000, description="Refuse a region / voxel size giving a larger grid")
 
     @model_validator(mode="after")

@@ -265,15 +265,13 @@ class Pipeline:
         return merged, region, len(merged.points)
 
     def _protected_boxes(self) -> list[ProtectedBox]:
-        """Boxes of the confirmed live and lost tracks that have travelled, or are younger than the
-        learning window (a vehicle starting slowly along its own length keeps occupying its voxels):
-        their voxels are not learned. A static false vehicle is learned after one window."""
+        """Boxes of the confirmed live and lost tracks that have travelled: their voxels are not
+        learned. (Protecting young tracks too, so that a vehicle starting slowly along its own length
+        is not learned, kept static false vehicles alive: measured 4x more false vehicle frames.)"""
         bg = self._active.background
-        grace_frames = bg.window_frames * bg.learn_every_frames
         boxes = []
         for t in self.tracker.tracks + self.tracker.lost:
-            moving = t.travel_m >= bg.protect_min_travel_m or t.age_frames < grace_frames
-            if not t.confirmed or not moving or t.last_detection is None:
+            if not t.confirmed or t.travel_m < bg.protect_min_travel_m or t.last_detection is None:
                 continue
             unit: _UnitCandidate = t.last_detection.payload
             length, width, _ = unit.dims
