@@ -126,11 +126,10 @@ def _fit(probe: PlacedVehicle, occupied: np.ndarray, allow_dock: bool):
     # A dock goes on the field's long south edge (between l2 and l3, away from the sensors):
     # the docked trailer faces north with its rear at y = DOCK_Y_M. Otherwise fit the field.
     yaw = math.pi / 2 - dock[1] if dock is not None else _best_rotation(pts)
-    c, s = math.cos(yaw), math.sin(yaw)
-    rotated = pts @ np.array([[c, s], [-s, c]])
+    rotated = rotate_xy(pts, yaw)
     centering = np.array(FIELD_CENTER_XY) - (rotated.min(axis=0) + rotated.max(axis=0)) / 2
     if dock is not None:
-        centering[1] = DOCK_Y_M - dock[0] @ np.array([s, c])
+        centering[1] = DOCK_Y_M - rotate_xy(dock[0], yaw)[1]
     shift = _free_offset(rotated + centering, occupied, along_x_only=dock is not None)
     return yaw, centering + shift, rotated + centering + shift, probe.trajectory, float(np.hypot(*shift))
 

@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from i2v_loc.geometry import rotate_xy
 from i2v_loc.sim import kinematics as kin
 
 LABELS = (
@@ -76,8 +77,7 @@ class Trajectory:
 
     def moved(self, yaw_rad: float, offset_xy) -> "Trajectory":
         """The same motion rotated about the origin by ``yaw_rad`` and then shifted."""
-        c, s = math.cos(yaw_rad), math.sin(yaw_rad)
-        xy = self.rear_axle_xy @ np.array([[c, s], [-s, c]]) + np.asarray(offset_xy, dtype=float)
+        xy = rotate_xy(self.rear_axle_xy, yaw_rad) + np.asarray(offset_xy, dtype=float)
         return Trajectory(self.art, self.time_s, xy, self.yaw_rad + yaw_rad, self.trailer_yaw_rad + yaw_rad,
                           self.speed_mps, self.steer_rad, self.label_index, self.labels)
 

@@ -3,9 +3,9 @@ cylinders: articulated vehicles, yard objects, pedestrians."""
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
+
+from i2v_loc.geometry import rotate_xy
 
 Mesh = tuple[np.ndarray, np.ndarray]
 
@@ -18,8 +18,7 @@ _BOX_TRIANGLES = np.array(
 def box(center, size, yaw_rad: float = 0.0) -> Mesh:
     """Axis-aligned box (rotated by ``yaw_rad`` about its centre's vertical axis)."""
     corners = np.array([[x, y, z] for x in (-0.5, 0.5) for y in (-0.5, 0.5) for z in (-0.5, 0.5)]) * np.asarray(size, float)
-    c, s = math.cos(yaw_rad), math.sin(yaw_rad)
-    corners = corners @ np.array([[c, s, 0], [-s, c, 0], [0, 0, 1]])
+    corners[:, :2] = rotate_xy(corners[:, :2], yaw_rad)
     return corners + np.asarray(center, float), _BOX_TRIANGLES.copy()
 
 
