@@ -146,7 +146,7 @@ def simulated_recording(spec: SimSpec, cache_dir: str | Path | None = None, quie
               f"into {target} (once; cached)", file=sys.stderr, flush=True)
     # Progress of the simulator goes straight to the terminal, on stderr like everything the
     # service prints (stdout stays empty).
-    out = subprocess.DEVNULL if quiet else sys.stderr
+    out = subprocess.DEVNULL if quiet else _stderr_fd()
     done = subprocess.run(cmd, stdout=out, stderr=subprocess.PIPE if quiet else None, text=True)
     if done.returncode != 0:
         shutil.rmtree(partial, ignore_errors=True)
@@ -157,6 +157,15 @@ def simulated_recording(spec: SimSpec, cache_dir: str | Path | None = None, quie
     except OSError:  # another process won the race: use its recording
         shutil.rmtree(partial, ignore_errors=True)
     return target
+
+
+def _stderr_fd() -> int | None:
+    """This process's stderr for a child's stdout (None: inherit stdout, if stderr has no file)."""
+    try:
+        sys.stderr.flush()
+        return sys.stderr.fileno()
+    except (AttributeError, OSError, ValueError):
+        return None
 
 
 def _i2v_loc_command() -> list[str]:

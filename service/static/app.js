@@ -451,11 +451,12 @@ async function applyParams() {
     showParamStatus(`request failed: ${err}`, false);
     return;
   }
-  if (response.ok) {
+  if (response.ok || body.in_force === true) {  // 507: in force, but the parameter file is behind
     store.params = body.params; store.version = body.version;
     ui.paramsInfo.textContent = `params v${body.version}`;
     renderEditor();
-    showParamStatus(`applied: version ${body.version}`, true);
+    if (response.ok) showParamStatus(`applied: version ${body.version}`, true);
+    else showParamStatus(`applied: version ${body.version}, but NOT saved: ${body.detail}`, false);
     return;
   }
   showParamStatus(`refused (HTTP ${response.status})`, false);
