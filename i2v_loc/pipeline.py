@@ -43,6 +43,7 @@ METHOD_PATCHES = {
         "clustering": {"algorithm": "grid"},
         "region": {"ground_refit_frames": 10},
         "tracking": {"confirm_paired": True, "reacquire_distance_m": 3.0},
+        "classification": {"truck_one_end": True},
     },
 }
 STAGES = ("concatenation", "background", "region", "clustering", "classification", "centroid", "tracking",

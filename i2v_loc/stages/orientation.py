@@ -104,9 +104,10 @@ class OrientationEstimator:
             axis_deg = self._pca_axis_deg(history)
         elif state.yaw_deg is not None:
             return None  # standing still: hold
-        elif forward is not None and np.hypot(*forward) > 1e-6:
+        elif forward is not None and np.hypot(*forward) > 1e-6 and self.params.shape_weight > 0:
             # first estimate: of the shape axis's equivalents (90 deg apart on a square cab) the one
-            # nearest the trailer-to-truck direction (the truck is ahead of the trailer)
+            # nearest the trailer-to-truck direction (the truck is ahead of the trailer); the paper
+            # (shape_weight 0) takes the shape axis as it comes
             axis_deg = float(np.degrees(np.arctan2(forward[1], forward[0])))
             axis_deg = self._nearest_equivalent(axis_deg, unit.shape_axis_deg, unit.shape_period_deg)
         else:
