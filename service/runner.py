@@ -4,8 +4,9 @@ Nothing here waits for an HTTP or WebSocket client: results are handed to the ``
 never blocks) and kept as the latest state for the REST API. A parameter change is handed to the
 pipeline at once (so the pipeline can refuse it before the store commits it) and takes effect
 between two frames. A frame that fails to load, to process or to publish is counted, logged and
-skipped: nothing about one frame can stop the thread. When the pipeline falls behind real time, it jumps to the newest frame (the skipped ones
-are counted as dropped, reason ``late``), as a live system would.
+skipped: nothing about one frame can stop the thread. When the pipeline falls behind real time,
+it jumps to the newest frame (the skipped ones are counted as dropped, reason ``late``), as a
+live system would.
 """
 
 from __future__ import annotations
