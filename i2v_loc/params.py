@@ -230,6 +230,7 @@ class ClassificationParams(Section):
     min_truck_points: int = Field(10, ge=1, description="Fewer points left after removing the trailer: the truck is not seen")
     max_length_excess_m: float = Field(1.0, ge=0.0, le=20.0, description="A trailer candidate longer than the trailer plus this is rejected")
     floor_margin_m: float = Field(0.1, ge=-1.0, le=2.0, description="The second clustering uses points higher than the trailer floor plus this above the ground")
+    xy_grid_m: float = Field(0.05, gt=0.0, le=0.3, description="The xy projection is thinned to one point per cell of this size before the second clustering (neighbour pairs fall with its square)")
     truck_one_end: bool = Field(False, description="The truck is the rest of the cluster at one end of the trailer only (the end holding most of it)")
 
 

@@ -26,7 +26,6 @@ import numpy as np
 from i2v_loc.params import ClassificationParams, VehicleConfig
 from i2v_loc.stages.primitives import euclidean_labels, min_area_rect, oriented_box_volume, split_by_label, voxel_keys
 
-XY_GRID_M = 0.05  # the xy projection is thinned to this grid before the second clustering
 FOOTPRINT_MARGIN_M = 0.1
 TOLERANCE_FACTORS = (1.0, 0.6, 0.4)  # retries of the second clustering with smaller epsilon
 
@@ -100,7 +99,7 @@ class TruckTrailerClassifier:
         if len(points) == 0:
             return []
         xy = points[:, :2].astype(np.float64)
-        _, first, inverse = np.unique(voxel_keys(xy, XY_GRID_M), return_index=True, return_inverse=True)
+        _, first, inverse = np.unique(voxel_keys(xy, self.params.xy_grid_m), return_index=True, return_inverse=True)
         cell_labels = euclidean_labels(xy[first], tolerance_m or self.params.trailer_tolerance_m)
         labels = cell_labels[inverse.reshape(-1)]
         return [g for g in split_by_label(labels) if len(g) >= self.params.min_trailer_points]
