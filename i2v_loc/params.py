@@ -19,9 +19,10 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_valida
 
 
 class Section(BaseModel):
-    """Base of every parameter section: unknown keys are errors, assignments are validated."""
+    """Base of every parameter section: unknown keys are errors, assignments are validated, and
+    values are not coerced across types (``true`` or ``"0.6"`` is no length; an integer is a float)."""
 
-    model_config = ConfigDict(extra="forbid", validate_assignment=True)
+    model_config = ConfigDict(extra="forbid", validate_assignment=True, strict=True)
 
 
 # --------------------------------------------------------------------------- sensors
@@ -168,7 +169,7 @@ def _paper_vehicles() -> dict[str, VehicleConfig]:
 
 
 class CalibrationParams(Section):
-    reference_sensor: str = Field("l1", description="Sensor whose extrinsics are kept fixed")
+    reference_sensor: str | None = Field(None, description="Sensor whose extrinsics are kept fixed; none: the first sensor")
     method: Literal["gicp", "point_to_plane"] = "gicp"
     frames: int = Field(5, ge=1, le=100, description="Frames of the static scene accumulated per sensor")
     voxel_size_m: float = Field(0.1, gt=0.01, le=2.0, description="Voxel of the registered clouds; 0.2 m leaves 6 cm errors with a slow vehicle in view")
@@ -287,7 +288,7 @@ class BackgroundParams(Section):
 class Params(Section):
     """All parameters of i2v-loc."""
 
-    sensors: list[SensorConfig] = Field(default_factory=_paper_field_sensors)
+    sensors: list[SensorConfig] = Field(default_factory=_paper_field_sensors, min_length=1)
     vehicles: dict[str, VehicleConfig] = Field(default_factory=_paper_vehicles)
     calibration: CalibrationParams = Field(default_factory=CalibrationParams)
     concatenation: ConcatenationParams = Field(default_factory=ConcatenationParams)
@@ -303,7 +304,12 @@ class Params(Section):
     def _check_names(self) -> "Params":
         names = [s.name for s in self.sensors]
         if len(set(names)) != len(names):
-            raise ValueError(f"sensor names must be unique, got {names}")
+            raise ValueError(f"sensor names must be unique, got {', '.join(names)}")
+        if self.calibration.reference_sensor is not None and self.calibration.reference_sensor not in names:
+            raise ValueError(
+                f"calibration.reference_sensor {self.calibration.reference_sensor!r} is not a configured sensor "
+                f"(known: {', '.join(names)})"
+            )
         return self
 
     def sensor(self, name: str) -> SensorConfig:
@@ -403,7 +409,10 @@ def read_yaml(path: str | Path) -> dict:
     try:
         data = yaml.safe_load(path.read_text()) or {}
     except yaml.YAMLError as err:
-        raise ParamsError(f"{path}: not valid YAML: {err}") from err
+        mark = getattr(err, "problem_mark", None)
+        where = f":{mark.line + 1}:{mark.column + 1}" if mark else ""
+        problem = getattr(err, "problem", None) or str(err).splitlines()[0]
+        raise ParamsError(f"{path}{where}: not valid YAML: {problem}") from err
     if not isinstance(data, dict):
         raise ParamsError(f"{path}: expected a mapping of sections at the top level, got {type(data).__name__}")
     return data

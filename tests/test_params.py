@@ -101,3 +101,27 @@ def test_cli_schema_and_check(tmp_path, capsys):
     bad.write_text("sensors: 3\n")
     assert main(["params", "check", str(bad)]) == 2
     assert "sensors" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("value", [True, "0.6", [0.6]])
+def test_values_are_not_coerced_across_types(value):
+    with pytest.raises(ParamsError, match="clustering.tolerance_m"):
+        apply_patch(Params(), {"clustering": {"tolerance_m": value}})
+    assert apply_patch(Params(), {"clustering": {"tolerance_m": 1}}).clustering.tolerance_m == 1.0
+
+
+def test_at_least_one_sensor_and_a_known_reference_sensor():
+    with pytest.raises(ParamsError, match="sensors"):
+        apply_patch(Params(), {"sensors": []})
+    with pytest.raises(ParamsError, match="reference_sensor 'l9' is not a configured sensor"):
+        apply_patch(Params(), {"calibration": {"reference_sensor": "l9"}})
+    assert apply_patch(Params(), {"calibration": {"reference_sensor": "l3"}}).calibration.reference_sensor == "l3"
+
+
+def test_malformed_yaml_gives_one_line_with_the_position(tmp_path):
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("region:\n  x_min_m: [1, 2\n")
+    with pytest.raises(ParamsError) as err:
+        load_params(bad)
+    message = str(err.value)
+    assert "\n" not in message and f"{bad}:" in message and "not valid YAML" in message

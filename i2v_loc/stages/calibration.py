@@ -57,11 +57,11 @@ class Calibrator:
 
         o3d.utility.set_verbosity_level(o3d.utility.VerbosityLevel.Error)
         names = [s.name for s in sensors]
-        if self.params.reference_sensor not in names:
-            raise ValueError(f"reference sensor {self.params.reference_sensor!r} is not among the sensors {names}")
+        ref = self.params.reference_sensor or names[0]
+        if ref not in names:
+            raise ValueError(f"reference sensor {ref!r} is not among the sensors {', '.join(names)}")
         guess = {s.name: extrinsics_matrix(s.extrinsics) for s in sensors}
         clouds = {name: self._yard_cloud(static_points(sweeps.get(name, [])), guess[name]) for name in names}
-        ref = self.params.reference_sensor
         done = {ref: guess[ref]}
         results = [SensorCalibration(ref, sensors[names.index(ref)].extrinsics, 1.0, 0.0, "reference")]
         target = clouds[ref]
