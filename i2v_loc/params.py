@@ -233,10 +233,12 @@ class ClassificationParams(Section):
     floor_margin_m: float = Field(0.1, ge=-1.0, le=2.0, description="The second clustering uses points higher than the trailer floor plus this above the ground")
     xy_grid_m: float = Field(0.05, gt=0.0, le=0.3, description="The xy projection is thinned to one point per cell of this size before the second clustering (neighbour pairs fall with its square)")
     truck_one_end: bool = Field(False, description="The truck is the rest of the cluster at one end of the trailer only (the end holding most of it)")
+    max_hitch_gap_m: float = Field(0.0, ge=0.0, le=20.0, description="A truck whose corrected centre is further than this from where the trailer's hitch point puts it (the truck's centre-to-hitch distance from it) is dropped (0 = no check)")
 
 
 class CentroidParams(Section):
     enabled: bool = True
+    truck_front_anchor: bool = Field(False, description="A truck with a known heading whose points reach further back than its length (chassis rails, fifth wheel) is centred half its length behind its front end")
 
 
 class TrackingParams(Section):
@@ -253,11 +255,13 @@ class TrackingParams(Section):
 class OrientationParams(Section):
     history_frames: int = Field(10, ge=2, le=200, description="Corrected centroids in the PCA history (Eq. 11-12)")
     min_travel_m: float = Field(0.3, ge=0.0, le=20.0, description="Below this travel over the history the yaw is held")
-    max_yaw_rate_deg_s: float = Field(45.0, gt=0.0, le=720.0, description="Bound on the yaw change between frames")
+    max_yaw_rate_deg_s: float = Field(45.0, gt=0.0, le=720.0, description="Bound on the smoothed yaw's change per second")
     smoothing: float = Field(0.5, ge=0.0, lt=1.0, description="Weight of the previous yaw in the smoothed yaw")
     shape_weight: float = Field(0.0, ge=0.0, le=1.0, description="Blend of the unit's shape axis into the PCA axis (0 = pure PCA, the paper)")
     history_gap_s: float = Field(1.0, gt=0.0, le=60.0, description="A unit unseen for longer restarts its centroid history (its yaw is kept)")
     prefer_continuity: bool = Field(False, description="A unit seen in the previous frames keeps its direction; the trailer-to-truck direction decides only for new or re-acquired units")
+    flip_confirm_frames: int = Field(0, ge=0, le=100, description="A yaw measured more than 90 deg from the unit's yaw is ignored until measured this many frames in a row, then taken at once (0 = no check: the rate bound turns the yaw over)")
+    hitch_forward: bool = Field(False, description="The truck's forward direction runs from the trailer's hitch point to the truck (its heading at any hitch angle), not from the trailer's centre")
 
 
 class BackgroundParams(Section):

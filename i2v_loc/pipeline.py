@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from i2v_loc.frame import Frame
-from i2v_loc.geometry import planar_pose
+from i2v_loc.geometry import box_poses
 from i2v_loc.params import Params, ParamsError, VehicleConfig, apply_patch
 from i2v_loc.stages.background import BackgroundMap, ProtectedBox, check_grid, region_box
 from i2v_loc.stages.centroid import CentroidCorrector, CorrectedUnit
@@ -34,16 +34,18 @@ from i2v_loc.stages.tracking import Detection, Tracker, Track
 # before anything else (interpolation, voxel grid and clustering run on the foreground only),
 # voxel-grid connected components, the ground refitted once a second, lost tracks re-acquired
 # with their ID and yaw, truck + trailer pairs reported from their first frame.
+# A preset fills only the fields the given parameters leave at the model default (``method_params``).
 METHODS = ("paper", "default")
 METHOD_PATCHES = {
     "paper": {},
     "default": {
-        "orientation": {"shape_weight": 1.0},
         "background": {"enabled": True},
         "clustering": {"algorithm": "grid"},
         "region": {"ground_refit_frames": 10},
         "tracking": {"confirm_paired": True, "reacquire_distance_m": 3.0},
-        "classification": {"truck_one_end": True},
+        "centroid": {"truck_front_anchor": True},
+        "classification": {"truck_one_end": True, "max_hitch_gap_m": 2.0},
+        "orientation": {"shape_weight": 1.0, "flip_confirm_frames": 5, "hitch_forward": True},
     },
 }
 STAGES = ("concatenation", "background", "region", "clustering", "classification", "centroid", "tracking",
@@ -52,6 +54,28 @@ MOTION_HINT_MIN_SPEED_M_S = 0.1
 MOTION_HINT_MARGIN_M = 0.5
 PREDICTION_S = 0.1  # protected boxes are moved ahead by one frame of the track's velocity
 SQUARE_ASPECT = 1.3  # units with length < 1.3 x width have their shape axis known modulo 90 deg only
+
+
+def method_params(params: Params, method: str) -> Params:
+    """``params`` with the method's preset filled in where they hold the model default: a value the
+    user set (any value other than the default) always wins over the preset."""
+    if method not in METHODS:
+        raise ValueError(f"unknown method {method!r}; known: {', '.join(METHODS)}")
+    patch = _unset_only(METHOD_PATCHES[method], params.model_dump(mode="json"), Params().model_dump(mode="json"))
+    return apply_patch(params, patch, source=f"method {method}") if patch else params
+
+
+def _unset_only(preset: dict, given: dict, defaults: dict) -> dict:
+    """The part of ``preset`` whose fields are at their default in ``given``."""
+    out = {}
+    for key, value in preset.items():
+        if isinstance(value, dict):
+            sub = _unset_only(value, given.get(key, {}), defaults.get(key, {}))
+            if sub:
+                out[key] = sub
+        elif given.get(key) == defaults.get(key):
+            out[key] = value
+    return out
 
 
 def _check_background(params: Params) -> None:
@@ -128,6 +152,23 @@ class _UnitCandidate:
     points: np.ndarray
     dims: tuple[float, float, float] = (0.0, 0.0, 0.0)
     corrected: CorrectedUnit | None = None
+    yaw_hint_rad: float | None = None  # forward heading of the track it probably continues
+
+
+@dataclass
+class _YawHint:
+    kind: str
+    vehicle: str
+    center_xy: np.ndarray  # where the track's unit is expected in this frame
+    yaw_rad: float  # its forward heading
+
+
+def centre_to_hitch_m(vehicle: VehicleConfig) -> tuple[float, float]:
+    """(truck box centre ahead of the hitch, hitch ahead of the trailer box centre) in metres, from
+    the kinematic figures (docs/formats.md: boxes centred on the units)."""
+    t, r = vehicle.truck, vehicle.trailer
+    truck = t.wheelbase_m + t.front_overhang_m - t.length_m / 2 + t.hitch_behind_rear_axle_m
+    return truck, r.length_m / 2 - r.hitch_to_front_m
 
 
 @dataclass
@@ -148,22 +189,18 @@ class _Timer:
 
 class Pipeline:
     def __init__(self, params: Params, method: str = "paper"):
-        if method not in METHODS:
-            raise ValueError(f"unknown method {method!r}; known: {', '.join(METHODS)}")
+        params = method_params(params, method)
         self.method = method
-        if METHOD_PATCHES[method]:
-            params = apply_patch(params, METHOD_PATCHES[method], source=f"method {method}")
         _check_background(params)
         self._lock = threading.Lock()
         self._pending: Params | None = None
-        self._active = params
+        self._active = params  # written under the lock only once the pipeline is shared
         self.counters: Counter = Counter()
         self.tracker = Tracker(params.tracking)
         self.orientation = OrientationEstimator(params.orientation)
         self.background: BackgroundMap | None = None
         self._build(params)
         self._motion: list[MotionHint] = []
-        self._last_yaw: dict[tuple[str, int], tuple[np.ndarray, float]] = {}
 
     # ----------------------------------------------------------------- parameters
 
@@ -181,13 +218,16 @@ class Pipeline:
         return new
 
     def _apply_pending(self) -> None:
+        # _active changes under the lock: a patch arriving meanwhile builds on the new parameters
         with self._lock:
             pending, self._pending = self._pending, None
+            if pending is not None:
+                self._active = pending
         if pending is not None:
             self._build(pending)
 
     def _build(self, params: Params) -> None:
-        self._active = params
+        """Stages for ``params`` (already in ``_active``)."""
         self.concatenation = Concatenation(params.concatenation, params.sensors)
         self.region = Region(params.region)
         self.clustering = Clustering(params.clustering, params.vehicles)
@@ -230,8 +270,10 @@ class Pipeline:
         ground_z = region.ground.height_at if region.ground else (lambda x, y: 0.0)
         units, cluster_lines = self._classify(clustering.clusters, ground_z)
         timer.lap("classification")
+        hints = self._yaw_hints()
         for unit in units:
-            unit.corrected = self._correct(unit, params.vehicles[unit.vehicle], ground_z)
+            unit.corrected = self._correct(unit, params.vehicles[unit.vehicle], ground_z, hints)
+        units = self._articulated(units, params)
         timer.lap("centroid")
         tracked = self.tracker.process([self._detection(u) for u in units], merged.stamp_s)
         timer.lap("tracking")
@@ -296,22 +338,67 @@ class Pipeline:
                           "volume_m3": _r(cluster.volume_m3, 2), "status": status})
         return units, lines
 
-    def _correct(self, unit: _UnitCandidate, vehicle: VehicleConfig, ground_z) -> CorrectedUnit:
+    def _correct(self, unit: _UnitCandidate, vehicle: VehicleConfig, ground_z, hints: list[_YawHint]) -> CorrectedUnit:
         dims = vehicle.truck if unit.kind == "truck" else vehicle.trailer
         points = unit.points
         centroid_xy = points[:, :2].mean(axis=0)
-        hint = self._yaw_hint(unit.kind, centroid_xy)
         unit.dims = (dims.length_m, dims.width_m, dims.height_m)
-        return self.centroid.process(points, dims, ground_z(*centroid_xy), hint)
+        unit.yaw_hint_rad = self._yaw_hint(hints, unit, centroid_xy)
+        anchor = unit.kind == "truck" and self._active.centroid.truck_front_anchor
+        return self.centroid.process(points, dims, ground_z(*centroid_xy), unit.yaw_hint_rad, anchor)
 
-    def _yaw_hint(self, kind: str, centroid_xy: np.ndarray) -> float | None:
-        """Last yaw of the nearest unit of this kind reported in the previous frame (unit axes)."""
-        best, best_d = None, 0.5 * self._active.tracking.max_distance_m + 2.0
-        for (k, _), (center, yaw_deg) in self._last_yaw.items():
-            d = float(np.hypot(*(center - centroid_xy)))
-            if k == kind and d < best_d:
-                best, best_d = np.radians(yaw_deg), d
+    def _yaw_hints(self) -> list[_YawHint]:
+        """Tracks with a yaw (live: where the filter expects them now; lost: their last sighting)."""
+        hints = []
+        for t in self.tracker.tracks + self.tracker.lost:
+            state = self.orientation.states.get(t.track_id)
+            if state is None or state.yaw_deg is None or t.last_detection is None:
+                continue
+            center = t.position[:2] + t.velocity * PREDICTION_S if t.lost_at_s is None else t.last_detection.center[:2]
+            hints.append(_YawHint(t.kind, t.vehicle, center, float(np.radians(state.yaw_deg))))
+        return hints
+
+    def _yaw_hint(self, hints: list[_YawHint], unit: _UnitCandidate, centroid_xy: np.ndarray) -> float | None:
+        """Yaw of the nearest track of the unit's kind and vehicle that it can continue: the points'
+        centroid lies within half the unit's length of its box centre (one end seen), and the box
+        centre within the association gate of the track."""
+        best, best_d = None, unit.dims[0] / 2 + self._active.tracking.max_distance_m
+        for hint in hints:
+            d = float(np.hypot(*(hint.center_xy - centroid_xy)))
+            if hint.kind == unit.kind and hint.vehicle == unit.vehicle and d < best_d:
+                best, best_d = hint.yaw_rad, d
         return best
+
+    def _articulated(self, units: list[_UnitCandidate], params: Params) -> list[_UnitCandidate]:
+        """Drops trucks that the articulation rules out (``classification.max_hitch_gap_m``): the hitch
+        point lies at the trailer's front (by its track's yaw, else the end facing the truck) and the
+        truck's centre its centre-to-hitch distance from it; a truck elsewhere is a piece of the
+        trailer or of the yard left over by the split. Its cluster's trailer is still reported."""
+        max_gap = params.classification.max_hitch_gap_m
+        if max_gap <= 0:
+            return units
+        trailers = {u.group: u for u in units if u.kind == "trailer"}
+        kept = []
+        for unit in units:
+            trailer = trailers.get(unit.group)
+            if unit.kind == "truck" and trailer is not None:
+                gap = self._hitch_gap_m(unit, trailer, params.vehicles[unit.vehicle])
+                if gap > max_gap:
+                    self.counters["truck_off_hitch"] += 1
+                    continue
+            kept.append(unit)
+        return kept
+
+    @staticmethod
+    def _hitch_gap_m(truck: _UnitCandidate, trailer: _UnitCandidate, vehicle: VehicleConfig) -> float:
+        truck_ahead_m, hitch_ahead_m = centre_to_hitch_m(vehicle)
+        truck_xy, trailer_xy = truck.corrected.center[:2], trailer.corrected.center[:2]
+        axis = trailer.corrected.axis_yaw_rad
+        ahead = np.array([np.cos(axis), np.sin(axis)])
+        front = truck_xy - trailer_xy if trailer.yaw_hint_rad is None else \
+            np.array([np.cos(trailer.yaw_hint_rad), np.sin(trailer.yaw_hint_rad)])
+        ahead *= 1.0 if ahead @ front >= 0 else -1.0
+        return abs(float(np.hypot(*(truck_xy - (trailer_xy + hitch_ahead_m * ahead)))) - truck_ahead_m)
 
     @staticmethod
     def _detection(unit: _UnitCandidate) -> Detection:
@@ -319,13 +406,9 @@ class Pipeline:
 
     def _orient(self, tracks: list[Track], stamp_s: float, params: Params) -> list[VehicleResult]:
         seen = [t for t in tracks if t.detection is not None]
-        observations = [UnitObservation(t.track_id, t.vehicle_id, t.kind, t.detection.center,
-                                        float(np.degrees(t.detection.payload.corrected.shape_yaw_rad)) % 180.0,
-                                        self._shape_period_deg(t.detection.payload.dims))
-                        for t in seen]
-        yaws = self.orientation.process(observations, stamp_s, {t.track_id for t in tracks})
-        self._last_yaw = {(t.kind, t.track_id): (t.detection.center[:2], yaws[t.track_id])
-                          for t in seen if yaws.get(t.track_id) is not None}
+        observations = [self._observation(t, params) for t in seen]
+        kept = {t.track_id for t in tracks + self.tracker.lost}  # a re-acquired unit keeps its yaw
+        yaws = self.orientation.process(observations, stamp_s, kept)
         by_vehicle: dict[int, dict[str, UnitResult]] = {}
         names: dict[int, str] = {}
         for t in seen:
@@ -337,6 +420,15 @@ class Pipeline:
             names[t.vehicle_id] = t.vehicle
         return [self._vehicle_result(vid, names[vid], units) for vid, units in sorted(by_vehicle.items())]
 
+    def _observation(self, track: Track, params: Params) -> UnitObservation:
+        unit: _UnitCandidate = track.detection.payload
+        hitch_offset_m = 0.0
+        if track.kind == "trailer":
+            hitch_offset_m = centre_to_hitch_m(params.vehicles[unit.vehicle])[1]
+        return UnitObservation(track.track_id, track.vehicle_id, track.kind, track.detection.center,
+                               float(np.degrees(unit.corrected.shape_yaw_rad)) % 180.0,
+                               self._shape_period_deg(unit.dims), hitch_offset_m)
+
     @staticmethod
     def _shape_period_deg(dims: tuple[float, float, float]) -> float:
         length, width, _ = dims
@@ -347,8 +439,7 @@ class Pipeline:
         hitch = OrientationEstimator.hitch_deg(truck and truck.yaw_deg, trailer and trailer.yaw_deg)
         transform = None
         if hitch is not None:
-            t_truck = planar_pose(truck.center[0], truck.center[1], np.radians(truck.yaw_deg), truck.center[2])
-            t_trailer = planar_pose(trailer.center[0], trailer.center[1], np.radians(trailer.yaw_deg), trailer.center[2])
+            t_truck, t_trailer = box_poses([truck.center, trailer.center], [truck.yaw_deg, trailer.yaw_deg])
             transform = np.linalg.inv(t_trailer) @ t_truck
         return VehicleResult(vehicle_id, name, truck, trailer, hitch, transform)
 

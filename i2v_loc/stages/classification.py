@@ -27,6 +27,8 @@ from i2v_loc.params import ClassificationParams, VehicleConfig
 from i2v_loc.stages.primitives import euclidean_labels, min_area_rect, oriented_box_volume, split_by_label, voxel_keys
 
 FOOTPRINT_MARGIN_M = 0.1
+MISSING_WALL_M = 0.3  # a trailer found this much narrower than its width lacks its far wall; the
+# widened footprint reaches this far beyond the width (range noise, the fitted axis a little off)
 TOLERANCE_FACTORS = (1.0, 0.6, 0.4)  # retries of the second clustering with smaller epsilon
 
 
@@ -54,7 +56,7 @@ class TruckTrailerClassifier:
             if found is None:
                 continue
             trailer_body, error = found
-            is_trailer, along_m = self._in_footprint(points, points[body[trailer_body]])
+            is_trailer, along_m = self._in_footprint(points, points[body[trailer_body]], vehicle.trailer.width_m)
             is_truck = ~is_trailer
             if self.params.truck_one_end:
                 is_truck &= self._truck_end(along_m, is_truck)
@@ -72,15 +74,28 @@ class TruckTrailerClassifier:
         front = along_m > 0
         return front if (rest & front).sum() >= (rest & ~front).sum() else ~front
 
-    def _in_footprint(self, points: np.ndarray, body: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def _in_footprint(self, points: np.ndarray, body: np.ndarray, width_m: float) -> tuple[np.ndarray, np.ndarray]:
         """Points whose xy falls inside the body's oriented rectangle (plus a small margin), and each
-        point's coordinate along the rectangle's long axis from its centre."""
+        point's coordinate along the rectangle's long axis from its centre.
+
+        When the roof is not seen, a trailer's far wall can be a sub-cluster of its own (the walls are
+        its width apart) or joined to the cab: a body narrower than the trailer's width by more than
+        MISSING_WALL_M is widened to it on the side holding more points (a wall along the whole
+        trailer outweighs a cab beside its front corner)."""
         rect = min_area_rect(body[:, :2])
         d = points[:, :2] - rect.center_xy
         along = d @ [np.cos(rect.yaw_rad), np.sin(rect.yaw_rad)]
-        across = np.abs(d @ [-np.sin(rect.yaw_rad), np.cos(rect.yaw_rad)])
+        across = d @ [-np.sin(rect.yaw_rad), np.cos(rect.yaw_rad)]
         margin = FOOTPRINT_MARGIN_M
-        return (np.abs(along) <= rect.length_m / 2 + margin) & (across <= rect.width_m / 2 + margin), along
+        beside = np.abs(along) <= rect.length_m / 2 + margin
+        low, high = -rect.width_m / 2 - margin, rect.width_m / 2 + margin
+        if width_m - rect.width_m > MISSING_WALL_M:
+            missing_m = width_m - rect.width_m + MISSING_WALL_M
+            left = int((beside & (across > high) & (across <= high + missing_m)).sum())
+            right = int((beside & (across < low) & (across >= low - missing_m)).sum())
+            if left or right:
+                low, high = (low, high + missing_m) if left >= right else (low - missing_m, high)
+        return beside & (across >= low) & (across <= high), along
 
     def _find_trailer(self, body: np.ndarray, vehicle: VehicleConfig):
         """Second clustering at the trailer tolerance; when the cab still touches the trailer (the
