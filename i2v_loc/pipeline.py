@@ -44,7 +44,7 @@ METHOD_PATCHES = {
         "region": {"ground_refit_frames": 10},
         "tracking": {"confirm_paired": True, "reacquire_distance_m": 3.0},
         "centroid": {"truck_front_anchor": True},
-        "classification": {"truck_one_end": True, "max_hitch_gap_m": 2.0},
+        "classification": {"truck_one_end": True, "complete_width": True, "max_hitch_gap_m": 2.0},
         "orientation": {"shape_weight": 1.0, "flip_confirm_frames": 5, "hitch_forward": True},
     },
 }
@@ -53,6 +53,7 @@ STAGES = ("concatenation", "background", "region", "clustering", "classification
 MOTION_HINT_MIN_SPEED_M_S = 0.1
 MOTION_HINT_MARGIN_M = 0.5
 PREDICTION_S = 0.1  # protected boxes are moved ahead by one frame of the track's velocity
+MAX_HITCH_ANGLE_DEG = 100.0  # a semitrailer jack-knifes beyond about 90 deg; 10 deg for the centres' errors
 SQUARE_ASPECT = 1.3  # units with length < 1.3 x width have their shape axis known modulo 90 deg only
 
 
@@ -371,9 +372,10 @@ class Pipeline:
 
     def _articulated(self, units: list[_UnitCandidate], params: Params) -> list[_UnitCandidate]:
         """Drops trucks that the articulation rules out (``classification.max_hitch_gap_m``): the hitch
-        point lies at the trailer's front (by its track's yaw, else the end facing the truck) and the
-        truck's centre its centre-to-hitch distance from it; a truck elsewhere is a piece of the
-        trailer or of the yard left over by the split. Its cluster's trailer is still reported."""
+        point lies at the trailer's front (by its track's yaw, else the end facing the truck); the
+        truck's centre is its centre-to-hitch distance from it, ahead of it (|hitch angle| at most
+        MAX_HITCH_ANGLE_DEG). A truck elsewhere is a piece of the trailer or of the yard left over by
+        the split; the cluster's trailer is still reported."""
         max_gap = params.classification.max_hitch_gap_m
         if max_gap <= 0:
             return units
@@ -381,16 +383,15 @@ class Pipeline:
         kept = []
         for unit in units:
             trailer = trailers.get(unit.group)
-            if unit.kind == "truck" and trailer is not None:
-                gap = self._hitch_gap_m(unit, trailer, params.vehicles[unit.vehicle])
-                if gap > max_gap:
-                    self.counters["truck_off_hitch"] += 1
-                    continue
+            if unit.kind == "truck" and trailer is not None and \
+                    not self._truck_at_hitch(unit, trailer, params.vehicles[unit.vehicle], max_gap):
+                self.counters["truck_off_hitch"] += 1
+                continue
             kept.append(unit)
         return kept
 
     @staticmethod
-    def _hitch_gap_m(truck: _UnitCandidate, trailer: _UnitCandidate, vehicle: VehicleConfig) -> float:
+    def _truck_at_hitch(truck: _UnitCandidate, trailer: _UnitCandidate, vehicle: VehicleConfig, max_gap_m: float) -> bool:
         truck_ahead_m, hitch_ahead_m = centre_to_hitch_m(vehicle)
         truck_xy, trailer_xy = truck.corrected.center[:2], trailer.corrected.center[:2]
         axis = trailer.corrected.axis_yaw_rad
@@ -398,7 +399,10 @@ class Pipeline:
         front = truck_xy - trailer_xy if trailer.yaw_hint_rad is None else \
             np.array([np.cos(trailer.yaw_hint_rad), np.sin(trailer.yaw_hint_rad)])
         ahead *= 1.0 if ahead @ front >= 0 else -1.0
-        return abs(float(np.hypot(*(truck_xy - (trailer_xy + hitch_ahead_m * ahead)))) - truck_ahead_m)
+        to_truck = truck_xy - (trailer_xy + hitch_ahead_m * ahead)
+        distance_m = float(np.hypot(*to_truck))
+        angle_deg = float(np.degrees(np.arccos(np.clip(ahead @ to_truck / max(distance_m, 1e-9), -1.0, 1.0))))
+        return abs(distance_m - truck_ahead_m) <= max_gap_m and angle_deg <= MAX_HITCH_ANGLE_DEG
 
     @staticmethod
     def _detection(unit: _UnitCandidate) -> Detection:

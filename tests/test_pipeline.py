@@ -9,8 +9,8 @@ import pytest
 from i2v_loc.frame import Frame, SensorScan
 from i2v_loc.params import Extrinsics, Params, ParamsError, SensorConfig
 from i2v_loc.geometry import wrap_deg
-from i2v_loc.pipeline import Pipeline
-from test_stage_classification import articulated_points, articulated_poses
+from i2v_loc.pipeline import Pipeline, centre_to_hitch_m, method_params
+from test_stage_classification import articulated_points, articulated_poses, box_surface, place
 
 
 def yard_params(vehicle=None, **sections):
@@ -168,3 +168,68 @@ def test_foreground_points_are_exposed_but_not_in_the_state_line():
     assert d.max() < 7.5
     paper = Pipeline(yard_params("man_tgx")).process(frame_of(0, 0.0, {"l1": ground()}))
     assert paper.foreground is not None and len(paper.foreground) < 50  # only ground noise above 0.15 m
+
+
+def test_method_preset_fills_only_the_fields_left_at_the_model_default():
+    user = yard_params(tracking={"reacquire_distance_m": 5.0}, orientation={"shape_weight": 0.5},
+                       region={"ground_refit_frames": 3})
+    params = Pipeline(user, method="default").params
+    assert params.tracking.reacquire_distance_m == 5.0  # the user's, not the preset's 3.0
+    assert params.orientation.shape_weight == 0.5
+    assert params.region.ground_refit_frames == 3
+    assert params.clustering.algorithm == "grid" and params.background.enabled  # left at default: preset
+    assert params.tracking.confirm_paired and params.orientation.flip_confirm_frames == 5
+    assert Pipeline(user, method="paper").params == user  # the paper adds nothing
+    assert method_params(user, "default") == params
+    assert user.tracking.reacquire_distance_m == 5.0 and not user.background.enabled  # input unchanged
+
+
+def test_a_patch_arriving_while_the_previous_one_is_applied_is_not_lost():
+    """update_params from another thread between taking the pending patch and building the stages
+    must build on the patch being applied, not on the parameters before it."""
+    pipeline = Pipeline(yard_params())
+    frame = frame_of(0, 1.0, {"l1": ground()})
+    pipeline.update_params({"clustering": {"tolerance_m": 0.3}})
+    build = pipeline._build
+
+    def build_with_a_patch_arriving(params):
+        del pipeline._build  # once: back to the method
+        pipeline.update_params({"clustering": {"min_points": 7}})
+        build(params)
+    pipeline._build = build_with_a_patch_arriving
+    pipeline.process(frame)
+    pipeline.process(frame)
+    assert pipeline.params.clustering.tolerance_m == 0.3 and pipeline.params.clustering.min_points == 7
+    assert pipeline.clustering.params.tolerance_m == 0.3 and pipeline.clustering.params.min_points == 7
+
+
+@pytest.mark.parametrize("name", ["man_tgx", "volvo_fh", "twizy"])
+@pytest.mark.parametrize("hitch_deg", [0.0, 35.0, -80.0])
+def test_centre_to_hitch_distances_match_the_kinematic_figures(name, hitch_deg):
+    v = Params().vehicles[name]
+    (tc, _), (rc, ry) = articulated_poses(v, (2.0, -1.0), 25.0, hitch_deg)
+    truck_ahead_m, hitch_ahead_m = centre_to_hitch_m(v)
+    hitch = np.array([2.0, -1.0]) - v.truck.hitch_behind_rear_axle_m * np.array([np.cos(np.radians(25.0)), np.sin(np.radians(25.0))])
+    assert np.hypot(*(tc - hitch)) == pytest.approx(truck_ahead_m, abs=1e-9)
+    assert np.hypot(*(rc - hitch)) == pytest.approx(hitch_ahead_m, abs=1e-9)
+    assert hitch - rc == pytest.approx(hitch_ahead_m * np.array([np.cos(np.radians(ry)), np.sin(np.radians(ry))]))
+    assert {"man_tgx": 3.265, "volvo_fh": 3.525, "twizy": 1.39}[name] == pytest.approx(truck_ahead_m)
+
+
+def test_a_truck_beside_the_trailer_middle_is_not_where_the_hitch_puts_it():
+    """A cab-sized box 0.5 m beside the middle of a Volvo trailer, in one cluster with it: the
+    classification takes it for the truck; the articulation check drops it (its centre is 4 m from
+    where the hitch puts a truck) and counts it, the trailer is still reported."""
+    v = Params().vehicles["volvo_fh"]
+    trailer = place(box_surface(v.trailer.length_m, v.trailer.width_m, v.trailer.height_m), 0.0, 0.0, 0.0, v.trailer.floor_m)
+    side_y = v.trailer.width_m / 2 + 0.5 + v.truck.width_m / 2
+    cab = place(box_surface(v.truck.length_m, v.truck.width_m, v.truck.height_m), 0.0, side_y, 0.0, v.truck.floor_m)
+    frame = frame_of(0, 0.0, {"l1": np.vstack([ground(), trailer, cab])})
+    results = {}
+    for gap in (0.0, 2.0):
+        params = yard_params("volvo_fh", tracking={"min_hits": 1}, classification={"max_hitch_gap_m": gap})
+        pipeline = Pipeline(params)
+        results[gap] = pipeline.process(frame).to_json()["vehicles"]
+        assert pipeline.counters["truck_off_hitch"] == (1 if gap else 0)
+    assert results[0.0][0]["truck"]["center"][:2] == pytest.approx([0.0, side_y], abs=0.3)  # no check: a truck
+    assert results[2.0][0]["truck"] is None and results[2.0][0]["trailer"]["center"][:2] == pytest.approx([0, 0], abs=0.3)

@@ -90,3 +90,32 @@ def test_a_trailer_candidate_longer_than_the_trailer_is_rejected():
     stage = TruckTrailerClassifier(ClassificationParams(max_length_excess_m=1.0), params.vehicles)
     long_thin = box_surface(9.0, 2.5, 2.5)  # volume fits the Volvo trailer gate, length 9 > 6.3 + 1
     assert stage.process(long_thin, ["volvo_fh"]).vehicle is None
+
+
+def test_far_trailer_wall_apart_from_the_seen_part_joins_the_trailer_with_complete_width():
+    """The roof seen only near one wall: the far wall is 1.2 m from the rest, joined to the cab
+    (40 deg hitch angle). Without complete_width part of it is left to the truck; with it, the
+    trailer is whole and the truck is the cab."""
+    params = Params()
+    v = params.vehicles["man_tgx"]
+    (tc, ty), (rc, ry) = articulated_poses(v, (0.0, 0.0), 0.0, 40.0)
+    truck, _ = articulated_points(v, (0.0, 0.0), 0.0, 40.0)
+    length, width, height = v.trailer.length_m, v.trailer.width_m, v.trailer.height_m
+    u, z = np.arange(-length / 2, length / 2, 0.1), np.arange(0.0, height, 0.2)
+    near_wall = np.array(np.meshgrid(u, [width / 2], z, indexing="ij")).reshape(3, -1).T
+    roof_strip = np.array(np.meshgrid(u, np.arange(width / 2 - 1.6, width / 2, 0.1), [height], indexing="ij")).reshape(3, -1).T
+    far_wall = np.array(np.meshgrid(u, [-width / 2], z, indexing="ij")).reshape(3, -1).T  # on the cab's side
+    seen = place(np.vstack([near_wall, roof_strip]), *rc, ry, v.trailer.floor_m)
+    far = place(far_wall, *rc, ry, v.trailer.floor_m)
+    cluster = np.vstack([truck, seen, far])
+    cab = truck[truck[:, 2] > v.trailer.floor_m]
+    plain = TruckTrailerClassifier(params.classification, params.vehicles).process(cluster, ["man_tgx"])
+    assert plain.vehicle == "man_tgx" and min_dist(far, plain.truck).min() == 0.0  # part of the far wall is "truck"
+    complete = TruckTrailerClassifier(params.classification.model_copy(update={"complete_width": True}),
+                                      params.vehicles).process(cluster, ["man_tgx"])
+    assert complete.vehicle == "man_tgx"
+    assert min_dist(far, complete.trailer).max() == 0.0  # the whole far wall is trailer
+    # the cab, but for its corner inside the widened footprint, is the truck
+    assert (min_dist(cab, complete.truck) == 0).mean() > 0.9
+    assert np.hypot(*(complete.truck[:, :2].mean(axis=0) - tc)) < 1.0
+    assert np.hypot(*(plain.truck[:, :2].mean(axis=0) - tc)) > 2.0

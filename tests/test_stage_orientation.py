@@ -98,3 +98,93 @@ def test_reacquired_unit_keeps_its_yaw_and_restarts_its_history():
     yaw = est.process([UnitObservation(1, 1, "trailer", np.array([1.8 + 3.5, 1.8 - 3.5, 1.0]), 45.0)], 2.9, {1})[1]
     assert yaw == pytest.approx(45.0, abs=0.5)
     assert len(est.states[1].history) == 1
+
+
+def test_smoothing_does_not_halve_the_rate_bound():
+    """Smoothed first, then bounded: with smoothing 0.5 the yaw still turns at max_yaw_rate_deg_s."""
+    est = OrientationEstimator(OrientationParams(history_frames=2, min_travel_m=0.01, max_yaw_rate_deg_s=10.0, smoothing=0.5))
+    est.process([UnitObservation(1, 1, "truck", np.array([0.0, 0.0, 0]), 0.0)], 0.0, {1})
+    est.process([UnitObservation(1, 1, "truck", np.array([1.0, 0.0, 0]), 0.0)], 0.1, {1})
+    turned = est.process([UnitObservation(1, 1, "truck", np.array([1.0, 1.0, 0]), 0.0)], 0.2, {1})[1]
+    assert turned == pytest.approx(1.0, abs=1e-6)  # 10 deg/s * 0.1 s, not half of it
+    # a small change is smoothed, not bounded: 2 deg measured -> half of it
+    est2 = OrientationEstimator(OrientationParams(history_frames=2, min_travel_m=0.01, max_yaw_rate_deg_s=100.0, smoothing=0.5))
+    est2.process([UnitObservation(1, 1, "truck", np.array([0.0, 0.0, 0]), 0.0)], 0.0, {1})
+    est2.process([UnitObservation(1, 1, "truck", np.array([1.0, 0.0, 0]), 0.0)], 0.1, {1})
+    yaw = est2.process([UnitObservation(1, 1, "truck", np.array([2.0, np.tan(np.radians(2.0)), 0]), 0.0)], 0.2, {1})[1]
+    assert yaw == pytest.approx(1.0, abs=1e-6)
+
+
+def test_rate_bound_covers_the_time_since_the_unit_was_last_seen():
+    est = OrientationEstimator(OrientationParams(history_frames=2, min_travel_m=0.01, max_yaw_rate_deg_s=10.0, smoothing=0.0))
+    est.process([UnitObservation(1, 1, "truck", np.array([0.0, 0.0, 0]), 0.0)], 0.0, {1})
+    est.process([UnitObservation(1, 1, "truck", np.array([1.0, 0.0, 0]), 0.0)], 0.1, {1})
+    est.process([], 0.2, {1})
+    est.process([], 0.3, {1})  # unseen for two frames: 0.3 s since its last sighting
+    turned = est.process([UnitObservation(1, 1, "truck", np.array([1.0, 1.0, 0]), 0.0)], 0.4, {1})[1]
+    assert turned == pytest.approx(3.0, abs=1e-6)
+
+
+def forward_trailer_pair(truck_yaw_deg, trailer_yaw_deg, hitch_ahead_m=5.64, truck_ahead_m=3.27, shift=(0.0, 0.0)):
+    """Truck and trailer centres of an articulated vehicle whose hitch is at ``shift``."""
+    hitch = np.array(shift, dtype=float)
+    truck = hitch + truck_ahead_m * np.array([np.cos(np.radians(truck_yaw_deg)), np.sin(np.radians(truck_yaw_deg))])
+    trailer = hitch - hitch_ahead_m * np.array([np.cos(np.radians(trailer_yaw_deg)), np.sin(np.radians(trailer_yaw_deg))])
+    return np.r_[truck, 1.0], np.r_[trailer, 1.0]
+
+
+@pytest.mark.parametrize("hitch_deg", [75.0, -80.0])
+def test_square_cab_at_a_large_hitch_angle_takes_the_heading_from_the_hitch_point(hitch_deg):
+    """At 75-80 deg the trailer-to-truck vector is more than 45 deg off the cab's heading, so from the
+    trailer's centre the wrong 90 deg equivalent wins; from the hitch point the right one does."""
+    truck_yaw = 20.0
+    truck, trailer = forward_trailer_pair(truck_yaw, truck_yaw + hitch_deg)
+    units = [UnitObservation(1, 1, "truck", truck, truck_yaw % 90.0, 90.0),
+             UnitObservation(2, 1, "trailer", trailer, (truck_yaw + hitch_deg) % 180.0, 180.0, hitch_offset_m=5.64)]
+    from_hitch = OrientationEstimator(PARAMS.model_copy(update={"shape_weight": 1.0, "hitch_forward": True}))
+    yaws = from_hitch.process(units, 0.0, {1, 2})
+    assert yaws[1] == pytest.approx(truck_yaw, abs=1e-6)
+    assert yaws[2] == pytest.approx(truck_yaw + hitch_deg, abs=1e-6)
+    from_centre = OrientationEstimator(PARAMS.model_copy(update={"shape_weight": 1.0}))
+    assert abs(((from_centre.process(units, 0.0, {1, 2})[1] - truck_yaw) + 180) % 360 - 180) == pytest.approx(90.0)
+
+
+def test_isolated_180_deg_flip_is_rejected_and_a_persistent_one_taken_at_once():
+    """A truck driving east; for 2 frames its partner suggests the opposite direction (a bad split):
+    ignored. When the opposite persists for flip_confirm_frames, the yaw turns over at once."""
+    params = PARAMS.model_copy(update={"flip_confirm_frames": 3, "max_yaw_rate_deg_s": 45.0})
+    est = OrientationEstimator(params)
+    k = 0
+
+    def step(trailer_side):
+        nonlocal k
+        truck = np.array([k * 0.2, 0.0, 1.0])
+        trailer = truck + [8.0 * trailer_side, 0.0, 0.0]
+        k += 1
+        return est.process([UnitObservation(1, 1, "truck", truck, 0.0), UnitObservation(2, 1, "trailer", trailer, 0.0)],
+                           k * 0.1, {1, 2})
+    for _ in range(5):
+        yaws = step(-1.0)  # trailer behind (west): heading east
+    assert yaws[1] == pytest.approx(0.0) and yaws[2] == pytest.approx(0.0)
+    for _ in range(2):
+        yaws = step(+1.0)  # the trailer suddenly east of the truck: a flip
+        assert yaws[1] == pytest.approx(0.0) and yaws[2] == pytest.approx(0.0)
+    yaws = step(-1.0)
+    for _ in range(2):
+        yaws = step(+1.0)
+        assert yaws[1] == pytest.approx(0.0)
+    yaws = step(+1.0)  # the third in a row: taken
+    assert abs(yaws[1]) == pytest.approx(180.0) and abs(yaws[2]) == pytest.approx(180.0)
+
+
+def test_provisional_shape_guess_is_replaced_at_once_by_the_first_real_measurement():
+    """A lone square cab standing still gets its shape axis (possibly 90 deg off); when its trailer
+    appears, the trailer-to-truck direction replaces the guess at once (no rate-bounded creep)."""
+    params = PARAMS.model_copy(update={"shape_weight": 1.0, "max_yaw_rate_deg_s": 10.0})
+    est = OrientationEstimator(params)
+    truck = np.array([8.0, 0.0, 1.0])
+    guess = est.process([UnitObservation(1, 1, "truck", truck, 90.0, 90.0)], 0.0, {1, 2})[1]
+    assert guess == pytest.approx(90.0)
+    yaws = est.process([UnitObservation(1, 1, "truck", truck, 90.0, 90.0),
+                        UnitObservation(2, 1, "trailer", np.array([0.0, 0.0, 1.0]), 0.0)], 0.1, {1, 2})
+    assert yaws[1] == pytest.approx(0.0) and yaws[2] == pytest.approx(0.0)

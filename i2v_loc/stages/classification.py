@@ -78,10 +78,10 @@ class TruckTrailerClassifier:
         """Points whose xy falls inside the body's oriented rectangle (plus a small margin), and each
         point's coordinate along the rectangle's long axis from its centre.
 
-        When the roof is not seen, a trailer's far wall can be a sub-cluster of its own (the walls are
-        its width apart) or joined to the cab: a body narrower than the trailer's width by more than
-        MISSING_WALL_M is widened to it on the side holding more points (a wall along the whole
-        trailer outweighs a cab beside its front corner)."""
+        With ``complete_width``: when the roof is not seen, a trailer's far wall can be a sub-cluster
+        of its own (the walls are its width apart) or joined to the cab: a body narrower than the
+        trailer's width by more than MISSING_WALL_M is widened to it on the side holding more points
+        (a wall along the whole trailer outweighs a cab beside its front corner)."""
         rect = min_area_rect(body[:, :2])
         d = points[:, :2] - rect.center_xy
         along = d @ [np.cos(rect.yaw_rad), np.sin(rect.yaw_rad)]
@@ -89,7 +89,7 @@ class TruckTrailerClassifier:
         margin = FOOTPRINT_MARGIN_M
         beside = np.abs(along) <= rect.length_m / 2 + margin
         low, high = -rect.width_m / 2 - margin, rect.width_m / 2 + margin
-        if width_m - rect.width_m > MISSING_WALL_M:
+        if self.params.complete_width and width_m - rect.width_m > MISSING_WALL_M:
             missing_m = width_m - rect.width_m + MISSING_WALL_M
             left = int((beside & (across > high) & (across <= high + missing_m)).sum())
             right = int((beside & (across < low) & (across >= low - missing_m)).sum())
