@@ -34,14 +34,22 @@ def _read_npy(path: Path) -> np.ndarray:
     data = np.load(path, allow_pickle=False)
     if data.ndim != 2 or data.shape[1] < 3:
         raise CloudError(f"{path}: expected an (N, 3+) array, got shape {data.shape}")
+    if len(data) == 0:
+        raise CloudError(f"{path}: empty array, no points")
     return data[:, :3].astype(np.float32)
 
 
+POINT_BYTES_KITTI = 16  # float32 x, y, z, intensity
+
+
 def _read_kitti_bin(path: Path) -> np.ndarray:
-    raw = np.fromfile(path, dtype=np.float32)
-    if raw.size % 4:
-        raise CloudError(f"{path}: {raw.size} floats is not a multiple of 4 (KITTI x, y, z, intensity)")
-    return raw.reshape(-1, 4)[:, :3].copy()
+    size = path.stat().st_size
+    if size == 0:
+        raise CloudError(f"{path}: empty file, no points")
+    if size % POINT_BYTES_KITTI:
+        raise CloudError(f"{path}: {size} bytes is not a multiple of {POINT_BYTES_KITTI} "
+                         "(KITTI points are 4 float32: x, y, z, intensity)")
+    return np.fromfile(path, dtype=np.float32).reshape(-1, 4)[:, :3].copy()
 
 
 def _read_open3d(path: Path) -> np.ndarray:

@@ -176,7 +176,8 @@ class CalibrationParams(Section):
     normal_radius_m: float = Field(2.0, ge=0.5, le=10.0, description="Normals from >= 2 m: 1 m diverges on sparse 32-beam rings")
     max_correspondence_m: float = Field(1.0, gt=0.01, le=10.0)
     max_iterations: int = Field(60, ge=1, le=1000)
-    min_fitness: float = Field(0.3, ge=0.0, le=1.0, description="Results below this fitness are refused")
+    fitness_distance_m: float = Field(0.3, gt=0.0, le=2.0, description="Fitness: share of the sensor's overlapping structure (walls, not the ground) with a registered neighbour this close")
+    min_fitness: float = Field(0.4, ge=0.0, le=1.0, description="Results below this fitness are refused (sample yard: correct 0.45-0.75, a guess off by 3 m / 20 deg 0.25-0.35)")
     min_overlap_points: int = Field(500, ge=10, description="Overlap needed to register two sensors directly")
 
 
@@ -256,7 +257,7 @@ class TrackingParams(Section):
 class OrientationParams(Section):
     history_frames: int = Field(10, ge=2, le=200, description="Corrected centroids in the PCA history (Eq. 11-12)")
     min_travel_m: float = Field(0.3, ge=0.0, le=20.0, description="Below this travel over the history the yaw is held")
-    max_yaw_rate_deg_s: float = Field(45.0, gt=0.0, le=720.0, description="Bound on the smoothed yaw's change per second")
+    max_yaw_rate_deg_s: float = Field(22.5, gt=0.0, le=720.0, description="Bound on the smoothed yaw's change per second (22.5: the bound in force before it was applied after the smoothing, 45 x 0.5)")
     smoothing: float = Field(0.5, ge=0.0, lt=1.0, description="Weight of the previous yaw in the smoothed yaw")
     shape_weight: float = Field(0.0, ge=0.0, le=1.0, description="Blend of the unit's shape axis into the PCA axis (0 = pure PCA, the paper)")
     history_gap_s: float = Field(1.0, gt=0.0, le=60.0, description="A unit unseen for longer restarts its centroid history (its yaw is kept)")

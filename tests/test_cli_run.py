@@ -45,13 +45,15 @@ def hitch_errors(states: list[dict], ground_truth: list[dict]) -> tuple[int, lis
 SAMPLES = Path(__file__).resolve().parents[1] / "samples"
 
 
-@pytest.mark.parametrize("sample, min_both_fraction, max_median_hitch_deg", [
-    ("volvo_fh_u_turn", 0.9, 1.5),
-    ("twizy_single_turn", 0.7, 1.5),
-    ("man_tgx_docking", 0.65, 2.0),  # reversing at up to 45 deg hitch: the cab touches the trailer
+# measured with the default method (50-60 frames each): both units 1.00 / 0.78 / 0.85 of the frames,
+# |hitch error| median 0.58 / 0.33 / 1.04 deg, p90 1.53 / 0.93 / 1.62, RMSE 0.91 / 0.61 / 1.08, no flips
+@pytest.mark.parametrize("sample, min_both_fraction, max_median_deg, max_p90_deg, max_rmse_deg", [
+    ("volvo_fh_u_turn", 0.9, 1.0, 2.5, 1.5),
+    ("twizy_single_turn", 0.7, 1.0, 2.0, 1.5),
+    ("man_tgx_docking", 0.75, 1.5, 2.5, 2.0),  # reversing at up to 45 deg hitch: the cab touches the trailer
 ])
-def test_run_on_committed_samples_reports_both_units_in_most_frames(sample, min_both_fraction, max_median_hitch_deg,
-                                                                     tmp_path, capsys):
+def test_run_on_committed_samples_reports_both_units_in_most_frames(sample, min_both_fraction, max_median_deg,
+                                                                     max_p90_deg, max_rmse_deg, tmp_path, capsys):
     recording = SAMPLES / sample
     if not (recording / "meta.yaml").is_file():
         pytest.skip(f"sample {sample} not committed")
@@ -62,8 +64,12 @@ def test_run_on_committed_samples_reports_both_units_in_most_frames(sample, min_
     assert len(states) == len(rec)
     assert all(s["type"] == "state" and set(s["latency_ms"]) >= {"total", "clustering"} for s in states)
     both, errors = hitch_errors(states, rec.ground_truth())
-    assert both >= min_both_fraction * len(states)
-    assert np.median(errors) < max_median_hitch_deg
+    errors = np.array(errors)
+    assert both >= min_both_fraction * len(states) and len(errors) == both
+    assert np.median(errors) < max_median_deg
+    assert np.percentile(errors, 90) < max_p90_deg  # a 90 deg error on a tenth of the frames fails here
+    assert np.sqrt(np.mean(errors**2)) < max_rmse_deg  # one 180 deg flip in 60 frames fails here
+    assert not np.any(errors > 90.0)  # no heading flips
     summary = capsys.readouterr().out
     assert f"{len(states)} frames" in summary and "with both units" in summary
 
@@ -72,6 +78,22 @@ def test_run_refuses_unknown_sensor_and_method(recording, tmp_path, capsys):
     assert main(["run", str(recording), "--out", str(tmp_path / "x.jsonl"), "--sensors", "l1,l9"]) == 2
     assert "l9" in capsys.readouterr().err
     assert main(["run", str(recording), "--out", str(tmp_path / "x.jsonl"), "--method", "magic"]) == 2
+
+
+@pytest.mark.parametrize("frames", ["0", "-3"])
+def test_run_refuses_fewer_than_one_frame(recording, tmp_path, capsys, frames):
+    out = tmp_path / "x.jsonl"
+    assert main(["run", str(recording), "--out", str(out), "--frames", frames]) == 2
+    assert "--frames must be at least 1" in capsys.readouterr().err and not out.exists()
+
+
+def test_run_creates_the_output_folder_and_says_so(recording, tmp_path, capsys):
+    out = tmp_path / "new" / "dir" / "x.jsonl"
+    assert main(["run", str(recording), "--out", str(out), "--frames", "2", "--quiet"]) == 0
+    assert len(out.read_text().splitlines()) == 2
+    with pytest.raises(SystemExit):
+        main(["run", "--help"])
+    assert "parent folders are created" in " ".join(capsys.readouterr().out.split())
 
 
 def test_calibrate_recovers_the_true_extrinsics(recording, tmp_path, capsys):
@@ -87,15 +109,28 @@ def test_calibrate_recovers_the_true_extrinsics(recording, tmp_path, capsys):
         assert np.degrees(rotation_angle_rad(est[:3, :3], truth[s.name][:3, :3])) <= 0.2
     # the guess really was off (so the test measures the refinement)
     assert max(np.linalg.norm(guess[n][:3, 3] - truth[n][:3, 3]) for n in truth) > 0.2
-    assert "fitness" in capsys.readouterr().out
+    lines = capsys.readouterr().out.splitlines()
+    assert "fitness" in lines[0]
+    figures = {line.split()[0]: (float(line.split()[1]), float(line.split()[2])) for line in lines[1:5]}
+    # fine figures: every sensor well above min_fitness 0.4 (measured 0.67-0.75), plane RMSE a few cm
+    assert all(fitness > 0.55 and rmse < 0.1 for fitness, rmse in figures.values())
 
 
-def test_calibrate_refuses_low_fitness(recording, tmp_path, capsys):
-    strict = tmp_path / "strict.yaml"
-    strict.write_text("calibration:\n  min_fitness: 0.99\n  frames: 1\n")
+def test_calibrate_refuses_a_guess_off_by_3_m_and_20_deg(recording, tmp_path, capsys):
+    """ICP from l4's guess moved 3 m and turned 20 deg lands about 1.5 m / 20 deg off: its fitness on the
+    structure (measured 0.25; correct results 0.45-0.87 on the samples) is below min_fitness 0.4."""
+    guess = yaml.safe_load((Path(recording) / "sensors_guess.yaml").read_text())
+    l4 = next(s for s in guess["sensors"] if s["name"] == "l4")["extrinsics"]
+    l4["x_m"] += 3.0
+    l4["yaw_deg"] = (l4["yaw_deg"] + 20.0 + 180.0) % 360.0 - 180.0
+    wrong = tmp_path / "wrong_guess.yaml"
+    wrong.write_text(yaml.safe_dump(guess))
     out = tmp_path / "calibrated.yaml"
-    assert main(["calibrate", str(recording), "--out", str(out), "--params", str(strict)]) == 2
-    assert "refused" in capsys.readouterr().err and not out.exists()
+    assert main(["calibrate", str(recording), "--out", str(out), "--guess", str(wrong)]) == 2
+    captured = capsys.readouterr()
+    assert "refused" in captured.err and "l4" in captured.err and not out.exists()
+    figures = {line.split()[0]: float(line.split()[1]) for line in captured.out.splitlines()[1:]}
+    assert figures["l4"] < 0.4 and figures["l2"] > 0.6  # l2 (registered before l4) is right and scores well
 
 
 def test_detect_reads_npy_and_kitti_bin_and_reports_errors(tmp_path, capsys):
@@ -112,21 +147,58 @@ def test_detect_reads_npy_and_kitti_bin_and_reports_errors(tmp_path, capsys):
         assert len(report["clusters"]) == 1 and report["clusters"][0]["center"][:2] == pytest.approx([4, 4], abs=0.1)
     assert main(["detect", str(tmp_path / "missing.pcd")]) == 2
     assert "no such file" in capsys.readouterr().err
-    (tmp_path / "bad.bin").write_bytes(b"\x00" * 6)
-    assert main(["detect", str(tmp_path / "bad.bin")]) == 2
-    assert "multiple of 4" in capsys.readouterr().err
+    for size in (3, 6, 20):
+        (tmp_path / "bad.bin").write_bytes(b"\x00" * size)
+        assert main(["detect", str(tmp_path / "bad.bin")]) == 2
+        assert f"{size} bytes is not a multiple of 16" in capsys.readouterr().err
+    (tmp_path / "empty.bin").write_bytes(b"")
+    assert main(["detect", str(tmp_path / "empty.bin")]) == 2
+    assert "empty file" in capsys.readouterr().err
+    np.save(tmp_path / "empty.npy", np.zeros((0, 3), np.float32))
+    assert main(["detect", str(tmp_path / "empty.npy")]) == 2
+    assert "no points" in capsys.readouterr().err
 
 
-def test_detect_on_a_real_roadside_ouster_frame(capsys):
+def test_detect_reports_nan_points_like_the_state_line_and_names_known_sensors(tmp_path, capsys):
+    rng = np.random.default_rng(1)
+    cloud = np.column_stack([rng.uniform(-10, 10, (3000, 2)), rng.normal(0, 0.02, 3000)]).astype(np.float32)
+    cloud[:7] = np.nan
+    np.save(tmp_path / "c.npy", cloud)
+    assert main(["detect", str(tmp_path / "c.npy")]) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert report["points"] == 3000 and report["finite_points"] == 2993
+    assert report["faults"] == {"cloud": "nan_points"} and report["dropped"]["nan_points"] == 7
+    assert set(report) >= {"file", "points", "finite_points", "ground_found", "latency_ms", "faults", "dropped",
+                           "clusters", "vehicles"}
+    assert main(["detect", str(tmp_path / "c.npy"), "--sensor", "l9"]) == 2
+    assert "no sensor named 'l9'; known: l1, l2, l3, l4" in capsys.readouterr().err
+
+
+def test_detect_on_a_real_roadside_ouster_frame(tmp_path, capsys):
+    """TUMTraf: the labelled semi-trailer truck stands 47 m away with about 29 points. Its cluster is
+    found inside the labelled cuboid; at that range it is far too small for any vehicle's volume gate,
+    and its status says so (detection at range is not claimed)."""
     folder = REALDATA / "tumtraf_s110_south"
     if not folder.is_dir():
         pytest.skip(f"real data not present at {folder}")
     pcd = sorted(folder.glob("*.pcd"))[0]
-    # the sensor hangs about 7 m above the road: lift the cloud into a yard-like frame via a sensor
-    sensors = Path(pytest.importorskip("tempfile").mkdtemp()) / "s.yaml"
-    sensors.write_text("sensors:\n- name: south\n  max_range_m: 120\n  extrinsics: {z_m: 7.0}\n"
+    lift_m = 7.0  # the sensor hangs about 7 m above the road: lift the cloud into a yard-like frame
+    sensors = tmp_path / "s.yaml"
+    sensors.write_text(f"sensors:\n- name: south\n  max_range_m: 120\n  extrinsics: {{z_m: {lift_m}}}\n"
                        "region: {x_min_m: -80, x_max_m: 80, y_min_m: -80, y_max_m: 80}\n")
     assert main(["detect", str(pcd), "--params", str(sensors), "--sensor", "south"]) == 0
     report = json.loads(capsys.readouterr().out)
     assert report["points"] > 40000 and report["ground_found"]
-    assert len(report["clusters"]) > 3
+    label = json.loads(pcd.with_suffix(".json").read_text())["openlabel"]["frames"]
+    x, y, z, _, _, qz, qw, length, width, height = next(
+        o["object_data"]["cuboid"]["val"] for f in label.values() for o in f["objects"].values()
+        if o["object_data"]["type"] == "TRUCK")
+    yaw = 2.0 * np.arctan2(qz, qw)
+    inside = []
+    for cluster in report["clusters"]:
+        d = np.subtract(cluster["center"], [x, y, z + lift_m])
+        along, across = d[0] * np.cos(yaw) + d[1] * np.sin(yaw), -d[0] * np.sin(yaw) + d[1] * np.cos(yaw)
+        if abs(along) <= length / 2 and abs(across) <= width / 2 and abs(d[2]) <= height / 2:
+            inside.append(cluster)
+    assert len(inside) == 1 and 10 <= inside[0]["points"] <= 40
+    assert inside[0]["status"] == "too_small" and inside[0]["volume_m3"] < 5

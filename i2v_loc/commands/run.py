@@ -12,13 +12,13 @@ from i2v_loc.cli import UserError
 def register(sub) -> None:
     p = sub.add_parser("run", help="run the localization pipeline on a recording, write state lines (JSONL)")
     p.add_argument("recording", metavar="REC", help="recording folder (docs/formats.md)")
-    p.add_argument("--out", required=True, help="output JSONL file of state lines")
+    p.add_argument("--out", required=True, help="output JSONL file of state lines (missing parent folders are created)")
     p.add_argument("--method", default="paper", help="pipeline method (default: paper)")
     p.add_argument("--sensors", help="comma-separated subset of the sensors, e.g. l1,l4 (default: all)")
     p.add_argument("--vehicles", help="comma-separated subset of the configured vehicles to look for (default: all)")
     p.add_argument("--params", action="append", default=[], metavar="FILE",
                    help="parameter file merged after the defaults and REC/sensors.yaml (repeatable)")
-    p.add_argument("--frames", type=int, help="only the first N frames")
+    p.add_argument("--frames", type=int, metavar="N", help="only the first N frames (N >= 1)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=run)
 
@@ -52,6 +52,8 @@ def run(args) -> int:
     rec_path = Path(args.recording)
     if not (rec_path / "meta.yaml").is_file():
         raise UserError(f"{rec_path}: not a recording folder (no meta.yaml)")
+    if args.frames is not None and args.frames < 1:
+        raise UserError(f"--frames must be at least 1, got {args.frames}")
     if args.method not in METHODS:
         raise UserError(f"unknown method {args.method!r}; known: {', '.join(METHODS)}")
     recording = Recording(rec_path)
