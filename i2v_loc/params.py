@@ -234,6 +234,7 @@ class ClassificationParams(Section):
     floor_margin_m: float = Field(0.1, ge=-1.0, le=2.0, description="The second clustering uses points higher than the trailer floor plus this above the ground")
     xy_grid_m: float = Field(0.05, gt=0.0, le=0.3, description="The xy projection is thinned to one point per cell of this size before the second clustering (neighbour pairs fall with its square)")
     truck_one_end: bool = Field(False, description="The truck is the rest of the cluster at one end of the trailer only (the end holding most of it)")
+    min_height_fraction: float = Field(0.0, ge=0.0, le=1.0, description="A trailer candidate whose top (95th percentile above the ground) is below the trailer's floor plus this share of its height is rejected (0 = no check; a car's body fits the Twizy trailer's volume gate but is 1 m lower)")
     complete_width: bool = Field(False, description="A trailer found narrower than its width (its far wall a sub-cluster of its own or joined to the cab) takes in the points up to its width on the side holding more of them")
     max_hitch_gap_m: float = Field(0.0, ge=0.0, le=20.0, description="A truck whose corrected centre is further than this from where the trailer's hitch point puts it (the truck's centre-to-hitch distance from it) is dropped (0 = no check)")
 

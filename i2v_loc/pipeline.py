@@ -44,7 +44,8 @@ METHOD_PATCHES = {
         "region": {"ground_refit_frames": 10},
         "tracking": {"confirm_paired": True, "reacquire_distance_m": 3.0},
         "centroid": {"truck_front_anchor": True},
-        "classification": {"truck_one_end": True, "complete_width": True, "max_hitch_gap_m": 2.0},
+        "classification": {"truck_one_end": True, "complete_width": True, "max_hitch_gap_m": 2.0,
+                           "min_height_fraction": 0.6},
         "orientation": {"shape_weight": 1.0, "flip_confirm_frames": 5, "hitch_forward": True},
     },
 }

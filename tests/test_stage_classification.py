@@ -119,3 +119,23 @@ def test_far_trailer_wall_apart_from_the_seen_part_joins_the_trailer_with_comple
     assert (min_dist(cab, complete.truck) == 0).mean() > 0.9
     assert np.hypot(*(complete.truck[:, :2].mean(axis=0) - tc)) < 1.0
     assert np.hypot(*(plain.truck[:, :2].mean(axis=0) - tc)) > 2.0
+
+
+def test_a_car_is_no_twizy_when_the_trailer_must_reach_its_height():
+    """A 3.3 x 1.7 x 1.5 m car (or the 3.3 m of a car seen past an occlusion): its body above the
+    Twizy trailer's floor (6 m3, 3.3 m long) fits the Twizy trailer's gates (10.9 +- 7 m3, at most
+    3.5 m long) and its bumpers stick out of that footprint (a "truck").
+    Its top (1.5 m) is far below the trailer's (0.35 + 2.5 m): min_height_fraction 0.6 rejects it,
+    while a real Twizy (trailer top 2.85 m) is still found."""
+    params = Params()
+    body = box_surface(3.3, 1.7, 1.3) + [0.0, 0.0, 0.2]
+    bumpers = np.array([[s * 1.85, y, z] for s in (-1, 1) for y in np.arange(-0.8, 0.81, 0.1) for z in (0.3, 0.4)])
+    car = place(np.vstack([body, bumpers]), 5.0, 2.0, 30.0, 0.0)
+    plain = TruckTrailerClassifier(params.classification, params.vehicles)
+    assert plain.process(car, ["twizy"]).vehicle == "twizy"  # what happened on the docking loop
+    strict = TruckTrailerClassifier(params.classification.model_copy(update={"min_height_fraction": 0.6}), params.vehicles)
+    assert strict.process(car, ["twizy"]).vehicle is None
+    truck, trailer = articulated_points(params.vehicles["twizy"], (3.0, 4.0), 40.0, 20.0)
+    assert strict.process(np.vstack([truck, trailer]), ["twizy"]).vehicle == "twizy"
+    # the ground height counts: the same car on a ground 1.5 m lower still is no trailer
+    assert strict.process(car - [0, 0, 1.5], ["twizy"], ground_z_m=-1.5).vehicle is None

@@ -27,6 +27,7 @@ from i2v_loc.params import ClassificationParams, VehicleConfig
 from i2v_loc.stages.primitives import euclidean_labels, min_area_rect, oriented_box_volume, split_by_label, voxel_keys
 
 FOOTPRINT_MARGIN_M = 0.1
+TOP_PERCENTILE = 95  # a candidate's top: robust to a few stray points above it
 MISSING_WALL_M = 0.3  # a trailer found this much narrower than its width lacks its far wall; the
 # widened footprint reaches this far beyond the width (range noise, the fitted axis a little off)
 TOLERANCE_FACTORS = (1.0, 0.6, 0.4)  # retries of the second clustering with smaller epsilon
@@ -52,7 +53,7 @@ class TruckTrailerClassifier:
         for name in candidates:
             vehicle = self.vehicles[name]
             body = np.flatnonzero(points[:, 2] - ground_z_m >= vehicle.trailer.floor_m + self.params.floor_margin_m)
-            found = self._find_trailer(points[body], vehicle)
+            found = self._find_trailer(points[body], vehicle, ground_z_m)
             if found is None:
                 continue
             trailer_body, error = found
@@ -97,14 +98,14 @@ class TruckTrailerClassifier:
                 low, high = (low, high + missing_m) if left >= right else (low - missing_m, high)
         return beside & (across >= low) & (across <= high), along
 
-    def _find_trailer(self, body: np.ndarray, vehicle: VehicleConfig):
+    def _find_trailer(self, body: np.ndarray, vehicle: VehicleConfig, ground_z_m: float = 0.0):
         """Second clustering at the trailer tolerance; when the cab still touches the trailer (the
         inner corners close in at large hitch angles) retry with smaller tolerances."""
         for factor in TOLERANCE_FACTORS:
             key = (vehicle.trailer.floor_m, factor)
             if key not in self._cache:
                 self._cache[key] = self.sub_clusters(body, self.params.trailer_tolerance_m * factor)
-            found = self._best_trailer(body, self._cache[key], vehicle)
+            found = self._best_trailer(body, self._cache[key], vehicle, ground_z_m)
             if found is not None:
                 return found
         return None
@@ -119,14 +120,19 @@ class TruckTrailerClassifier:
         labels = cell_labels[inverse.reshape(-1)]
         return [g for g in split_by_label(labels) if len(g) >= self.params.min_trailer_points]
 
-    def _best_trailer(self, points: np.ndarray, groups: list[np.ndarray], vehicle: VehicleConfig):
-        """(indices, volume error) of the sub-cluster closest to the trailer volume inside its gate."""
+    def _best_trailer(self, points: np.ndarray, groups: list[np.ndarray], vehicle: VehicleConfig, ground_z_m: float = 0.0):
+        """(indices, volume error) of the sub-cluster closest to the trailer volume inside its gate, not
+        too long and (``min_height_fraction``) reaching high enough: a car's body passes the Twizy
+        trailer's volume gate, but its top is 1 m below the trailer's."""
         expected = vehicle.trailer.volume_m3
+        min_top_m = vehicle.trailer.floor_m + self.params.min_height_fraction * vehicle.trailer.height_m
         best, best_error = None, np.inf
         for idx in groups:
             volume, rect = oriented_box_volume(points[idx])
             error = abs(volume - expected)
             too_long = rect.length_m > vehicle.trailer.length_m + self.params.max_length_excess_m
-            if error <= vehicle.trailer_volume_tolerance_m3 and not too_long and error < best_error:
+            too_low = self.params.min_height_fraction > 0 and \
+                np.percentile(points[idx, 2], TOP_PERCENTILE) - ground_z_m < min_top_m
+            if error <= vehicle.trailer_volume_tolerance_m3 and not too_long and not too_low and error < best_error:
                 best, best_error = idx, error
         return None if best is None else (best, best_error)
