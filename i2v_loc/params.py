@@ -218,6 +218,7 @@ class ClusteringParams(Section):
     grid_voxel_m: float = Field(0.5, ge=0.1, le=2.0, description="Voxel of the grid algorithm (0.3 m splits a vehicle: 32-beam rings are 0.5 m apart at 20 m)")
     min_points: int = Field(10, ge=1)
     max_points: int = Field(200000, ge=1)
+    hitch_range_deg: float = Field(0.0, ge=0.0, le=90.0, description="The whole-vehicle gate also admits the vehicle's oriented box at any hitch angle up to this, from its kinematic figures (0 = Eq. 5 alone)")
 
     @model_validator(mode="after")
     def _check_points(self) -> "ClusteringParams":

@@ -18,6 +18,7 @@ import numpy as np
 from i2v_loc.frame import Frame
 from i2v_loc.geometry import box_poses
 from i2v_loc.params import Params, ParamsError, VehicleConfig, apply_patch
+from i2v_loc.stages.articulation import centre_to_hitch_m
 from i2v_loc.stages.background import BackgroundMap, ProtectedBox, check_grid, region_box
 from i2v_loc.stages.centroid import CentroidCorrector, CorrectedUnit
 from i2v_loc.stages.classification import TruckTrailerClassifier
@@ -40,13 +41,14 @@ METHOD_PATCHES = {
     "paper": {},
     "default": {
         "background": {"enabled": True},
-        "clustering": {"algorithm": "grid"},
+        "clustering": {"algorithm": "grid", "hitch_range_deg": 90.0},
         "region": {"ground_refit_frames": 10},
         "tracking": {"confirm_paired": True, "reacquire_distance_m": 3.0},
         "centroid": {"truck_front_anchor": True},
         "classification": {"truck_one_end": True, "complete_width": True, "max_hitch_gap_m": 2.0,
                            "min_height_fraction": 0.6},
-        "orientation": {"shape_weight": 1.0, "flip_confirm_frames": 5, "hitch_forward": True},
+        "orientation": {"shape_weight": 1.0, "flip_confirm_frames": 5, "hitch_forward": True,
+                        "max_yaw_rate_deg_s": 45.0},
     },
 }
 STAGES = ("concatenation", "background", "region", "clustering", "classification", "centroid", "tracking",
@@ -163,14 +165,6 @@ class _YawHint:
     vehicle: str
     center_xy: np.ndarray  # where the track's unit is expected in this frame
     yaw_rad: float  # its forward heading
-
-
-def centre_to_hitch_m(vehicle: VehicleConfig) -> tuple[float, float]:
-    """(truck box centre ahead of the hitch, hitch ahead of the trailer box centre) in metres, from
-    the kinematic figures (docs/formats.md: boxes centred on the units)."""
-    t, r = vehicle.truck, vehicle.trailer
-    truck = t.wheelbase_m + t.front_overhang_m - t.length_m / 2 + t.hitch_behind_rear_axle_m
-    return truck, r.length_m / 2 - r.hitch_to_front_m
 
 
 @dataclass
