@@ -264,9 +264,9 @@ class Pipeline:
         clustering = self.clustering.process(region.points)
         timer.lap("clustering")
         ground_z = region.ground.height_at if region.ground else (lambda x, y: 0.0)
-        units, cluster_lines = self._classify(clustering.clusters, ground_z)
-        timer.lap("classification")
         hints = self._yaw_hints()
+        units, cluster_lines = self._classify(clustering.clusters, ground_z, hints)
+        timer.lap("classification")
         for unit in units:
             unit.corrected = self._correct(unit, params.vehicles[unit.vehicle], ground_z, hints)
         units = self._articulated(units, params)
@@ -319,13 +319,14 @@ class Pipeline:
             boxes.append(ProtectedBox(tuple(center), unit.corrected.axis_yaw_rad, length / 2, width / 2))
         return boxes
 
-    def _classify(self, clusters: list[Cluster], ground_z) -> tuple[list[_UnitCandidate], list[dict]]:
+    def _classify(self, clusters: list[Cluster], ground_z, hints: list[_YawHint]) -> tuple[list[_UnitCandidate], list[dict]]:
         units, lines = [], []
         for group, cluster in enumerate(clusters):
             status = cluster.status
             if status == "candidate":
                 center = cluster.center
-                result = self.classifier.process(cluster.points, cluster.candidates, ground_z(center[0], center[1]))
+                heading = self._trailer_heading(hints, cluster)
+                result = self.classifier.process(cluster.points, cluster.candidates, ground_z(center[0], center[1]), heading)
                 status = f"vehicle:{result.vehicle}" if result.vehicle else "unmatched"
                 for kind, pts in (("truck", result.truck), ("trailer", result.trailer)):
                     if result.vehicle and pts is not None:
@@ -333,6 +334,16 @@ class Pipeline:
             lines.append({"points": int(len(cluster.points)), "center": [_r(v, 3) for v in cluster.center],
                           "volume_m3": _r(cluster.volume_m3, 2), "status": status})
         return units, lines
+
+    def _trailer_heading(self, hints: list[_YawHint], cluster: Cluster) -> float | None:
+        """Heading of the trailer track nearest the cluster's centre within the cluster's half length
+        plus the association gate (the trailer's box centre lies in the cluster's box)."""
+        best, best_d = None, cluster.rect.length_m / 2 + self._active.tracking.max_distance_m
+        for hint in hints:
+            d = float(np.hypot(*(hint.center_xy - cluster.rect.center_xy)))
+            if hint.kind == "trailer" and hint.vehicle in cluster.candidates and d < best_d:
+                best, best_d = hint.yaw_rad, d
+        return best
 
     def _correct(self, unit: _UnitCandidate, vehicle: VehicleConfig, ground_z, hints: list[_YawHint]) -> CorrectedUnit:
         dims = vehicle.truck if unit.kind == "truck" else vehicle.trailer
@@ -344,11 +355,12 @@ class Pipeline:
         return self.centroid.process(points, dims, ground_z(*centroid_xy), unit.yaw_hint_rad, anchor)
 
     def _yaw_hints(self) -> list[_YawHint]:
-        """Tracks with a yaw (live: where the filter expects them now; lost: their last sighting)."""
+        """Tracks with a yaw (live: where the filter expects them now; lost: their last sighting); not a
+        provisional one (a lone unit's shape-axis guess, its direction unknown)."""
         hints = []
         for t in self.tracker.tracks + self.tracker.lost:
             state = self.orientation.states.get(t.track_id)
-            if state is None or state.yaw_deg is None or t.last_detection is None:
+            if state is None or state.yaw_deg is None or state.provisional or t.last_detection is None:
                 continue
             center = t.position[:2] + t.velocity * PREDICTION_S if t.lost_at_s is None else t.last_detection.center[:2]
             hints.append(_YawHint(t.kind, t.vehicle, center, float(np.radians(state.yaw_deg))))

@@ -139,3 +139,22 @@ def test_a_car_is_no_twizy_when_the_trailer_must_reach_its_height():
     assert strict.process(np.vstack([truck, trailer]), ["twizy"]).vehicle == "twizy"
     # the ground height counts: the same car on a ground 1.5 m lower still is no trailer
     assert strict.process(car - [0, 0, 1.5], ["twizy"], ground_z_m=-1.5).vehicle is None
+
+
+def test_known_heading_puts_the_truck_at_the_trailer_front_not_at_the_busier_end():
+    """A docked MAN with dock bumpers and a person behind the trailer (more points than the cab's
+    visible part): the majority rule takes them for the truck; the trailer's known heading does not."""
+    params = Params()
+    v = params.vehicles["man_tgx"]
+    truck, trailer = articulated_points(v, (0.0, 0.0), 0.0, 0.0)
+    cab = truck[truck[:, 0] > 2.0][::4]  # the cab's front half, thinned (seen from afar)
+    (_, _), (rc, _) = articulated_poses(v, (0.0, 0.0), 0.0, 0.0)
+    rear_x = rc[0] - v.trailer.length_m / 2
+    clutter = place(box_surface(0.4, 2.6, 0.8, 0.05), rear_x - 0.35, 0.0, 0.0, 0.3)  # bumpers, below the floor
+    cluster = np.vstack([cab, trailer, clutter])
+    assert len(clutter) > len(cab)
+    stage = TruckTrailerClassifier(params.classification.model_copy(update={"truck_one_end": True}), params.vehicles)
+    busier = stage.process(cluster, ["man_tgx"])
+    assert busier.truck[:, 0].mean() < rear_x  # the clutter
+    known = stage.process(cluster, ["man_tgx"], heading_rad=0.0)
+    assert min_dist(cab, known.truck).max() == 0.0 and known.truck[:, 0].min() > rear_x + 1.0

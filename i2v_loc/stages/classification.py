@@ -24,7 +24,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from i2v_loc.params import ClassificationParams, VehicleConfig
-from i2v_loc.stages.primitives import euclidean_labels, min_area_rect, oriented_box_volume, split_by_label, voxel_keys
+from i2v_loc.stages.primitives import (euclidean_labels, min_area_rect, oriented_box_volume, rect_along, split_by_label,
+                                       voxel_keys)
 
 FOOTPRINT_MARGIN_M = 0.1
 TOP_PERCENTILE = 95  # a candidate's top: robust to a few stray points above it
@@ -46,9 +47,14 @@ class TruckTrailerClassifier:
         self.vehicles = vehicles
         self._cache: dict = {}
 
-    def process(self, points: np.ndarray, candidates: list[str], ground_z_m: float = 0.0) -> Classification:
-        """The candidate vehicle whose trailer gate fits best (error / tolerance) wins."""
+    def process(self, points: np.ndarray, candidates: list[str], ground_z_m: float = 0.0,
+                heading_rad: float | None = None) -> Classification:
+        """The candidate vehicle whose trailer gate fits best (error / tolerance) wins. ``heading_rad``:
+        the trailer's heading when its track knows it: the footprint is laid along it (with
+        ``complete_width``) and the truck is at its front end (with ``truck_one_end``)."""
         best, best_score = Classification(None, None, None), np.inf
+        if not (self.params.truck_one_end or self.params.complete_width):
+            heading_rad = None  # the paper's classification: no track knowledge
         self._cache: dict = {}  # sub-clusters per (floor, tolerance): vehicles often share a floor height
         for name in candidates:
             vehicle = self.vehicles[name]
@@ -57,10 +63,11 @@ class TruckTrailerClassifier:
             if found is None:
                 continue
             trailer_body, error = found
-            is_trailer, along_m = self._in_footprint(points, points[body[trailer_body]], vehicle.trailer.width_m)
+            is_trailer, along_m = self._in_footprint(points, points[body[trailer_body]], vehicle.trailer.width_m,
+                                                     heading_rad)
             is_truck = ~is_trailer
             if self.params.truck_one_end:
-                is_truck &= self._truck_end(along_m, is_truck)
+                is_truck &= self._truck_end(along_m, is_truck, heading_rad is not None, self.params.min_truck_points)
             if is_truck.sum() < self.params.min_truck_points:
                 continue  # a lone box is not an articulated vehicle (the truck may be occluded, not absent)
             score = error / vehicle.trailer_volume_tolerance_m3
@@ -69,21 +76,29 @@ class TruckTrailerClassifier:
         return best
 
     @staticmethod
-    def _truck_end(along_m: np.ndarray, rest: np.ndarray) -> np.ndarray:
-        """The tractor is at one end of the trailer: keep the remaining points of the trailer half
-        (along its axis) holding most of them; the other end's (a dock's bumpers, a person) are dropped."""
+    def _truck_end(along_m: np.ndarray, rest: np.ndarray, front_known: bool = False, min_points: int = 1) -> np.ndarray:
+        """The tractor is at one end of the trailer: keep the remaining points of its front half (when
+        ``along_m`` runs forward and that half holds a truck), else of the half holding most of them;
+        the other end's (a dock's bumpers, a person, a trailer wall left over by the split) are dropped."""
         front = along_m > 0
-        return front if (rest & front).sum() >= (rest & ~front).sum() else ~front
+        in_front = int((rest & front).sum())
+        if front_known and in_front >= min_points:
+            return front
+        return front if in_front >= (rest & ~front).sum() else ~front
 
-    def _in_footprint(self, points: np.ndarray, body: np.ndarray, width_m: float) -> tuple[np.ndarray, np.ndarray]:
+    def _in_footprint(self, points: np.ndarray, body: np.ndarray, width_m: float,
+                      heading_rad: float | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Points whose xy falls inside the body's oriented rectangle (plus a small margin), and each
-        point's coordinate along the rectangle's long axis from its centre.
+        point's coordinate along the rectangle's long axis from its centre (forward along
+        ``heading_rad`` when given).
 
         With ``complete_width``: when the roof is not seen, a trailer's far wall can be a sub-cluster
         of its own (the walls are its width apart) or joined to the cab: a body narrower than the
         trailer's width by more than MISSING_WALL_M is widened to it on the side holding more points
-        (a wall along the whole trailer outweighs a cab beside its front corner)."""
-        rect = min_area_rect(body[:, :2])
+        (a wall along the whole trailer outweighs a cab beside its front corner). The rectangle is
+        laid along the heading when known: the minimum-area rectangle of a wall and a strip of
+        roof is skewed by several degrees, which leaves the far wall's end out."""
+        rect = min_area_rect(body[:, :2]) if heading_rad is None else rect_along(body[:, :2], heading_rad)
         d = points[:, :2] - rect.center_xy
         along = d @ [np.cos(rect.yaw_rad), np.sin(rect.yaw_rad)]
         across = d @ [-np.sin(rect.yaw_rad), np.cos(rect.yaw_rad)]

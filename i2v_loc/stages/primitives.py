@@ -128,6 +128,14 @@ def min_area_rect(xy: np.ndarray) -> Rect:
     return Rect(center, float(dv[best]), float(du[best]), float(a + np.pi / 2))
 
 
+def rect_along(xy: np.ndarray, yaw_rad: float) -> Rect:
+    """The rectangle with its length along ``yaw_rad`` enclosing the points (a given axis, not fitted)."""
+    axes = unit_axes(yaw_rad)
+    local = np.asarray(xy, dtype=float) @ axes.T
+    low, high = local.min(axis=0), local.max(axis=0)
+    return Rect((low + high) / 2 @ axes, float(high[0] - low[0]), float(high[1] - low[1]), float(yaw_rad))
+
+
 def _degenerate_rect(xy: np.ndarray) -> Rect:
     """Collinear or tiny point sets: a zero-width rectangle along the principal axis."""
     if len(xy) == 0:

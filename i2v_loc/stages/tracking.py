@@ -161,15 +161,20 @@ class Tracker:
 
     def _confirm_pairs(self) -> None:
         """With ``confirm_paired``: truck and trailer classified together in one cluster are confirmed
-        at once (the classification is the evidence that min_hits stands in for)."""
+        at once (the classification is the evidence that min_hits stands in for), unless the vehicle
+        already has a confirmed live unit of that kind (missed in this frame): a vehicle has one
+        truck, so a second one is a bad split until it earns ``min_hits``."""
         if not self.params.confirm_paired:
             return
         kinds: dict[int, set[str]] = {}
         for t in self.tracks:
             if t.detection is not None:
                 kinds.setdefault(t.detection.group, set()).add(t.kind)
+        held = {(t.vehicle_id, t.kind) for t in self.tracks if t.confirmed}
         for t in self.tracks:
-            if t.detection is not None and kinds[t.detection.group] >= {"truck", "trailer"}:
+            if t.confirmed or t.detection is None or not kinds[t.detection.group] >= {"truck", "trailer"}:
+                continue
+            if (t.vehicle_id, t.kind) not in held:
                 t.confirmed = True
 
     def _new_filter(self, center: np.ndarray) -> KalmanFilter:
