@@ -95,17 +95,24 @@ class TruckTrailerClassifier:
         With ``complete_width``: when the roof is not seen, a trailer's far wall can be a sub-cluster
         of its own (the walls are its width apart) or joined to the cab: a body narrower than the
         trailer's width by more than MISSING_WALL_M is widened to it on the side holding more points
-        (a wall along the whole trailer outweighs a cab beside its front corner). The rectangle is
-        laid along the heading when known: the minimum-area rectangle of a wall and a strip of
-        roof is skewed by several degrees, which leaves the far wall's end out."""
-        rect = min_area_rect(body[:, :2]) if heading_rad is None else rect_along(body[:, :2], heading_rad)
+        (a wall along the whole trailer outweighs a cab beside its front corner). The widened
+        rectangle is laid along the heading when known: the minimum-area rectangle of a wall and a
+        strip of roof is skewed by several degrees, which leaves the far wall's end out. (A whole
+        trailer keeps its own rectangle: a tracked heading lags a turning trailer by degrees.)"""
+        rect = min_area_rect(body[:, :2])
+        widen = self.params.complete_width and width_m - rect.width_m > MISSING_WALL_M
+        if heading_rad is not None:
+            if widen:
+                rect = rect_along(body[:, :2], heading_rad)
+            elif np.cos(rect.yaw_rad - heading_rad) < 0:
+                rect.yaw_rad += np.pi  # the same rectangle, its axis forward
         d = points[:, :2] - rect.center_xy
         along = d @ [np.cos(rect.yaw_rad), np.sin(rect.yaw_rad)]
         across = d @ [-np.sin(rect.yaw_rad), np.cos(rect.yaw_rad)]
         margin = FOOTPRINT_MARGIN_M
         beside = np.abs(along) <= rect.length_m / 2 + margin
         low, high = -rect.width_m / 2 - margin, rect.width_m / 2 + margin
-        if self.params.complete_width and width_m - rect.width_m > MISSING_WALL_M:
+        if widen and width_m - rect.width_m > MISSING_WALL_M:
             missing_m = width_m - rect.width_m + MISSING_WALL_M
             left = int((beside & (across > high) & (across <= high + missing_m)).sum())
             right = int((beside & (across < low) & (across >= low - missing_m)).sum())
@@ -115,15 +122,31 @@ class TruckTrailerClassifier:
 
     def _find_trailer(self, body: np.ndarray, vehicle: VehicleConfig, ground_z_m: float = 0.0):
         """Second clustering at the trailer tolerance; when the cab still touches the trailer (the
-        inner corners close in at large hitch angles) retry with smaller tolerances."""
+        inner corners close in at large hitch angles) retry with smaller tolerances.
+
+        A smaller tolerance only splits sub-clusters, and a part's box is never bigger, longer or
+        higher than the whole's: the body is not clustered when it is itself below the trailer's
+        gates, and the retries run only while some sub-cluster is too big or too long."""
+        if not self._may_hold_trailer(body, vehicle, ground_z_m):
+            return None
         for factor in TOLERANCE_FACTORS:
             key = (vehicle.trailer.floor_m, factor)
             if key not in self._cache:
                 self._cache[key] = self.sub_clusters(body, self.params.trailer_tolerance_m * factor)
-            found = self._best_trailer(body, self._cache[key], vehicle, ground_z_m)
-            if found is not None:
+            found, splittable = self._best_trailer(body, self._cache[key], vehicle, ground_z_m)
+            if found is not None or not splittable:
                 return found
         return None
+
+    def _may_hold_trailer(self, body: np.ndarray, vehicle: VehicleConfig, ground_z_m: float) -> bool:
+        if len(body) < self.params.min_trailer_points:
+            return False
+        if self.params.min_height_fraction > 0 and body[:, 2].max() - ground_z_m < self._min_top_m(vehicle):
+            return False
+        return oriented_box_volume(body)[0] >= vehicle.trailer.volume_m3 - vehicle.trailer_volume_tolerance_m3
+
+    def _min_top_m(self, vehicle: VehicleConfig) -> float:
+        return vehicle.trailer.floor_m + self.params.min_height_fraction * vehicle.trailer.height_m
 
     def sub_clusters(self, points: np.ndarray, tolerance_m: float | None = None) -> list[np.ndarray]:
         """Point indices of the xy clusters with at least ``min_trailer_points`` points."""
@@ -136,18 +159,20 @@ class TruckTrailerClassifier:
         return [g for g in split_by_label(labels) if len(g) >= self.params.min_trailer_points]
 
     def _best_trailer(self, points: np.ndarray, groups: list[np.ndarray], vehicle: VehicleConfig, ground_z_m: float = 0.0):
-        """(indices, volume error) of the sub-cluster closest to the trailer volume inside its gate, not
-        too long and (``min_height_fraction``) reaching high enough: a car's body passes the Twizy
-        trailer's volume gate, but its top is 1 m below the trailer's."""
+        """((indices, volume error) or None, whether a sub-cluster was too big or too long) of the
+        sub-cluster closest to the trailer volume inside its gate, not too long and
+        (``min_height_fraction``) reaching high enough: a car's body passes the Twizy trailer's
+        volume gate, but its top is 1 m below the trailer's."""
         expected = vehicle.trailer.volume_m3
-        min_top_m = vehicle.trailer.floor_m + self.params.min_height_fraction * vehicle.trailer.height_m
-        best, best_error = None, np.inf
+        min_top_m = self._min_top_m(vehicle)
+        best, best_error, splittable = None, np.inf, False
         for idx in groups:
             volume, rect = oriented_box_volume(points[idx])
             error = abs(volume - expected)
             too_long = rect.length_m > vehicle.trailer.length_m + self.params.max_length_excess_m
+            splittable |= too_long or volume > expected + vehicle.trailer_volume_tolerance_m3
             too_low = self.params.min_height_fraction > 0 and \
                 np.percentile(points[idx, 2], TOP_PERCENTILE) - ground_z_m < min_top_m
             if error <= vehicle.trailer_volume_tolerance_m3 and not too_long and not too_low and error < best_error:
                 best, best_error = idx, error
-        return None if best is None else (best, best_error)
+        return (None if best is None else (best, best_error)), splittable
