@@ -28,6 +28,7 @@ from i2v_loc.stages.primitives import (euclidean_labels, min_area_rect, oriented
                                        voxel_keys)
 
 FOOTPRINT_MARGIN_M = 0.1
+HEADING_TRUST_DEG = 20.0  # a fitted rectangle further off the tracked heading is not the trailer's axis
 TOP_PERCENTILE = 95  # a candidate's top: robust to a few stray points above it
 MISSING_WALL_M = 0.3  # a trailer found this much narrower than its width lacks its far wall; the
 # widened footprint reaches this far beyond the width (range noise, the fitted axis a little off)
@@ -97,12 +98,14 @@ class TruckTrailerClassifier:
         trailer's width by more than MISSING_WALL_M is widened to it on the side holding more points
         (a wall along the whole trailer outweighs a cab beside its front corner). The widened
         rectangle is laid along the heading when known: the minimum-area rectangle of a wall and a
-        strip of roof is skewed by several degrees, which leaves the far wall's end out. (A whole
-        trailer keeps its own rectangle: a tracked heading lags a turning trailer by degrees.)"""
+        strip of roof is skewed by several degrees, which leaves the far wall's end out. So is a
+        rectangle more than HEADING_TRUST_DEG off the heading (a short trailer seen in part: its
+        length and width swapped). Otherwise a trailer keeps its own rectangle: the tracked heading
+        lags a turning trailer by degrees."""
         rect = min_area_rect(body[:, :2])
         widen = self.params.complete_width and width_m - rect.width_m > MISSING_WALL_M
         if heading_rad is not None:
-            if widen:
+            if widen or abs(np.sin(rect.yaw_rad - heading_rad)) > np.sin(np.radians(HEADING_TRUST_DEG)):
                 rect = rect_along(body[:, :2], heading_rad)
             elif np.cos(rect.yaw_rad - heading_rad) < 0:
                 rect.yaw_rad += np.pi  # the same rectangle, its axis forward
@@ -126,7 +129,7 @@ class TruckTrailerClassifier:
 
         A smaller tolerance only splits sub-clusters, and a part's box is never bigger, longer or
         higher than the whole's: the body is not clustered when it is itself below the trailer's
-        gates, and the retries run only while some sub-cluster is too big or too long."""
+        gates, and the retries run only while some sub-cluster is too big, too long or too low."""
         if not self._may_hold_trailer(body, vehicle, ground_z_m):
             return None
         for factor in TOLERANCE_FACTORS:
@@ -170,9 +173,10 @@ class TruckTrailerClassifier:
             volume, rect = oriented_box_volume(points[idx])
             error = abs(volume - expected)
             too_long = rect.length_m > vehicle.trailer.length_m + self.params.max_length_excess_m
-            splittable |= too_long or volume > expected + vehicle.trailer_volume_tolerance_m3
             too_low = self.params.min_height_fraction > 0 and \
                 np.percentile(points[idx, 2], TOP_PERCENTILE) - ground_z_m < min_top_m
+            # a part's top percentile can be higher than the whole's (a trailer joined to a low cab)
+            splittable |= too_long or too_low or volume > expected + vehicle.trailer_volume_tolerance_m3
             if error <= vehicle.trailer_volume_tolerance_m3 and not too_long and not too_low and error < best_error:
                 best, best_error = idx, error
         return (None if best is None else (best, best_error)), splittable
