@@ -120,3 +120,15 @@ def test_too_large_grid_is_a_parameter_error():
         pipeline.update_params({"background": {"max_voxels": 1000}})
     with pytest.raises(ParamsError, match="min_samples"):
         pipeline.update_params({"background": {"min_samples": 50, "window_frames": 10}})
+
+
+@pytest.mark.parametrize("x_max_m", [1e30, float("inf")])
+def test_a_huge_or_infinite_region_is_refused_with_a_value_error(x_max_m):
+    """Integer voxel counts overflowed (OverflowError, a server error in the service) for a region
+    of 1e30 m; it is a ValueError naming the fix, like any too-large grid."""
+    from i2v_loc.params import BackgroundParams, RegionParams
+    from i2v_loc.stages.background import check_grid
+    region = RegionParams.model_construct(**{**RegionParams().model_dump(), "x_max_m": x_max_m})
+    with pytest.raises(ValueError, match="max_voxels"):
+        check_grid(BackgroundParams(), region)
+    check_grid(BackgroundParams(), RegionParams())  # the default region fits

@@ -57,12 +57,15 @@ def grid_shape(params: BackgroundParams, region: RegionParams) -> tuple[int, int
 
 
 def check_grid(params: BackgroundParams, region: RegionParams) -> None:
-    """ValueError naming the fix when the padded grid would exceed ``max_voxels``."""
-    shape = grid_shape(params, region)
-    cells = int(np.prod(np.array(shape) + 2, dtype=np.int64))
-    if cells > params.max_voxels:
-        raise ValueError(f"background grid of {shape} voxels ({cells} cells) exceeds background.max_voxels "
-                         f"{params.max_voxels}: enlarge background.voxel_size_m or shrink the region")
+    """ValueError naming the fix when the padded grid would exceed ``max_voxels`` (also for a region
+    so large, or infinite, that the voxel count overflows)."""
+    box = np.array(region_box(region), dtype=float)
+    extent = np.ceil((box[3:] - box[:3]) / params.voxel_size_m - 1e-9) + 2  # float: no integer overflow
+    cells = float(np.prod(extent)) if np.all(np.isfinite(extent)) else float("inf")
+    if not cells <= params.max_voxels:
+        raise ValueError(f"background grid of {cells:.3g} cells (region {region_box(region)} at "
+                         f"{params.voxel_size_m} m) exceeds background.max_voxels {params.max_voxels}: "
+                         "enlarge background.voxel_size_m or shrink the region")
 
 
 @dataclass
