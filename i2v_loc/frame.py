@@ -38,7 +38,3 @@ class Frame:
     index: int
     scans: dict[str, SensorScan] = field(default_factory=dict)
 
-    @property
-    def stamp_s(self) -> float:
-        """Earliest sweep start of the frame (sensor clocks), NaN when the frame is empty."""
-        return min((s.stamp_s for s in self.scans.values()), default=float("nan"))

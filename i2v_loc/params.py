@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import copy
 import json
+import math
 from pathlib import Path
 from typing import Any, Literal
 
@@ -62,8 +63,6 @@ def _paper_field_sensors() -> list[SensorConfig]:
     height_m = 4.0
     corners = {"l1": (-7.5, 14.36), "l2": (-20.25, 0.0), "l3": (20.25, 0.0), "l4": (7.5, 14.36)}
     centre = (0.0, 6.0)
-    import math
-
     return [
         SensorConfig(
             name=name,
