@@ -48,6 +48,12 @@ class SensorConfig(Section):
     min_range_m: float = Field(0.5, ge=0.0, le=10.0)
     max_range_m: float = Field(120.0, gt=1.0, le=300.0)
     time_offset_s: float = Field(0.0, ge=-1.0, le=1.0, description="Known offset added to this sensor's stamps to bring it onto the common clock")
+    beam_config: Literal["uniform", "gradient", "below_horizon", "above_horizon"] = Field(
+        "uniform", description="Which of the OS1's 128 channels a 32/64-beam model reads (Ouster's beam configurations)"
+    )
+    metadata: str | None = Field(
+        None, max_length=4096, description="Ouster sensor metadata JSON (as ouster-cli records it); its beam table overrides the model's"
+    )
     extrinsics: Extrinsics = Field(default_factory=Extrinsics)
 
     @property

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -16,6 +16,7 @@ from i2v_loc.sim import kinematics as kin
 from i2v_loc.sim import maneuvers as mv
 from i2v_loc.sim import meshes as m
 from i2v_loc.sim.lidar import LidarModel, MovingObject, YardCaster
+from i2v_loc.sim.sensor_model import ReturnModel
 from i2v_loc.sim.yard import FIELD_CENTER_XY, build_yard, footprint_points
 
 GENERATOR = "i2v-loc sim"
@@ -30,8 +31,7 @@ class SimConfig:
     duration_s: float = 30.0
     start_s: float = 0.0  # skip this much of the maneuver (for short clips)
     columns: int | None = None  # override every sensor's columns
-    range_noise_m: float = 0.03
-    dropout_rate: float = 0.02
+    returns: ReturnModel | None = field(default_factory=ReturnModel)  # None: ideal sensors (tests)
     max_phase_s: float = 0.1
     max_clock_offset_s: float = 0.005
     guess_offset_m: float = 0.3
@@ -153,8 +153,9 @@ def make_lidars(cfg: SimConfig, rng: np.random.Generator) -> list[LidarModel]:
     for sensor in cfg.params.sensors:
         if cfg.columns is not None:
             sensor = sensor.model_copy(update={"columns": cfg.columns})
+        returns = None if cfg.returns is None else replace(cfg.returns, min_range_m=sensor.min_range_m)
         lidars.append(LidarModel.from_config(
-            sensor, range_noise_m=cfg.range_noise_m, dropout_rate=cfg.dropout_rate,
+            sensor, returns=returns,
             phase_s=float(rng.uniform(0.0, cfg.max_phase_s)),
             clock_offset_s=float(rng.uniform(-cfg.max_clock_offset_s, cfg.max_clock_offset_s)),
         ))
@@ -219,6 +220,7 @@ class Simulation:
     tilt: np.ndarray
     n_frames: int
     rate_hz: float
+    surfaces: dict[int, tuple[str, str]]  # vehicle id -> (cab paint, trailer body)
 
 
 def build_simulation(cfg: SimConfig) -> Simulation:
@@ -242,16 +244,30 @@ def build_simulation(cfg: SimConfig) -> Simulation:
     semitrailer = next((v.config.trailer for v in vehicles if v.config.trailer.hitch_to_front_m >= 0), cfg.params.vehicles["man_tgx"].trailer if "man_tgx" in cfg.params.vehicles else None)
     yard = build_yard(rng_yard, occupied, sensor_xy, dock, semitrailer, cfg.distractors)
     objects = []
+    rng_paint = np.random.default_rng(np.random.SeedSequence(cfg.seed).spawn(5)[4])
+    surfaces = {}
     for v in vehicles:
-        truck_mesh = m.shifted(m.truck_mesh(v.config.truck), -v.truck_center_axle)
-        trailer_mesh = m.shifted(m.trailer_mesh(v.config.trailer), -v.trailer_center_axle)
+        paint, body = surfaces[v.vehicle_id] = vehicle_surfaces(rng_paint)
+        truck_mesh = m.shifted(m.truck_mesh(v.config.truck, paint), -v.truck_center_axle)
+        trailer_mesh = m.shifted(m.trailer_mesh(v.config.trailer, body), -v.trailer_center_axle)
         objects.append(MovingObject(2 * v.vehicle_id, truck_mesh, lambda t, v=v: tilt @ v.unit_poses(t)[0]))
         objects.append(MovingObject(2 * v.vehicle_id + 1, trailer_mesh, lambda t, v=v: tilt @ v.unit_poses(t)[1]))
     for j, d in enumerate(yard.distractors):
         objects.append(MovingObject(1000 + j, d.mesh, lambda t, d=d: tilt @ _distractor_poses(d, t)))
     caster = YardCaster(m.transformed(yard.static_mesh(), tilt), objects, cfg.slices)
     n_frames = max(1, int(round(cfg.duration_s * rate_hz)))
-    return Simulation(cfg, vehicles, lidars, caster, yard, tilt, n_frames, rate_hz)
+    return Simulation(cfg, vehicles, lidars, caster, yard, tilt, n_frames, rate_hz, surfaces)
+
+
+CAB_PAINTS = {"white_paint": 0.45, "silver_paint": 0.15, "red_paint": 0.15, "blue_paint": 0.1, "dark_paint": 0.15}
+TRAILER_BODIES = {"trailer_panel": 0.5, "tarpaulin": 0.5}
+
+
+def vehicle_surfaces(rng: np.random.Generator) -> tuple[str, str]:
+    """A cab paint and a trailer body drawn from a yard's usual mix (a dark cab returns little)."""
+    paint = rng.choice(list(CAB_PAINTS), p=list(CAB_PAINTS.values()))
+    body = rng.choice(list(TRAILER_BODIES), p=list(TRAILER_BODIES.values()))
+    return str(paint), str(body)
 
 
 def _distractor_poses(d, t) -> np.ndarray:
@@ -376,6 +392,7 @@ def run(cfg: SimConfig, out: str | Path, progress=None) -> tuple[Simulation, Pat
         "rate_hz": sim.rate_hz, "duration_s": cfg.duration_s, "start_s": cfg.start_s, "slope_deg": cfg.slope_deg,
         "sensors": [l.meta() for l in sim.lidars],
         "static_objects": sim.yard.static_objects,
+        "vehicle_surfaces": {str(i): {"cab": cab, "trailer": body} for i, (cab, body) in sim.surfaces.items()},
     }
     path = write_recording(out, meta, scans, gt, dump_yaml(sensors, ["sensors"]), dump_yaml(guess, ["sensors"]), openlabel(gt, sim.rate_hz))
     return sim, path

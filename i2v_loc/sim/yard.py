@@ -66,13 +66,13 @@ def dock_wall(rear_center_xy, facing_yaw_rad: float, bays: int = 3, bay_width_m:
     half = bays * bay_width_m / 2
     edges = [-half] + [(-half + (i + 0.5) * bay_width_m) + s * door_w / 2 for i in range(bays) for s in (-1, 1)] + [half]
     for y0, y1 in zip(edges[0::2], edges[1::2]):  # pillars between the doors
-        parts.append(m.box_between(-thickness, 0.0, y0, y1, 0.0, height))
+        parts.append(m.box_between(-thickness, 0.0, y0, y1, 0.0, height, "concrete"))
     for i in range(bays):
         yc = -half + (i + 0.5) * bay_width_m
-        parts.append(m.box_between(-thickness - recess, -recess, yc - door_w / 2, yc + door_w / 2, 0.0, height))  # door
-        parts.append(m.box_between(-recess, 0.0, yc - door_w / 2, yc + door_w / 2, door_h, height))  # lintel
+        parts.append(m.box_between(-thickness - recess, -recess, yc - door_w / 2, yc + door_w / 2, 0.0, height, "steel"))  # door
+        parts.append(m.box_between(-recess, 0.0, yc - door_w / 2, yc + door_w / 2, door_h, height, "concrete"))  # lintel
         for s in (-1, 1):  # rubber bumpers at trailer-floor height
-            parts.append(m.box_between(0.0, 0.15, yc + s * 1.1 - 0.15, yc + s * 1.1 + 0.15, 0.9, 1.3))
+            parts.append(m.box_between(0.0, 0.15, yc + s * 1.1 - 0.15, yc + s * 1.1 + 0.15, 0.9, 1.3, "rubber"))
     # Local frame: x out of the wall, so rotate x onto the facing direction.
     pose = planar_pose(rear_center_xy[0], rear_center_xy[1], facing_yaw_rad)
     shift = np.eye(4)
@@ -90,7 +90,7 @@ def build_yard(
 ) -> Yard:
     """Static objects and distractors placed clear of ``occupied_xy`` (the vehicles' swept footprint)."""
     yard = Yard()
-    yard.static_parts.append(m.box_between(-90, 90, -90, 90, -0.2, 0.0))  # ground (top face at z = 0)
+    yard.static_parts.append(m.box_between(-90, 90, -90, 90, -0.2, 0.0, "asphalt"))  # ground (top face at z = 0)
     space = FreeSpace(np.vstack([occupied_xy, sensor_xy]), clearance_m=2.0)
     if dock is not None:
         yard.static_parts += dock_wall(dock[0], dock[1])
@@ -100,7 +100,7 @@ def build_yard(
         yard.static_parts += dock_wall((0.0, wall_y), -math.pi / 2, bays=5)
         yard.static_objects.append({"kind": "dock_wall", "center": [0.0, wall_y], "yaw_deg": -90.0})
     for x, y in sensor_xy:  # the sensors' poles
-        yard.static_parts.append(m.cylinder((x, y, 1.85), 0.12, 3.7))
+        yard.static_parts.append(m.cylinder((x, y, 1.85), 0.12, 3.7, surface="pole"))
 
     def place(kind, length, width, tries=200, ring=(18.0, 34.0)):
         for _ in range(tries):
@@ -119,13 +119,13 @@ def build_yard(
         if spot:
             xy, yaw = spot
             size = CONTAINER_SIZE_M
-            yard.static_parts.append(m.box((xy[0], xy[1], size[2] / 2), size, yaw))
+            yard.static_parts.append(m.box((xy[0], xy[1], size[2] / 2), size, yaw, surface="container"))
             yard.static_objects.append({"kind": "container", "center": [float(xy[0]), float(xy[1])], "yaw_deg": math.degrees(yaw)})
     for _ in range(3):
         spot = place("pole", 0.4, 0.4, ring=(8.0, 30.0))
         if spot:
             xy, _ = spot
-            yard.static_parts.append(m.cylinder((xy[0], xy[1], 4.0), 0.1, 8.0))
+            yard.static_parts.append(m.cylinder((xy[0], xy[1], 4.0), 0.1, 8.0, surface="pole"))
             yard.static_objects.append({"kind": "pole", "center": [float(xy[0]), float(xy[1])]})
     if parked_trailer is not None:
         for _ in range(2):
