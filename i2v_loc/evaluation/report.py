@@ -301,6 +301,8 @@ def _table2(res, methods, primary) -> list[str]:
     lines = [
         "## Table 2 layout: overall metrics per vehicle",
         "",
+        "RMSEs over the frames where the unit (hitch: both units) was reported only; coverage in the first table.",
+        "",
         "| Platform | Source | Frames | Truck RMSE pos [m] / orient [deg] | Trailer RMSE pos [m] / orient [deg] "
         "| RMSE HAE [deg] | Inference time [ms] | Heading flips |",
         "|---|---|---|---|---|---|---|---|",
