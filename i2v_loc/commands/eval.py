@@ -153,6 +153,11 @@ def run(args) -> int:
 
 def print_summary(summary: dict) -> None:
     primary = summary["primary_subset"]
+    for c in (summary.get("calibration") or {}).values():
+        errors = [r for r in c["per_sensor"] if r.get("error_cm") is not None]
+        worst = (f"; worst sensor error {max(r['error_cm'] for r in errors):.2f} cm / "
+                 f"{max(r['error_deg'] for r in errors):.3f} deg" if errors else "")
+        print(f"extrinsics {c['recording']}: {c['status']}{' (cached)' if c.get('cached') else ''}{worst}")
     for method in summary["methods"]:
         for vehicle, s in summary["results"][method][primary]["by_vehicle"].items():
             if not s["gt_vehicle_frames"]:

@@ -219,7 +219,8 @@ def _headline_table(res, methods, primary) -> list[str]:
         "",
         f"Success: both units within {SUCCESS_POSITION_M} m / {SUCCESS_YAW_DEG}° and the hitch within "
         f"{SUCCESS_HITCH_DEG}°, of the frames the vehicle is visible. Coverage: GT frames with the unit reported. "
-        "**RMSEs exclude the frames where the unit was missed** (the hitch: either unit).",
+        "**RMSEs exclude the frames where the unit was missed** (the hitch: either unit). False vehicle-s: "
+        "vehicles reported under this name that match no GT vehicle, in any recording.",
         "",
         "| Vehicle | Method | Success | Coverage truck / trailer / both | Hitch RMSE [deg] (reported only) "
         "| Yaw RMSE truck / trailer [deg] (reported only) | Position RMSE truck / trailer [m] (reported only) "
