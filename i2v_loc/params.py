@@ -18,6 +18,8 @@ from typing import Any, Literal
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
+DEFAULT_METHOD = "default"  # the pipeline method run, eval, bench, sweep and serve use (i2v_loc.pipeline.METHODS)
+
 
 class Section(BaseModel):
     """Base of every parameter section: unknown keys are errors, assignments are validated, and

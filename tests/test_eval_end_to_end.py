@@ -15,6 +15,7 @@ from i2v_loc.cli import main
 REPO = Path(__file__).resolve().parents[1]
 REQUIRED = ("truck_pos_rmse_m", "trailer_pos_rmse_m", "truck_yaw_rmse_deg", "trailer_yaw_rmse_deg", "hitch_rmse_deg",
             "heading_flip_rate", "delta_T_m", "rra_rad", "latency_ms_p50")
+NEW = ("both_units_rate", "success_rate", "false_vehicle_s", "truck_flip_frames", "trailer_flip_frames")
 
 
 @pytest.fixture(scope="module")
@@ -28,9 +29,15 @@ def recording(tmp_path_factory) -> Path:
 
 def test_eval_writes_a_sane_report(recording, tmp_path, capsys):
     out = tmp_path / "report"
-    assert main(["eval", str(recording), "--out", str(out), "--quiet"]) == 0
+    assert main(["eval", str(recording), "--out", str(out), "--quiet", "--method", "paper",
+                 "--calibration-cache", str(tmp_path / "cache")]) == 0
     metrics = json.loads((out / "metrics.json").read_text())
     volvo = metrics["vehicles"]["paper"]["volvo_fh"]
+    for key in NEW:
+        assert key in volvo and key in metrics["results"]["paper"]["all"]["by_maneuver"]["long_curve"], key
+    (calibration,) = metrics["calibration"].values()
+    assert calibration["status"] == "calibrated" and len(calibration["per_sensor"]) == 4
+    assert all(row["error_cm"] < 5.0 for row in calibration["per_sensor"])
     for key in REQUIRED:
         assert key in volvo, key
     assert volvo["gt_vehicle_frames"] == 15
@@ -43,6 +50,7 @@ def test_eval_writes_a_sane_report(recording, tmp_path, capsys):
     # the static baseline is computed from the truth alone: always there, a few metres at most
     assert 0.0 <= volvo["static_delta_T_m"] < 10.0 and volvo["static_dcap_frames"] == 15
     report = (out / "report.md").read_text()
+    assert report.index("## Summary per vehicle") < report.index("## Calibration") < report.index("| metric |")
     assert "Table 2 layout" in report and "Volvo FH" in report and "0.14 / 1.30" in report
     with open(out / "per_frame.csv") as fh:
         rows = [r for r in csv.DictReader(fh) if r["kind"] == "gt"]
@@ -53,7 +61,8 @@ def test_eval_writes_a_sane_report(recording, tmp_path, capsys):
 
 
 def test_unknown_method_is_a_clear_error(recording, tmp_path, capsys):
-    assert main(["eval", str(recording), "--out", str(tmp_path), "--method", "paper,nonsense"]) == 2
+    assert main(["eval", str(recording), "--out", str(tmp_path), "--method", "paper,nonsense",
+                 "--calibration-cache", str(tmp_path / "cache")]) == 2
     assert "unknown method 'nonsense'" in capsys.readouterr().err
 
 
@@ -85,7 +94,8 @@ def test_sweep_ranks_and_writes_best_params(recording, tmp_path):
     grid = tmp_path / "grid.yaml"
     grid.write_text(yaml.safe_dump({"tracking.max_distance_m": [0.5, 2.0], "orientation.smoothing": [0.0]}))
     out = tmp_path / "sweep"
-    assert main(["sweep", str(recording), "--grid", str(grid), "--out", str(out), "--quiet"]) == 0
+    assert main(["sweep", str(recording), "--grid", str(grid), "--out", str(out), "--quiet",
+                 "--calibration-cache", str(tmp_path / "cache")]) == 0
     data = json.loads((out / "sweep.json").read_text())
     assert [row["rank"] for row in data["rows"]] == [1, 2]
     assert {row["values"]["tracking.max_distance_m"] for row in data["rows"]} == {0.5, 2.0}
@@ -106,12 +116,13 @@ def test_sweep_rejects_unknown_parameters(recording, tmp_path, capsys):
 
 
 def test_committed_sample_scores_within_honest_bounds(tmp_path):
-    """``default`` on samples/volvo_fh_u_turn (50 frames) measured 0.27 m / 0.6° truck, 0.17 m / 0.8° trailer,
-    0.85° hitch RMSE, every frame detected, no flips, 2 false detections; the bounds leave margin
-    for tuning but fail on a broken pipeline, wrong extrinsics or unsynchronised clocks."""
+    """``default`` on samples/volvo_fh_u_turn (50 frames), calibrated from the guess (0.4-0.7 cm off),
+    clocks as in the guess: measured 0.26 m / 0.7° truck, 0.17 m / 0.9° trailer, 1.1° hitch RMSE, every
+    frame both units, success 70 %, no flips, 1 false detection (0.1 vehicle-s); the bounds leave
+    margin for tuning but fail on a broken pipeline or wrong extrinsics."""
     out = tmp_path / "report"
     assert main(["eval", str(REPO / "samples" / "volvo_fh_u_turn"), "--method", "default", "--out", str(out),
-                 "--quiet", "--no-plots"]) == 0
+                 "--quiet", "--no-plots", "--calibration-cache", str(tmp_path / "cache")]) == 0
     metrics = json.loads((out / "metrics.json").read_text())["vehicles"]["default"]
     volvo = metrics["volvo_fh"]
     assert all(key in volvo for key in REQUIRED)
@@ -124,6 +135,19 @@ def test_committed_sample_scores_within_honest_bounds(tmp_path):
     assert volvo["heading_flip_rate"] == 0.0 and volvo["vehicle_id_switches"] == 0
     assert volvo["delta_T_m"] < 0.6 and volvo["delta_T_m"] < volvo["static_delta_T_m"]
     assert sum(s["false_vehicles"] for s in metrics.values()) <= 5
+    assert volvo["both_units_rate"] >= 0.9 and volvo["success_rate"] >= 0.5
+    assert volvo["truck_flip_frames"] == volvo["trailer_flip_frames"] == 0
+    assert sum(s["false_vehicle_s"] for s in metrics.values()) <= 0.5
+
+
+def test_true_extrinsics_skip_calibration_and_say_so(recording, tmp_path):
+    out = tmp_path / "report"
+    assert main(["eval", str(recording), "--out", str(out), "--quiet", "--no-plots", "--method", "paper",
+                 "--true-extrinsics", "--calibration-cache", str(tmp_path / "cache")]) == 0
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert [c["status"] for c in metrics["calibration"].values()] == ["true_extrinsics"]
+    assert "TRUE extrinsics" in (out / "report.md").read_text()
+    assert not (tmp_path / "cache").exists()
 
 
 def test_openlabel_labels_score_like_the_jsonl_truth(recording):

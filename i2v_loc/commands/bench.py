@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from i2v_loc.cli import UserError
+from i2v_loc.params import DEFAULT_METHOD
 
 DEFAULT_RECORDING = Path(__file__).resolve().parents[2] / "samples" / "man_tgx_docking"
 
@@ -17,7 +18,7 @@ def register(sub) -> None:
     p = sub.add_parser("bench", help="measure the per-stage latency of the pipeline on a recording")
     p.add_argument("recording", nargs="?", default=str(DEFAULT_RECORDING),
                    help="recording directory (default: the committed MAN TGX docking sample)")
-    p.add_argument("--method", default="paper")
+    p.add_argument("--method", default=DEFAULT_METHOD)
     p.add_argument("--params", action="append", default=[], help="parameter files merged over the recording's sensors")
     p.add_argument("--threads", type=int, default=1, help="threads for numpy/BLAS and open3d (default 1: one core)")
     p.add_argument("--repeat", type=int, default=1, help="passes over the recording (a fresh pipeline each pass)")

@@ -4,8 +4,6 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import numpy as np
-
 from i2v_loc.cli import UserError
 
 
@@ -20,10 +18,9 @@ def register(sub) -> None:
 
 
 def run(args) -> int:
-    from i2v_loc.geometry import extrinsics_matrix, rotation_angle_rad
+    from i2v_loc.evaluation.calibration import run_calibration, sensor_errors
     from i2v_loc.params import dump_yaml, load_params
     from i2v_loc.recording import Recording
-    from i2v_loc.stages.calibration import Calibrator
 
     rec_path = Path(args.recording)
     if not (rec_path / "meta.yaml").is_file():
@@ -32,32 +29,25 @@ def run(args) -> int:
     guess_file = Path(args.guess) if args.guess else recording.sensors_guess_file
     params = load_params(guess_file, *args.params)
     _set_threads(args.threads)
-    n = min(params.calibration.frames, len(recording))
-    step = max(1, len(recording) // n)
-    sweeps: dict[str, list[np.ndarray]] = {s.name: [] for s in params.sensors}
-    for index in range(0, step * n, step):
-        for name, scan in recording.frame(index).scans.items():
-            if name in sweeps:
-                sweeps[name].append(scan.points)
     try:
-        results = Calibrator(params.calibration).calibrate(params.sensors, sweeps)
+        results, _ = run_calibration(recording, params)
     except ValueError as err:
         raise UserError(str(err)) from err
-    truth = _true_extrinsics(recording)
+    truth = load_params(recording.sensors_file).sensors if recording.sensors_file.is_file() else []
+    by_name = {r.name: r.extrinsics for r in results}
+    sensors = [s.model_copy(update={"extrinsics": by_name[s.name]}) for s in params.sensors]
+    errors = {row["sensor"]: row for row in sensor_errors(sensors, truth)}
     print(f"{'sensor':8} {'fitness':>8} {'rmse_m':>8}  against" + ("   error_cm  error_deg" if truth else ""))
     for r in results:
         line = f"{r.name:8} {r.fitness:8.3f} {r.inlier_rmse_m:8.4f}  {r.target:10}"
-        if r.name in truth:
-            est, true = extrinsics_matrix(r.extrinsics), truth[r.name]
-            line += f" {100 * np.linalg.norm(est[:3, 3] - true[:3, 3]):8.2f} {np.degrees(rotation_angle_rad(est[:3, :3], true[:3, :3])):10.3f}"
+        if errors[r.name]["error_cm"] is not None:
+            line += f" {errors[r.name]['error_cm']:8.2f} {errors[r.name]['error_deg']:10.3f}"
         print(line)
     refused = [r for r in results if r.fitness < params.calibration.min_fitness]
     if refused:
         names = ", ".join(f"{r.name} ({r.fitness:.2f})" for r in refused)
         raise UserError(f"calibration refused: fitness below min_fitness {params.calibration.min_fitness} for {names}; "
                         f"{args.out} not written")
-    by_name = {r.name: r.extrinsics for r in results}
-    sensors = [s.model_copy(update={"extrinsics": by_name[s.name]}) for s in params.sensors]
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(dump_yaml(params.model_copy(update={"sensors": sensors}), ["sensors"]))
@@ -71,11 +61,3 @@ def _set_threads(n: int) -> None:
     if hasattr(o3d.utility, "set_max_threads"):  # Open3D >= 0.20 (TBB); OMP_NUM_THREADS has no effect
         o3d.utility.set_max_threads(max(1, n))
 
-
-def _true_extrinsics(recording) -> dict:
-    from i2v_loc.geometry import extrinsics_matrix
-    from i2v_loc.params import load_params
-
-    if not recording.sensors_file.is_file():
-        return {}
-    return {s.name: extrinsics_matrix(s.extrinsics) for s in load_params(recording.sensors_file).sensors}

@@ -7,13 +7,14 @@ import sys
 from pathlib import Path
 
 from i2v_loc.cli import UserError
+from i2v_loc.params import DEFAULT_METHOD
 
 
 def register(sub) -> None:
     p = sub.add_parser("run", help="run the localization pipeline on a recording, write state lines (JSONL)")
     p.add_argument("recording", metavar="REC", help="recording folder (docs/formats.md)")
     p.add_argument("--out", required=True, help="output JSONL file of state lines (missing parent folders are created)")
-    p.add_argument("--method", default="paper", help="pipeline method (default: paper)")
+    p.add_argument("--method", default=DEFAULT_METHOD, help=f"pipeline method (default: {DEFAULT_METHOD})")
     p.add_argument("--sensors", help="comma-separated subset of the sensors, e.g. l1,l4 (default: all)")
     p.add_argument("--vehicles", help="comma-separated subset of the configured vehicles to look for (default: all)")
     p.add_argument("--params", action="append", default=[], metavar="FILE",

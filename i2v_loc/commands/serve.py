@@ -12,9 +12,9 @@ import time
 from pathlib import Path
 
 from i2v_loc.cli import UserError
+from i2v_loc.params import DEFAULT_METHOD
 
 DEFAULT_SOURCE = "sim:docking"
-DEFAULT_METHOD = "default"  # = service.core.DEFAULT_METHOD (not imported here: argparse stays light)
 
 
 def register(sub) -> None:

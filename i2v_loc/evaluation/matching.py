@@ -8,8 +8,8 @@ import math
 import numpy as np
 
 from i2v_loc.evaluation import dcap
-from i2v_loc.evaluation.groundtruth import UNITS, interpolate_ground_truth
-from i2v_loc.evaluation.metrics import angle_error_deg, associate
+from i2v_loc.evaluation.groundtruth import UNITS, UNLABELLED, interpolate_ground_truth
+from i2v_loc.evaluation.metrics import angle_error_deg, associate, within_success
 from i2v_loc.geometry import box_poses, rotation_angle_rad, wrap_deg
 from i2v_loc.params import Params
 
@@ -28,6 +28,13 @@ def vehicle_cost(gt: dict, est: dict) -> float:
     d = [_unit_distance(gt.get(u), est.get(u)) for u in UNITS]
     d = [x for x in d if np.isfinite(x)]
     return float(np.mean(d)) if d else math.inf
+
+
+def same_type(gt: dict, est: dict) -> bool:
+    """False when both name a vehicle type and the names differ: an estimate reported under a
+    type the vehicle is not is never a match (it is a false vehicle, the true one is missed)."""
+    truth, estimate = gt.get("vehicle"), est.get("vehicle")
+    return not truth or truth == UNLABELLED or not estimate or truth == estimate
 
 
 def _unit_fields(prefix: str, gt: dict | None, est: dict | None) -> dict:
@@ -87,6 +94,17 @@ def _dcap_fields(prefix: str, estimate: np.ndarray | None, truth: np.ndarray | N
             f"{prefix}_dT_m": float(np.linalg.norm(d)), f"{prefix}_rra_rad": rotation_angle_rad(estimate[:3, :3], truth[:3, :3])}
 
 
+def _success_fields(rec: dict) -> dict:
+    """Visible: every unit has >= MIN_POINTS_FOR_DETECTION GT points (the detection rule, both
+    units). Success: both units reported, each within the position and yaw thresholds, and the
+    hitch within its threshold (metrics.within_success)."""
+    both = all(rec[f"{u}_reported"] for u in UNITS)
+    success = both and within_success(
+        [rec[f"{u}_pos_err_m"] for u in UNITS], [rec[f"{u}_yaw_err_deg"] for u in UNITS], rec["hitch_err_deg"])
+    return {"visible": all(rec[f"{u}_eligible"] for u in UNITS),
+            "both_in_gt": all(rec[f"{u}_in_gt"] for u in UNITS), "both_reported": both, "success": bool(success)}
+
+
 def vehicle_record(gt: dict | None, est: dict | None, params: Params) -> dict:
     """Everything measured on one GT vehicle (or one false vehicle when ``gt`` is None)."""
     rec = {
@@ -102,6 +120,7 @@ def vehicle_record(gt: dict | None, est: dict | None, params: Params) -> dict:
     rec["hitch_gt_deg"] = _hitch(gt)
     rec["hitch_est_deg"] = _hitch(est)
     rec["hitch_err_deg"] = float(angle_error_deg(rec["hitch_est_deg"], rec["hitch_gt_deg"]))
+    rec.update(_success_fields(rec) if gt is not None else {})
     config = params.vehicles.get(rec["vehicle"]) if gt is not None else None
     truth = _front_to_rear(gt, config) if config is not None and _both_posed(gt) else None
     estimate = _front_to_rear(est, config) if truth is not None and _both_posed(est) else None
@@ -111,12 +130,16 @@ def vehicle_record(gt: dict | None, est: dict | None, params: Params) -> dict:
     return rec
 
 
-def match_frame(state: dict, gt_line: dict, params: Params, gate_m: float) -> list[dict]:
-    """Records of one state against the truth at its stamp (nearest-centre Hungarian, gated)."""
+def match_frame(state: dict, gt_line: dict, params: Params, gate_m: float, period_s: float = NAN) -> list[dict]:
+    """Records of one state against the truth at its stamp (nearest-centre Hungarian, gated; a
+    pair of different vehicle types is never matched). A false vehicle's record holds the frame
+    period (``false_s``) and, when it sits on a GT vehicle of another type, that type
+    (``wrong_type_of``)."""
     gts = gt_line.get("vehicles", [])
     ests = state.get("vehicles") or []
-    cost = np.array([[vehicle_cost(g, e) for e in ests] for g in gts]).reshape(len(gts), len(ests))
-    pairs = dict(associate(cost, gate_m))
+    distance = np.array([[vehicle_cost(g, e) for e in ests] for g in gts]).reshape(len(gts), len(ests))
+    typed = np.array([[same_type(g, e) for e in ests] for g in gts], bool).reshape(distance.shape)
+    pairs = dict(associate(np.where(typed, distance, math.inf), gate_m))
     matched = set(pairs.values())
     records = [vehicle_record(g, ests[pairs[i]] if i in pairs else None, params) for i, g in enumerate(gts)]
     maneuver = gts[0].get("maneuver", "none") if gts else "none"
@@ -124,6 +147,9 @@ def match_frame(state: dict, gt_line: dict, params: Params, gate_m: float) -> li
         if j not in matched:
             rec = vehicle_record(None, e, params)
             rec["maneuver"] = maneuver
+            rec["false_s"] = period_s
+            near = [i for i in range(len(gts)) if not typed[i, j] and distance[i, j] <= gate_m]
+            rec["wrong_type_of"] = gts[min(near, key=lambda i: distance[i, j])].get("vehicle") if near else None
             records.append(rec)
     for rec in records:
         rec["frame"] = state.get("frame")
@@ -139,18 +165,33 @@ def frame_row(state: dict, n_gt: int) -> dict:
     return row
 
 
+def frame_period_s(gt_times: np.ndarray, state_stamps: list) -> float:
+    """The recording's frame period: the median step of the GT stamps (else of the states')."""
+    for stamps in (np.asarray(gt_times, float), np.array([np.nan if s is None else s for s in state_stamps], float)):
+        steps = np.diff(stamps[np.isfinite(stamps)])
+        if steps.size:
+            return float(np.median(steps))
+    return NAN
+
+
 def match_states(states: list[dict], gt_lines: list[dict], params: Params, gate_m: float = 4.0) -> tuple[list[dict], list[dict]]:
     """Records and frame rows of a whole run. Each state is compared with the truth interpolated
     to its ``stamp_s`` (falling back to the GT line of the same frame when it has no stamp)."""
     records, frames = [], []
     by_frame = {line.get("frame"): line for line in gt_lines}
     times = np.array([line["stamp_s"] for line in gt_lines], float)
+    period = frame_period_s(times, [s.get("stamp_s") for s in states])
+    start = next((float(s["stamp_s"]) for s in states if s.get("stamp_s") is not None), NAN)
     for state in states:
         stamp = state.get("stamp_s")
         if stamp is not None and np.isfinite(stamp):
             gt = interpolate_ground_truth(gt_lines, float(stamp), times=times)
         else:
             gt = by_frame.get(state.get("frame"), {"vehicles": []})
-        records += match_frame(state, gt, params, gate_m)
+        frame_records = match_frame(state, gt, params, gate_m, period)
+        since = float(stamp) - start if stamp is not None else NAN
+        for rec in frame_records:
+            rec["since_start_s"] = since
+        records += frame_records
         frames.append(frame_row(state, len(gt.get("vehicles", []))))
     return records, frames

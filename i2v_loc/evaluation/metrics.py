@@ -12,6 +12,11 @@ from scipy.optimize import linear_sum_assignment
 from i2v_loc.geometry import rotation_angle_rad, wrap_deg
 
 HEADING_FLIP_DEG = 90.0
+# A frame is a success when both units are within these of the truth and the hitch too.
+SUCCESS_POSITION_M = 0.3
+SUCCESS_YAW_DEG = 2.0
+SUCCESS_HITCH_DEG = 2.0
+_TOLERANCE = 1e-9  # the thresholds are inclusive; float differences like 10.3 - 10.0 stay within
 
 
 def angle_error_deg(estimate_deg, truth_deg) -> np.ndarray:
@@ -49,6 +54,22 @@ def heading_flip_rate(yaw_errors_deg) -> float:
     e = np.asarray(yaw_errors_deg, float)
     e = e[np.isfinite(e)]
     return float(np.mean(np.abs(e) > HEADING_FLIP_DEG)) if e.size else float("nan")
+
+
+def within_success(position_errors_m, yaw_errors_deg, hitch_error_deg) -> bool:
+    """Every unit within SUCCESS_POSITION_M and SUCCESS_YAW_DEG (inclusive) and the hitch within
+    SUCCESS_HITCH_DEG; a missing (NaN) error fails."""
+    pos = np.abs(np.asarray(position_errors_m, float))
+    yaw = np.abs(np.asarray(yaw_errors_deg, float))
+    hitch = abs(float(hitch_error_deg))
+    return bool(np.all(pos <= SUCCESS_POSITION_M + _TOLERANCE) and np.all(yaw <= SUCCESS_YAW_DEG + _TOLERANCE)
+                and hitch <= SUCCESS_HITCH_DEG + _TOLERANCE)
+
+
+def flip_count(yaw_errors_deg) -> int:
+    """Frames whose |yaw error| exceeds 90 deg (the box faces backwards)."""
+    e = np.asarray(yaw_errors_deg, float)
+    return int((np.abs(e[np.isfinite(e)]) > HEADING_FLIP_DEG).sum())
 
 
 def transform_errors(estimate: np.ndarray, truth: np.ndarray) -> dict[str, np.ndarray]:

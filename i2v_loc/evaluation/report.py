@@ -12,6 +12,8 @@ from pathlib import Path
 import numpy as np
 
 from i2v_loc.evaluation import published as pub
+from i2v_loc.evaluation.calibration import LOUD, TRUE
+from i2v_loc.evaluation.metrics import SUCCESS_HITCH_DEG, SUCCESS_POSITION_M, SUCCESS_YAW_DEG
 from i2v_loc.evaluation.summary import MANEUVERS, summarize_groups
 from i2v_loc.geometry import box_corners
 
@@ -136,6 +138,10 @@ def render_markdown(summary: dict, plot_files: list[Path]) -> str:
         "field, dCAP's on camera-based trailer poses in CARLA (STT4AT); they are not the same data.",
         "",
     ]
+    calibration = summary.get("calibration") or {}
+    lines += _extrinsics_banner(calibration)
+    lines += _headline_table(res, methods, primary)
+    lines += _calibration_table(calibration)
     lines += _method_comparison(res, methods, primary)
     lines += _table2(res, methods, primary)
     lines += _detection_table(res, methods, primary)
@@ -151,8 +157,15 @@ def render_markdown(summary: dict, plot_files: list[Path]) -> str:
         "",
         "- RMSE per paper Eq. 14-16; every angle difference wrapped to (-180, 180]. Ground truth is",
         "  interpolated to each state's `stamp_s`. Heading flip: |yaw error| > 90 deg (counted in the RMSE).",
-        "- Estimated vehicles are matched to GT vehicles by the Hungarian method on the mean distance",
-        "  of their unit centres, within a gate; unmatched estimates are false vehicles.",
+        "- **Every RMSE is over the reported frames only**: a frame where the unit (for the hitch: either",
+        "  unit) is missing is excluded from it. Read it beside the coverage: the share of GT frames where",
+        "  the unit was reported (for the hitch, both units: `both_units_rate`).",
+        f"- Success: both units reported, each within {SUCCESS_POSITION_M} m and {SUCCESS_YAW_DEG} deg and the hitch within",
+        f"  {SUCCESS_HITCH_DEG} deg (inclusive), of the frames where the vehicle is visible (both units with >= 30 GT points).",
+        "- A vehicle reported under a type it is not is no match: it is a false vehicle and the true one is",
+        "  missed. False vehicle-seconds: unmatched reported vehicles x frame period, summed over frames.",
+        "- Estimated vehicles are matched to GT vehicles of the same type by the Hungarian method on the",
+        "  mean distance of their unit centres, within a gate; unmatched estimates are false vehicles.",
         "- Detection rate: frames where the unit is reported, of those where the GT gives it >= 30 points.",
         "- dCAP metrics on T_F->B (tractor front sensor -> trailer rear sensor, docs/evaluation.md):",
         "  ΔT mean translation error (m), |Δx| |Δy| |Δz| in the rear sensor's frame, RRA mean geodesic",
@@ -163,14 +176,108 @@ def render_markdown(summary: dict, plot_files: list[Path]) -> str:
 
 
 _COMPARE_ROWS = [
-    ("truck position RMSE [m]", "truck_pos_rmse_m", 3), ("truck yaw RMSE [deg]", "truck_yaw_rmse_deg", 2),
-    ("trailer position RMSE [m]", "trailer_pos_rmse_m", 3), ("trailer yaw RMSE [deg]", "trailer_yaw_rmse_deg", 2),
-    ("hitch angle RMSE [deg]", "hitch_rmse_deg", 2), ("heading flips", "heading_flip_rate", None),
+    ("success rate", "success_rate", None), ("truck coverage", "truck_coverage", None),
+    ("trailer coverage", "trailer_coverage", None), ("both units (hitch coverage)", "both_units_rate", None),
+    ("truck position RMSE [m], reported frames only", "truck_pos_rmse_m", 3),
+    ("truck yaw RMSE [deg], reported frames only", "truck_yaw_rmse_deg", 2),
+    ("trailer position RMSE [m], reported frames only", "trailer_pos_rmse_m", 3),
+    ("trailer yaw RMSE [deg], reported frames only", "trailer_yaw_rmse_deg", 2),
+    ("hitch angle RMSE [deg], both-reported frames only", "hitch_rmse_deg", 2),
+    ("heading flips", "heading_flip_rate", None), ("truck flip frames", "truck_flip_frames", 0),
+    ("trailer flip frames", "trailer_flip_frames", 0),
     ("truck detection rate", "truck_detection_rate", None), ("trailer detection rate", "trailer_detection_rate", None),
     ("ΔT [m]", "delta_T_m", 3), ("RRA [rad]", "rra_rad", 4), ("false vehicles", "false_vehicles", 0),
+    ("false vehicle-seconds", "false_vehicle_s", 1), ("  of which wrong type", "wrong_type_vehicle_s", 1),
+    ("  of which in the first 5 s", "false_vehicle_s_first_5s", 1),
     ("vehicle id switches", "vehicle_id_switches", 0), ("latency mean [ms]", "latency_ms_mean", 1),
     ("latency p95 [ms]", "latency_ms_p95", 1),
 ]
+
+
+def _extrinsics_banner(calibration: dict) -> list[str]:
+    if not calibration:
+        return []
+    entries = list(calibration.values())
+    if all(c["status"] == TRUE for c in entries):
+        return ["**Sensor extrinsics: the recordings' TRUE extrinsics and clock offsets (`--true-extrinsics`,",
+                "diagnosis only; a deployment calibrates).**", ""]
+    lines = ["Sensor extrinsics: each recording calibrated from its `sensors_guess.yaml` as a deployment would",
+             "(`i2v-loc calibrate`, clock offsets as in the guess); errors against the truth below the first table.", ""]
+    for c in entries:
+        if c["status"] in LOUD:
+            lines += [f"> **WARNING — {c['recording']}: {c['message']}**", ""]
+    return lines
+
+
+def _pct_of(s: dict, key: str) -> str:
+    return _pct(s.get(key))
+
+
+def _headline_table(res, methods, primary) -> list[str]:
+    lines = [
+        "## Summary per vehicle",
+        "",
+        f"Success: both units within {SUCCESS_POSITION_M} m / {SUCCESS_YAW_DEG}° and the hitch within "
+        f"{SUCCESS_HITCH_DEG}°, of the frames the vehicle is visible. Coverage: GT frames with the unit reported. "
+        "**RMSEs exclude the frames where the unit was missed** (the hitch: either unit). False vehicle-s: "
+        "vehicles reported under this name that match no GT vehicle, in any recording.",
+        "",
+        "| Vehicle | Method | Success | Coverage truck / trailer / both | Hitch RMSE [deg] (reported only) "
+        "| Yaw RMSE truck / trailer [deg] (reported only) | Position RMSE truck / trailer [m] (reported only) "
+        "| Flip frames truck / trailer | False vehicle-s |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
+    for vehicle in _vehicles(res, methods, primary):
+        for m in methods:
+            s = res[m][primary]["by_vehicle"].get(vehicle)
+            if s is None:
+                continue
+            if not s["gt_vehicle_frames"]:
+                lines.append(f"| {_name(vehicle)} (not in the truth) | {m} | – | – | – | – | – | – "
+                             f"| {_f(s['false_vehicle_s'], 1)} |")
+                continue
+            lines.append(
+                f"| {_name(vehicle)} | {m} | {_pct_of(s, 'success_rate')} ({s['success_frames']}/{s['visible_frames']}) "
+                f"| {_pct_of(s, 'truck_coverage')} / {_pct_of(s, 'trailer_coverage')} / {_pct_of(s, 'both_units_rate')} "
+                f"| {_f(s['hitch_rmse_deg'])} | {_pair(s['truck_yaw_rmse_deg'], s['trailer_yaw_rmse_deg'])} "
+                f"| {_pair(s['truck_pos_rmse_m'], s['trailer_pos_rmse_m'], 3)} "
+                f"| {s['truck_flip_frames']} / {s['trailer_flip_frames']} | {_f(s['false_vehicle_s'], 1)} |"
+            )
+    for m in methods:
+        s = res[m][primary]["overall"]
+        lines.append(
+            f"| **all** | {m} | {_pct_of(s, 'success_rate')} ({s['success_frames']}/{s['visible_frames']}) "
+            f"| {_pct_of(s, 'truck_coverage')} / {_pct_of(s, 'trailer_coverage')} / {_pct_of(s, 'both_units_rate')} "
+            f"| {_f(s['hitch_rmse_deg'])} | {_pair(s['truck_yaw_rmse_deg'], s['trailer_yaw_rmse_deg'])} "
+            f"| {_pair(s['truck_pos_rmse_m'], s['trailer_pos_rmse_m'], 3)} "
+            f"| {s['truck_flip_frames']} / {s['trailer_flip_frames']} | {_f(s['false_vehicle_s'], 1)} |"
+        )
+    return lines + [""]
+
+
+def _calibration_table(calibration: dict) -> list[str]:
+    entries = [c for c in calibration.values() if c["status"] != TRUE]
+    if not entries:
+        return []
+    lines = ["## Calibration: each sensor's error against the truth", "",
+             "Used = the extrinsics the evaluation ran with (the calibrated ones, or the guess when refused).", "",
+             "| Recording | Status | Sensor | Fitness | Used: error [cm] / [deg] | Calibrated [cm] / [deg] "
+             "| Guess [cm] / [deg] | Clock offset error [ms] |",
+             "|---|---|---|---|---|---|---|---|"]
+    for c in entries:
+        status = c["status"] + (" (cached)" if c.get("cached") else "")
+        if c["status"] in LOUD:
+            status = f"**{c['status'].upper()}**"
+        if not c["per_sensor"]:
+            lines.append(f"| {c['recording']} | {status} | – | – | – | – | – | – |")
+        for row in c["per_sensor"]:
+            lines.append(
+                f"| {c['recording']} | {status} | {row['sensor']} | {_f(row.get('fitness'), 3)} "
+                f"| {_pair(row.get('error_cm'), row.get('error_deg'))} "
+                f"| {_pair(row.get('calibrated_error_cm'), row.get('calibrated_error_deg'))} "
+                f"| {_pair(row.get('guess_error_cm'), row.get('guess_error_deg'))} | {_f(row.get('clock_error_ms'), 2)} |"
+            )
+    return lines + [""]
 
 
 def _method_comparison(res, methods, primary) -> list[str]:
@@ -194,6 +301,8 @@ def _vehicles(res, methods, primary) -> list[str]:
 def _table2(res, methods, primary) -> list[str]:
     lines = [
         "## Table 2 layout: overall metrics per vehicle",
+        "",
+        "RMSEs over the frames where the unit (hitch: both units) was reported only; coverage in the first table.",
         "",
         "| Platform | Source | Frames | Truck RMSE pos [m] / orient [deg] | Trailer RMSE pos [m] / orient [deg] "
         "| RMSE HAE [deg] | Inference time [ms] | Heading flips |",
@@ -278,9 +387,9 @@ def _maneuver_table(res, methods, primary) -> list[str]:
     lines = [
         "## Per maneuver",
         "",
-        "| Maneuver | Method | Frames | Truck pos / orient | Trailer pos / orient | HAE [deg] | Flips | ΔT [m] "
-        "| RRA [rad] | Truck / trailer detected |",
-        "|---|---|---|---|---|---|---|---|---|---|",
+        "| Maneuver | Method | Frames | Success | Both units | Truck pos / orient | Trailer pos / orient "
+        "| HAE [deg] | Flips | ΔT [m] | RRA [rad] | Truck / trailer detected | False vehicle-s |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     names = {k for m in methods for k in res[m][primary]["by_maneuver"]}
     order = list(MANEUVERS)
@@ -290,10 +399,12 @@ def _maneuver_table(res, methods, primary) -> list[str]:
             if s is None or not s["gt_vehicle_frames"]:
                 continue
             lines.append(
-                f"| {man} | {m} | {s['gt_vehicle_frames']} | {_pair(s['truck_pos_rmse_m'], s['truck_yaw_rmse_deg'])} "
+                f"| {man} | {m} | {s['gt_vehicle_frames']} | {_pct(s['success_rate'])} | {_pct(s['both_units_rate'])} "
+                f"| {_pair(s['truck_pos_rmse_m'], s['truck_yaw_rmse_deg'])} "
                 f"| {_pair(s['trailer_pos_rmse_m'], s['trailer_yaw_rmse_deg'])} | {_f(s['hitch_rmse_deg'])} "
                 f"| {_pct(s['heading_flip_rate'])} | {_f(s['delta_T_m'], 3)} | {_f(s['rra_rad'], 4)} "
-                f"| {_pct(s['truck_detection_rate'])} / {_pct(s['trailer_detection_rate'])} |"
+                f"| {_pct(s['truck_detection_rate'])} / {_pct(s['trailer_detection_rate'])} "
+                f"| {_f(s['false_vehicle_s'], 1)} |"
             )
     return lines + [""]
 

@@ -9,6 +9,7 @@ import numpy as np
 from i2v_loc.evaluation import metrics as m
 
 TASK_KEYS = ("method", "subset", "recording")
+EARLY_S = 5.0  # false vehicles cluster in the first seconds (no background, no track history yet)
 MANEUVERS = ("straight", "single_turn", "long_curve", "u_turn", "lane_change", "roundabout",
              "reverse_docking", "standstill")
 
@@ -41,6 +42,17 @@ def _switches(records: list[dict]) -> dict[str, int]:
     return out
 
 
+def _false_seconds(false: list[dict]) -> dict[str, float]:
+    """Vehicle-seconds of false vehicles (each false record lasts one frame period), of those
+    reported under the type of a GT vehicle they sit on, and of those in the first EARLY_S."""
+    seconds = column(false, "false_s")
+    wrong = np.array([r.get("wrong_type_of") is not None for r in false], bool)
+    early = column(false, "since_start_s") < EARLY_S
+    total = (lambda mask: float(seconds[mask].sum()) if mask.any() else 0.0)
+    return {"false_vehicle_s": total(np.ones(len(false), bool)), "wrong_type_vehicle_s": total(wrong),
+            "false_vehicle_s_first_5s": total(early)}
+
+
 def _latency(frame_rows: list[dict]) -> dict[str, float]:
     stages = sorted({k for row in frame_rows for k in row if k.startswith("latency_")})
     out = {}
@@ -67,6 +79,13 @@ def summarize(records: list[dict], frame_rows: list[dict]) -> dict:
         out[f"{unit}_pos_rmse_m"] = m.rmse(column(gt, f"{unit}_pos_err_m"))
         out[f"{unit}_yaw_rmse_deg"] = m.rmse(yaw_err)
         out[f"{unit}_heading_flip_rate"] = m.heading_flip_rate(yaw_err)
+        out[f"{unit}_flip_frames"] = m.flip_count(yaw_err)
+        out[f"{unit}_coverage"] = _rate(_flag(gt, f"{unit}_reported"), _flag(gt, f"{unit}_in_gt"))
+    out["both_units_rate"] = _rate(_flag(gt, "both_reported"), _flag(gt, "both_in_gt"))
+    visible = _flag(gt, "visible")
+    out["visible_frames"] = int(visible.sum())
+    out["success_frames"] = int((_flag(gt, "success") & visible).sum())
+    out["success_rate"] = _rate(_flag(gt, "success"), visible)
     out["heading_flip_rate"] = m.heading_flip_rate(np.concatenate(flip_errors)) if gt else float("nan")
     hitch = column(gt, "hitch_err_deg")
     out["hitch_rmse_deg"] = m.rmse(hitch)
@@ -83,6 +102,7 @@ def summarize(records: list[dict], frame_rows: list[dict]) -> dict:
     out.update(_switches(records))
     out["false_vehicles"] = sum(1 for r in records if r["kind"] == "false")
     out["false_vehicles_per_frame"] = out["false_vehicles"] / len(frame_rows) if frame_rows else float("nan")
+    out.update(_false_seconds([r for r in records if r["kind"] == "false"]))
     out.update(_latency(frame_rows))
     return out
 

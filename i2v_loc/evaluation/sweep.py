@@ -14,7 +14,7 @@ from i2v_loc.params import ParamsError, Params, apply_patch, dump_yaml, read_yam
 
 RANK_KEY = "hitch_rmse_deg"
 TIE_KEYS = ("trailer_yaw_rmse_deg", "truck_yaw_rmse_deg")
-SHOWN = ("hitch_rmse_deg", "truck_pos_rmse_m", "trailer_pos_rmse_m", "truck_yaw_rmse_deg", "trailer_yaw_rmse_deg",
+SHOWN = ("hitch_rmse_deg", "success_rate", "both_units_rate", "false_vehicle_s", "truck_pos_rmse_m", "trailer_pos_rmse_m", "truck_yaw_rmse_deg", "trailer_yaw_rmse_deg",
          "heading_flip_rate", "truck_detection_rate", "trailer_detection_rate", "delta_T_m", "rra_rad",
          "false_vehicles", "latency_ms_p50")
 

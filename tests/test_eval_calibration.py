@@ -1,0 +1,129 @@
+"""The evaluation calibrates each recording from its guess once (cached) and measures the
+calibration's error against the truth."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import pytest
+
+from i2v_loc.evaluation import calibration as cal
+from i2v_loc.evaluation.report import render_markdown
+from i2v_loc.evaluation.runner import recording_params
+from i2v_loc.params import Extrinsics, SensorConfig, load_params
+from i2v_loc.stages.calibration import SensorCalibration
+
+SAMPLE = Path(__file__).resolve().parents[1] / "samples" / "volvo_fh_u_turn"
+TRUTH = load_params(SAMPLE / "sensors.yaml")
+GUESS = load_params(SAMPLE / "sensors_guess.yaml")
+
+
+def _perturbed(extrinsics: Extrinsics, dx=0.0, dy=0.0, dyaw=0.0) -> Extrinsics:
+    return extrinsics.model_copy(update={"x_m": extrinsics.x_m + dx, "y_m": extrinsics.y_m + dy,
+                                         "yaw_deg": extrinsics.yaw_deg + dyaw})
+
+
+@pytest.fixture
+def fake_calibration(monkeypatch):
+    """The ICP replaced by a counter returning the truth with l2 off by (3, -4) cm and 1.5 deg."""
+    calls = []
+    fitness = {"l3": 0.9}
+
+    def fake(recording, params):
+        calls.append(params.calibration.frames)
+        results = []
+        for sensor in params.sensors:
+            true = TRUTH.sensor(sensor.name).extrinsics
+            ext = _perturbed(true, 0.03, -0.04, 1.5) if sensor.name == "l2" else true
+            results.append(SensorCalibration(sensor.name, ext, fitness.get(sensor.name, 0.9), 0.05, "reference"))
+        return results, any(r.fitness < params.calibration.min_fitness for r in results)
+
+    monkeypatch.setattr(cal, "run_calibration", fake)
+    return calls, fitness
+
+
+def test_extrinsics_error_of_a_known_perturbation():
+    true = TRUTH.sensor("l3").extrinsics
+    cm, deg = cal.extrinsics_error(_perturbed(true, 0.03, -0.04, 1.5), true)
+    assert cm == pytest.approx(5.0) and deg == pytest.approx(1.5)
+    tilted = true.model_copy(update={"roll_deg": true.roll_deg + 2.0, "z_m": true.z_m + 0.12})
+    cm, deg = cal.extrinsics_error(tilted, true)
+    assert cm == pytest.approx(12.0) and deg == pytest.approx(2.0)
+
+
+def test_sensor_errors_include_the_clock_offset():
+    used = [SensorConfig(name="l1", extrinsics=TRUTH.sensor("l1").extrinsics, time_offset_s=0.0)]
+    (row,) = cal.sensor_errors(used, TRUTH.sensors)
+    assert row["error_cm"] == pytest.approx(0.0) and row["error_deg"] == pytest.approx(0.0, abs=1e-6)
+    assert row["clock_error_ms"] == pytest.approx(-1000.0 * TRUTH.sensor("l1").time_offset_s)
+
+
+def test_calibration_is_cached_and_its_errors_measured(fake_calibration, tmp_path):
+    calls, _ = fake_calibration
+    first = cal.calibrate_recording(str(SAMPLE), {}, tmp_path)
+    second = cal.calibrate_recording(str(SAMPLE), {}, tmp_path)
+    assert len(calls) == 1  # the second evaluation read the cache
+    assert first["status"] == second["status"] == cal.CALIBRATED
+    assert not first["cached"] and second["cached"]
+    assert second["sensors"] == first["sensors"]
+    rows = {r["sensor"]: r for r in second["per_sensor"]}
+    assert rows["l2"]["error_cm"] == pytest.approx(5.0) and rows["l2"]["error_deg"] == pytest.approx(1.5)
+    assert rows["l3"]["error_cm"] == pytest.approx(0.0, abs=1e-6)
+    # the sample's guess is 30 cm off on each axis for l2..l4
+    assert rows["l3"]["guess_error_cm"] == pytest.approx(100 * math.sqrt(3 * 0.3**2))
+    # other calibration parameters are another calibration
+    cal.calibrate_recording(str(SAMPLE), {"calibration": {"frames": 3}}, tmp_path)
+    assert calls == [5, 3]
+
+
+def test_tasks_run_with_the_calibrated_sensors_and_the_guess_clock_offsets(fake_calibration, tmp_path):
+    from i2v_loc.commands.eval import build_tasks
+
+    calibrations = cal.calibrate_recordings([SAMPLE], {}, cache_dir=tmp_path, progress=False)
+    (task,) = build_tasks([SAMPLE], ["default"], False, {}, None, 4.0, calibrations)
+    params = recording_params(task.params, task.recording, task.sensors)
+    assert params.sensor("l2").extrinsics == _perturbed(TRUTH.sensor("l2").extrinsics, 0.03, -0.04, 1.5)
+    assert params.sensor("l3").extrinsics == TRUTH.sensor("l3").extrinsics
+    assert params.sensor("l3").time_offset_s == GUESS.sensor("l3").time_offset_s == 0.0
+    # --params files still come last and win
+    (task,) = build_tasks([SAMPLE], ["default"], False, {"tracking": {"max_distance_m": 2.5}}, None, 4.0, calibrations)
+    params = recording_params(task.params, task.recording, task.sensors)
+    assert params.tracking.max_distance_m == 2.5 and params.sensor("l3").extrinsics == TRUTH.sensor("l3").extrinsics
+
+
+def test_a_refused_calibration_evaluates_with_the_guess_and_says_so(fake_calibration, tmp_path):
+    _, fitness = fake_calibration
+    fitness["l3"] = 0.1
+    result = cal.calibrate_recording(str(SAMPLE), {}, tmp_path)
+    assert result["status"] == cal.REFUSED and "l3 (0.10)" in result["message"]
+    assert result["sensors"] == [s.model_dump(mode="json") for s in GUESS.sensors]
+    rows = {r["sensor"]: r for r in result["per_sensor"]}
+    assert rows["l2"]["error_cm"] == pytest.approx(rows["l2"]["guess_error_cm"])  # the guess is what is used
+    assert rows["l2"]["calibrated_error_cm"] == pytest.approx(5.0)
+    summary = {"recordings": ["volvo_fh_u_turn"], "methods": ["default"], "subsets": ["all"], "primary_subset": "all",
+               "results": {"default": {"all": _empty_groups()}}, "calibration": {str(SAMPLE): result}}
+    text = render_markdown(summary, [])
+    assert "WARNING — volvo_fh_u_turn: CALIBRATION REFUSED" in text and "**REFUSED**" in text
+
+
+def test_true_extrinsics_skip_the_calibration(fake_calibration, tmp_path):
+    calls, _ = fake_calibration
+    calibrations = cal.calibrate_recordings([SAMPLE], {}, true_extrinsics=True, cache_dir=tmp_path, progress=False)
+    assert calls == [] and calibrations[str(SAMPLE)]["status"] == cal.TRUE
+    assert cal.task_patch({}, calibrations[str(SAMPLE)]) == {}  # REC/sensors.yaml as before
+
+
+def test_the_real_calibration_of_the_sample_is_within_centimetres(tmp_path):
+    result = cal.calibrate_recording(str(SAMPLE), {}, tmp_path)
+    assert result["status"] == cal.CALIBRATED
+    for row in result["per_sensor"]:  # measured: 0.4-0.7 cm, <= 0.02 deg; the guess is 52 cm / 3.5 deg off
+        assert row["error_cm"] < 2.0 and row["error_deg"] < 0.1, row
+    assert max(r["guess_error_cm"] for r in result["per_sensor"]) > 50.0
+
+
+def _empty_groups() -> dict:
+    from i2v_loc.evaluation.summary import summarize
+
+    s = summarize([], [])
+    return {"overall": s, "by_vehicle": {}, "by_maneuver": {}, "by_recording": {}}
