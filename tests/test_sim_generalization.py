@@ -82,7 +82,8 @@ def test_vehicles_file_round_trip_names_unknown_and_hides_the_dimensions(tmp_pat
     vehicles_file = _write(tmp_path / "vehicles.yaml", {"vehicles": {"trailer_10m5": ODD_VEHICLE}})
     out = tmp_path / "rec"
     assert main(["sim", "--vehicles-file", str(vehicles_file), "--vehicle", "trailer_10m5", "--scenario", "straight",
-                 "--seed", "5", "--start", "3", "--duration", "0.3", "--columns", "512", "--out", str(out)]) == 0
+                 "--seed", "5", "--start", "3", "--duration", "0.3", "--columns", "512", "--out", str(out), "--preview"]) == 0
+    assert (out / "preview.png").stat().st_size > 10_000  # --preview without a file: preview.png in the recording
     rec = Recording(out)
     gt = rec.ground_truth()
     assert len(gt) == 3

@@ -26,7 +26,8 @@ def register(sub) -> None:
     p.add_argument("--slope-deg", type=float, default=0.0, help="ground grade along +x in degrees")
     p.add_argument("--no-distractors", action="store_true", help="no car and pedestrians")
     p.add_argument("--clutter-near", action="store_true", help="containers and parked trailers right beside the vehicles' paths")
-    p.add_argument("--preview", help="write a bird's-eye-view PNG of the middle frame here")
+    p.add_argument("--preview", nargs="?", const="", metavar="PNG",
+                   help="write a bird's-eye-view PNG of the middle frame here (no value: preview.png in each recording)")
     p.add_argument("--suite", help="generate every entry of a suite (name in samples/suites/ or a YAML file) into --out")
     p.set_defaults(func=_run)
 
@@ -50,7 +51,8 @@ def _run(args) -> int:
     entry = {"vehicles": vehicles, "scenario": args.scenario, "seed": args.seed, "duration_s": args.duration,
              "start_s": args.start, "columns": args.columns, "slope_deg": args.slope_deg, "distractors": not args.no_distractors,
              "clutter_near": args.clutter_near, "extra_vehicles": extra}
-    _generate(entry, params, Path(args.out), args.preview)
+    preview = args.preview or (str(Path(args.out) / "preview.png") if args.preview == "" else None)
+    _generate(entry, params, Path(args.out), preview)
     return 0
 
 
@@ -101,7 +103,7 @@ def _run_suite(args, params) -> int:
     if len(set(names)) != len(names):
         raise UserError(f"{suite_file}: recording names must be unique, got {', '.join(sorted({n for n in names if names.count(n) > 1}))}")
     for name, clean, case_params in cases:
-        _generate(clean, case_params, out / name, str(out / name / "preview.png") if args.preview else None)
+        _generate(clean, case_params, out / name, str(out / name / "preview.png") if args.preview is not None else None)
     print(f"suite {suite_file.stem}: {len(entries)} recordings in {out}")
     return 0
 
