@@ -205,6 +205,14 @@ def test_suite_refuses_unknown_keys_and_vehicles(tmp_path, capsys):
     unknown = _write(tmp_path / "unknown.yaml", {"recordings": [{"scenario": "straight", "vehicle": "trailer_16m"}]})
     assert main(["sim", "--suite", str(unknown), "--out", str(tmp_path / "o")]) == 2
     assert "entry 0: unknown vehicle(s) trailer_16m" in capsys.readouterr().err
+    steep = _write(tmp_path / "steep.yaml", {"recordings": [{"scenario": "straight", "slope_deg": 12.0}]})
+    assert main(["sim", "--suite", str(steep), "--out", str(tmp_path / "o")]) == 2
+    assert "entry 0: slope_deg must be within ±10 degrees, got 12.0" in capsys.readouterr().err
+    late = _write(tmp_path / "late.yaml", {"recordings": [{"scenario": "straight", "duration_s": 0.2, "columns": 512},
+                                                          {"scenario": "parking"}]})
+    assert main(["sim", "--suite", str(late), "--out", str(tmp_path / "o")]) == 2
+    assert "entry 1: unknown scenario 'parking'" in capsys.readouterr().err
+    assert not (tmp_path / "o").exists()  # checked before anything is generated
 
 
 def test_two_vehicles_with_clutter_beside_them_and_no_collision(suite_recordings):

@@ -44,16 +44,22 @@ def _run(args) -> int:
     unknown = [v for v in vehicles if v not in params.vehicles and v not in extra]
     if unknown:
         raise UserError(f"unknown vehicle(s) {', '.join(unknown)}; known: {', '.join([*params.vehicles, *extra])}")
-    if args.duration <= 0 or args.duration > 600:
-        raise UserError(f"--duration must be in (0, 600] seconds, got {args.duration}")
-    if abs(args.slope_deg) > 10:
-        raise UserError(f"--slope-deg must be within ±10 degrees, got {args.slope_deg}")
+    _check_ranges(args.duration, args.slope_deg, "--duration", "--slope-deg")
     entry = {"vehicles": vehicles, "scenario": args.scenario, "seed": args.seed, "duration_s": args.duration,
              "start_s": args.start, "columns": args.columns, "slope_deg": args.slope_deg, "distractors": not args.no_distractors,
              "clutter_near": args.clutter_near, "extra_vehicles": extra}
     preview = args.preview or (str(Path(args.out) / "preview.png") if args.preview == "" else None)
     _generate(entry, params, Path(args.out), preview)
     return 0
+
+
+def _check_ranges(duration_s, slope_deg, duration_name: str, slope_name: str) -> None:
+    from i2v_loc.cli import UserError
+
+    if not isinstance(duration_s, (int, float)) or not 0 < duration_s <= 600:
+        raise UserError(f"{duration_name} must be in (0, 600] seconds, got {duration_s}")
+    if not isinstance(slope_deg, (int, float)) or abs(slope_deg) > 10:
+        raise UserError(f"{slope_name} must be within ±10 degrees, got {slope_deg}")
 
 
 def _extra_vehicles(path, params) -> dict:
@@ -117,11 +123,16 @@ def suite_case(suite_file: Path, i: int, entry, params, vehicles_file: str | Non
     unknown keys, missing files and unknown vehicles are errors naming the suite file and entry."""
     from i2v_loc.cli import UserError
     from i2v_loc.params import load_params
+    from i2v_loc.sim.maneuvers import SCENARIOS
 
     allowed = SUITE_KEYS | SUITE_FILE_KEYS | {"vehicle", "name"}
     if not isinstance(entry, dict) or set(entry) - allowed or "scenario" not in entry:
         got = sorted(entry) if isinstance(entry, dict) else entry
         raise UserError(f"{suite_file}: entry {i} needs 'scenario' and may have {sorted(allowed)}; got {got}")
+    if entry["scenario"] not in SCENARIOS:
+        raise UserError(f"{suite_file}: entry {i}: unknown scenario {entry['scenario']!r}; choose one of {', '.join(SCENARIOS)}")
+    where = f"{suite_file}: entry {i}:"
+    _check_ranges(entry.get("duration_s", 30.0), entry.get("slope_deg", 0.0), f"{where} duration_s", f"{where} slope_deg")
     files = {k: suite_file.parent / entry[k] for k in SUITE_FILE_KEYS if k in entry}
     if "sensors" in files:
         params = load_params(files["sensors"])
