@@ -19,10 +19,15 @@ def register(sub) -> None:
     p.add_argument("--start", type=float, default=0.0, help="skip this many seconds of the maneuver")
     p.add_argument("--out", required=True, help="recording directory to write")
     p.add_argument("--sensors", help="parameter file with the sensors (default: the paper's field)")
+    p.add_argument("--vehicles-file", metavar="FILE",
+                   help="extra vehicles for the simulator only (format of params/vehicles.yaml); the recording "
+                        "does not give the pipeline their dimensions and the ground truth names them unknown_<name>")
     p.add_argument("--columns", type=int, choices=[512, 1024, 2048], help="columns of every sensor")
     p.add_argument("--slope-deg", type=float, default=0.0, help="ground grade along +x in degrees")
     p.add_argument("--no-distractors", action="store_true", help="no car and pedestrians")
-    p.add_argument("--preview", help="write a bird's-eye-view PNG of the middle frame here")
+    p.add_argument("--clutter-near", action="store_true", help="containers and parked trailers right beside the vehicles' paths")
+    p.add_argument("--preview", nargs="?", const="", metavar="PNG",
+                   help="write a bird's-eye-view PNG of the middle frame here (no value: preview.png in each recording)")
     p.add_argument("--suite", help="generate every entry of a suite (name in samples/suites/ or a YAML file) into --out")
     p.set_defaults(func=_run)
 
@@ -34,18 +39,33 @@ def _run(args) -> int:
     params = load_params(args.sensors) if args.sensors else load_params()
     if args.suite:
         return _run_suite(args, params)
+    extra = _extra_vehicles(args.vehicles_file, params)
     vehicles = [v.strip() for v in (args.vehicles or args.vehicle).split(",") if v.strip()]
-    unknown = [v for v in vehicles if v not in params.vehicles]
+    unknown = [v for v in vehicles if v not in params.vehicles and v not in extra]
     if unknown:
-        raise UserError(f"unknown vehicle(s) {', '.join(unknown)}; known: {', '.join(params.vehicles)}")
-    if args.duration <= 0 or args.duration > 600:
-        raise UserError(f"--duration must be in (0, 600] seconds, got {args.duration}")
-    if abs(args.slope_deg) > 10:
-        raise UserError(f"--slope-deg must be within ±10 degrees, got {args.slope_deg}")
+        raise UserError(f"unknown vehicle(s) {', '.join(unknown)}; known: {', '.join([*params.vehicles, *extra])}")
+    _check_ranges(args.duration, args.slope_deg, "--duration", "--slope-deg")
     entry = {"vehicles": vehicles, "scenario": args.scenario, "seed": args.seed, "duration_s": args.duration,
-             "start_s": args.start, "columns": args.columns, "slope_deg": args.slope_deg, "distractors": not args.no_distractors}
-    _generate(entry, params, Path(args.out), args.preview)
+             "start_s": args.start, "columns": args.columns, "slope_deg": args.slope_deg, "distractors": not args.no_distractors,
+             "clutter_near": args.clutter_near, "extra_vehicles": extra}
+    preview = args.preview or (str(Path(args.out) / "preview.png") if args.preview == "" else None)
+    _generate(entry, params, Path(args.out), preview)
     return 0
+
+
+def _check_ranges(duration_s, slope_deg, duration_name: str, slope_name: str) -> None:
+    from i2v_loc.cli import UserError
+
+    if not isinstance(duration_s, (int, float)) or not 0 < duration_s <= 600:
+        raise UserError(f"{duration_name} must be in (0, 600] seconds, got {duration_s}")
+    if not isinstance(slope_deg, (int, float)) or abs(slope_deg) > 10:
+        raise UserError(f"{slope_name} must be within ±10 degrees, got {slope_deg}")
+
+
+def _extra_vehicles(path, params) -> dict:
+    from i2v_loc.sim.generate import load_vehicles_file
+
+    return load_vehicles_file(path, known=params.vehicles) if path else {}
 
 
 def _generate(entry: dict, params, out: Path, preview: str | None, position: int = 0) -> None:
@@ -84,15 +104,45 @@ def _run_suite(args, params) -> int:
     if not isinstance(entries, list) or not entries:
         raise UserError(f"{suite_file}: expected a non-empty list under 'recordings'")
     out = Path(args.out)
-    allowed = {"vehicles", "scenario", "seed", "duration_s", "start_s", "columns", "slope_deg", "distractors"}
-    for i, entry in enumerate(entries):
-        extra = set(entry) - allowed - {"vehicle", "name"}
-        if extra or "scenario" not in entry:
-            raise UserError(f"{suite_file}: entry {i} needs 'scenario' and may have {sorted(allowed | {'vehicle', 'name'})}; got {sorted(entry)}")
-        vehicles = entry.get("vehicles") or [entry.get("vehicle", "man_tgx")]
-        name = entry.get("name") or f"{'_'.join(vehicles)}_{entry['scenario']}"
-        clean = {k: v for k, v in entry.items() if k in allowed}
-        clean["vehicles"] = vehicles
-        _generate(clean, params, out / name, str(out / name / "preview.png") if args.preview else None)
+    cases = [suite_case(suite_file, i, entry, params, args.vehicles_file) for i, entry in enumerate(entries)]
+    names = [name for name, _, _ in cases]
+    if len(set(names)) != len(names):
+        raise UserError(f"{suite_file}: recording names must be unique, got {', '.join(sorted({n for n in names if names.count(n) > 1}))}")
+    for name, clean, case_params in cases:
+        _generate(clean, case_params, out / name, str(out / name / "preview.png") if args.preview is not None else None)
     print(f"suite {suite_file.stem}: {len(entries)} recordings in {out}")
     return 0
+
+
+SUITE_KEYS = {"vehicles", "scenario", "seed", "duration_s", "start_s", "columns", "slope_deg", "distractors", "clutter_near"}
+SUITE_FILE_KEYS = {"sensors", "vehicles_file"}  # paths relative to the suite file
+
+
+def suite_case(suite_file: Path, i: int, entry, params, vehicles_file: str | None = None) -> tuple[str, dict, object]:
+    """Recording name, SimConfig arguments and sensor parameters of one suite entry, checked:
+    unknown keys, missing files and unknown vehicles are errors naming the suite file and entry."""
+    from i2v_loc.cli import UserError
+    from i2v_loc.params import load_params
+    from i2v_loc.sim.maneuvers import SCENARIOS
+
+    allowed = SUITE_KEYS | SUITE_FILE_KEYS | {"vehicle", "name"}
+    if not isinstance(entry, dict) or set(entry) - allowed or "scenario" not in entry:
+        got = sorted(entry) if isinstance(entry, dict) else entry
+        raise UserError(f"{suite_file}: entry {i} needs 'scenario' and may have {sorted(allowed)}; got {got}")
+    if entry["scenario"] not in SCENARIOS:
+        raise UserError(f"{suite_file}: entry {i}: unknown scenario {entry['scenario']!r}; choose one of {', '.join(SCENARIOS)}")
+    where = f"{suite_file}: entry {i}:"
+    _check_ranges(entry.get("duration_s", 30.0), entry.get("slope_deg", 0.0), f"{where} duration_s", f"{where} slope_deg")
+    files = {k: suite_file.parent / entry[k] for k in SUITE_FILE_KEYS if k in entry}
+    if "sensors" in files:
+        params = load_params(files["sensors"])
+    extra = _extra_vehicles(files.get("vehicles_file") or vehicles_file, params)
+    vehicles = entry.get("vehicles") or [entry.get("vehicle", "man_tgx")]
+    unknown = [v for v in vehicles if v not in params.vehicles and v not in extra]
+    if unknown:
+        raise UserError(f"{suite_file}: entry {i}: unknown vehicle(s) {', '.join(unknown)}; known: {', '.join([*params.vehicles, *extra])}")
+    name = entry.get("name") or f"{'_'.join(vehicles)}_{entry['scenario']}"
+    clean = {k: v for k, v in entry.items() if k in SUITE_KEYS}
+    clean["vehicles"] = vehicles
+    clean["extra_vehicles"] = extra
+    return name, clean, params

@@ -10,7 +10,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from i2v_loc.geometry import planar_poses, pose_matrix, rotate_xy, wrap_deg
-from i2v_loc.params import Extrinsics, Params, dump_yaml
+from i2v_loc.params import Extrinsics, Params, ParamsError, VehicleConfig, dump_yaml, read_yaml, validate_params
 from i2v_loc.recording import SensorScans, meters_to_range_mm, write_recording
 from i2v_loc.sim import kinematics as kin
 from i2v_loc.sim import maneuvers as mv
@@ -21,6 +21,7 @@ from i2v_loc.sim.yard import FIELD_CENTER_XY, build_yard, footprint_points
 
 GENERATOR = "i2v-loc sim"
 DOCK_Y_M = -1.5
+UNKNOWN_PREFIX = "unknown_"
 
 
 @dataclass
@@ -38,8 +39,12 @@ class SimConfig:
     guess_angle_deg: float = 2.0
     slope_deg: float = 0.0  # ground grade along +x
     distractors: bool = True
+    clutter_near: bool = False  # parked trailers and containers right beside the vehicles' swept area
     slices: int = 8
     params: Params = field(default_factory=Params)
+    # Simulator-only vehicles (``--vehicles-file``): never written to the recording's parameters,
+    # and named ``unknown_<name>`` in the ground truth.
+    extra_vehicles: dict[str, VehicleConfig] = field(default_factory=dict)
 
 
 @dataclass
@@ -47,8 +52,8 @@ class PlacedVehicle:
     """One articulated vehicle: its geometry and trajectory in the yard (on the ground plane)."""
 
     vehicle_id: int
-    name: str
-    config: object  # VehicleConfig
+    name: str  # as in the ground truth
+    config: VehicleConfig
     trajectory: mv.Trajectory
     truck_center_axle: np.ndarray = field(init=False)
     trailer_center_axle: np.ndarray = field(init=False)
@@ -83,6 +88,37 @@ def _poses(x, y, yaw, center_axle) -> np.ndarray:
     return poses
 
 
+# --------------------------------------------------------------------------- vehicles
+
+
+def unknown_name(name: str) -> str:
+    return name if name.startswith(UNKNOWN_PREFIX) else UNKNOWN_PREFIX + name
+
+
+def vehicle_lookup(cfg: SimConfig, name: str) -> tuple[str, VehicleConfig]:
+    """Ground-truth name and geometry of a vehicle: a configured vehicle keeps its name; a
+    simulator-only one is ``unknown_<name>``, so nothing in the recording names its dimensions."""
+    if name in cfg.params.vehicles:
+        return name, cfg.params.vehicles[name]
+    if name in cfg.extra_vehicles:
+        return unknown_name(name), cfg.extra_vehicles[name]
+    raise ValueError(f"unknown vehicle {name!r}; known: {', '.join([*cfg.params.vehicles, *cfg.extra_vehicles])}")
+
+
+def load_vehicles_file(path, known=()) -> dict[str, VehicleConfig]:
+    """Simulator-only vehicles from a file in the format of params/vehicles.yaml, validated with the
+    parameter model (errors name the file and key). Names of ``known`` vehicles are refused: the
+    file defines vehicles the pipeline does not know."""
+    data = read_yaml(path)
+    if set(data) != {"vehicles"} or not isinstance(data["vehicles"], dict) or not data["vehicles"]:
+        raise ParamsError(f"{path}: expected one non-empty 'vehicles' mapping as in params/vehicles.yaml, got keys {sorted(data)}")
+    vehicles = validate_params({"vehicles": data["vehicles"]}, source=str(path)).vehicles
+    clash = sorted(set(vehicles) & set(known))
+    if clash:
+        raise ParamsError(f"{path}: vehicles.{clash[0]} is a configured vehicle; name simulator-only vehicles differently")
+    return dict(vehicles)
+
+
 # --------------------------------------------------------------------------- placement
 
 
@@ -97,10 +133,8 @@ def place_vehicles(cfg: SimConfig, tail_s: float) -> list[PlacedVehicle]:
     """Trajectories of every vehicle, moved into the field without overlapping each other."""
     placed: list[PlacedVehicle] = []
     occupied = np.array([[sc.extrinsics.x_m, sc.extrinsics.y_m] for sc in cfg.params.sensors])  # sensor poles
-    for i, name in enumerate(cfg.vehicles):
-        if name not in cfg.params.vehicles:
-            raise ValueError(f"unknown vehicle {name!r}; known: {', '.join(cfg.params.vehicles)}")
-        vcfg = cfg.params.vehicles[name]
+    for i, requested in enumerate(cfg.vehicles):
+        name, vcfg = vehicle_lookup(cfg, requested)
         art = kin.Articulation.from_vehicle(vcfg)
         raw = mv.build_trajectory(cfg.scenario, art, cfg.start_s + cfg.duration_s, tail_s)
         if cfg.start_s > 0:
@@ -239,10 +273,10 @@ def build_simulation(cfg: SimConfig) -> Simulation:
     vehicles = place_vehicles(cfg, tail_s)
     tilt = pose_matrix(0, 0, 0, 0, -cfg.slope_deg, 0)  # ground rising along +x for a positive grade
     occupied = np.vstack([v.footprint() for v in vehicles])
-    sensor_xy = np.array([l.pose[:2, 3] for l in lidars])
+    sensor_xyz = np.array([l.pose[:3, 3] for l in lidars])
     dock = next((d for d in (_dock_pose(v) for v in vehicles) if d is not None), None)
     semitrailer = next((v.config.trailer for v in vehicles if v.config.trailer.hitch_to_front_m >= 0), cfg.params.vehicles["man_tgx"].trailer if "man_tgx" in cfg.params.vehicles else None)
-    yard = build_yard(rng_yard, occupied, sensor_xy, dock, semitrailer, cfg.distractors)
+    yard = build_yard(rng_yard, occupied, sensor_xyz, dock, semitrailer, cfg.distractors, cfg.clutter_near)
     objects = []
     rng_paint = np.random.default_rng(np.random.SeedSequence(cfg.seed).spawn(5)[4])
     surfaces = {}
@@ -388,7 +422,7 @@ def run(cfg: SimConfig, out: str | Path, progress=None) -> tuple[Simulation, Pat
     guess = guessed_sensors(SimConfig(**{**cfg.__dict__, "params": sensors}), rng_guess)  # clocks uncalibrated: offsets 0
     sensors = with_true_time_offsets(sensors, sim.lidars)
     meta = {
-        "generator": GENERATOR, "seed": cfg.seed, "scenario": cfg.scenario, "vehicles": list(cfg.vehicles),
+        "generator": GENERATOR, "seed": cfg.seed, "scenario": cfg.scenario, "vehicles": [v.name for v in sim.vehicles],
         "rate_hz": sim.rate_hz, "duration_s": cfg.duration_s, "start_s": cfg.start_s, "slope_deg": cfg.slope_deg,
         "sensors": [l.meta() for l in sim.lidars],
         "static_objects": sim.yard.static_objects,

@@ -32,10 +32,11 @@ def render_preview(recording: Recording, out: str | Path, frame: int | None = No
     gt = recording.ground_truth()[frame]
     fig, ax = plt.subplots(figsize=(11, 8), dpi=110)
     colours = plt.get_cmap("tab10")
+    grade = math.tan(math.radians(recording.meta.get("slope_deg", 0.0)))  # the ground rises along +x
     for i, (name, scan) in enumerate(data.scans.items()):
         pose = extrinsics_matrix(params.sensor(name).extrinsics)
         pts = transform_points(pose, scan.points.astype(np.float64))
-        above = pts[:, 2] > z_min_m  # leave the ground out so objects stand out
+        above = pts[:, 2] - grade * pts[:, 0] > z_min_m  # leave the ground out so objects stand out
         ax.scatter(pts[above, 0], pts[above, 1], s=0.3, color=colours(i), label=f"{name} ({len(scan.points)} pts)", rasterized=True, zorder=3)
         ax.scatter(pts[~above, 0][::4], pts[~above, 1][::4], s=0.1, color=colours(i), alpha=0.15, rasterized=True)
         ax.plot(pose[0, 3], pose[1, 3], marker="^", color=colours(i), markersize=11, markeredgecolor="black")
@@ -58,7 +59,7 @@ def render_preview(recording: Recording, out: str | Path, frame: int | None = No
     ax.grid(alpha=0.3)
     ax.set_xlabel("x east [m]")
     ax.set_ylabel("y north [m]")
-    ax.set_title(f"{recording.path.name}: frame {frame}, t = {gt['stamp_s']:.1f} s (points above {z_min_m} m bold)")
+    ax.set_title(f"{recording.path.name}: frame {frame}, t = {gt['stamp_s']:.1f} s (points {z_min_m} m above the ground bold)")
     ax.legend(loc="upper right", markerscale=15, fontsize=8)
     out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)

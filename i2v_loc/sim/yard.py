@@ -66,13 +66,13 @@ def dock_wall(rear_center_xy, facing_yaw_rad: float, bays: int = 3, bay_width_m:
     half = bays * bay_width_m / 2
     edges = [-half] + [(-half + (i + 0.5) * bay_width_m) + s * door_w / 2 for i in range(bays) for s in (-1, 1)] + [half]
     for y0, y1 in zip(edges[0::2], edges[1::2]):  # pillars between the doors
-        parts.append(m.box_between(-thickness, 0.0, y0, y1, 0.0, height, "concrete"))
+        parts.append(m.box_between(-thickness, 0.0, y0, y1, 0.0, height))
     for i in range(bays):
         yc = -half + (i + 0.5) * bay_width_m
-        parts.append(m.box_between(-thickness - recess, -recess, yc - door_w / 2, yc + door_w / 2, 0.0, height, "steel"))  # door
-        parts.append(m.box_between(-recess, 0.0, yc - door_w / 2, yc + door_w / 2, door_h, height, "concrete"))  # lintel
+        parts.append(m.box_between(-thickness - recess, -recess, yc - door_w / 2, yc + door_w / 2, 0.0, height))  # door
+        parts.append(m.box_between(-recess, 0.0, yc - door_w / 2, yc + door_w / 2, door_h, height))  # lintel
         for s in (-1, 1):  # rubber bumpers at trailer-floor height
-            parts.append(m.box_between(0.0, 0.15, yc + s * 1.1 - 0.15, yc + s * 1.1 + 0.15, 0.9, 1.3, "rubber"))
+            parts.append(m.box_between(0.0, 0.15, yc + s * 1.1 - 0.15, yc + s * 1.1 + 0.15, 0.9, 1.3))
     # Local frame: x out of the wall, so rotate x onto the facing direction.
     pose = planar_pose(rear_center_xy[0], rear_center_xy[1], facing_yaw_rad)
     shift = np.eye(4)
@@ -83,26 +83,35 @@ def dock_wall(rear_center_xy, facing_yaw_rad: float, bays: int = 3, bay_width_m:
 def build_yard(
     rng: np.random.Generator,
     occupied_xy: np.ndarray,
-    sensor_xy: np.ndarray,
+    sensor_xyz: np.ndarray,
     dock: tuple[np.ndarray, float] | None,
     parked_trailer,
     distractors: bool = True,
+    clutter_near: bool = False,
 ) -> Yard:
-    """Static objects and distractors placed clear of ``occupied_xy`` (the vehicles' swept footprint)."""
+    """Static objects and distractors placed clear of ``occupied_xy`` (the vehicles' swept footprint);
+    with ``clutter_near`` the containers and parked trailers stand right beside it."""
     yard = Yard()
     yard.static_parts.append(m.box_between(-90, 90, -90, 90, -0.2, 0.0, "asphalt"))  # ground (top face at z = 0)
+    sensor_xy = sensor_xyz[:, :2]
     space = FreeSpace(np.vstack([occupied_xy, sensor_xy]), clearance_m=2.0)
-    if dock is not None:
-        yard.static_parts += dock_wall(dock[0], dock[1])
-        yard.static_objects.append({"kind": "dock_wall", "center": [float(v) for v in dock[0]], "yaw_deg": math.degrees(dock[1])})
+    swept = cKDTree(occupied_xy)
+    if dock is None:
+        # North of the vehicles and behind the sensors (a layout may mount them along this side).
+        wall_y = max(float(occupied_xy[:, 1].max()) + 6.0, float(sensor_xy[:, 1].max()) + 2.0, 22.0)
+        dock, bays = (np.array([0.0, wall_y]), -math.pi / 2), 5
     else:
-        wall_y = max(float(occupied_xy[:, 1].max()) + 6.0, 22.0)
-        yard.static_parts += dock_wall((0.0, wall_y), -math.pi / 2, bays=5)
-        yard.static_objects.append({"kind": "dock_wall", "center": [0.0, wall_y], "yaw_deg": -90.0})
-    for x, y in sensor_xy:  # the sensors' poles
-        yard.static_parts.append(m.cylinder((x, y, 1.85), 0.12, 3.7, surface="pole"))
+        bays = 3
+    yard.static_parts += dock_wall(dock[0], dock[1], bays=bays)
+    yard.static_objects.append({"kind": "dock_wall", "center": [float(v) for v in dock[0]], "yaw_deg": math.degrees(dock[1])})
+    behind = np.asarray(dock[0], float) - 0.5 * np.array([math.cos(dock[1]), math.sin(dock[1])])
+    space.add(footprint_points(behind, 1.0, bays * 4.0, dock[1]))  # nothing stands in the wall
+    for x, y, z in sensor_xyz:  # the sensors' poles, up to 0.3 m below the sensor
+        yard.static_parts.append(m.cylinder((x, y, (z - 0.3) / 2), 0.12, z - 0.3, surface="pole"))
 
     def place(kind, length, width, tries=200, ring=(18.0, 34.0)):
+        if clutter_near and kind != "pole":
+            return place_near(length, width)
         for _ in range(tries):
             angle = rng.uniform(0, 2 * np.pi)
             radius = rng.uniform(*ring)
@@ -114,20 +123,41 @@ def build_yard(
                 return xy, yaw
         return None
 
-    for _ in range(3):
-        spot = place("container", CONTAINER_SIZE_M[0], CONTAINER_SIZE_M[1])
-        if spot:
-            xy, yaw = spot
-            size = CONTAINER_SIZE_M
-            yard.static_parts.append(m.box((xy[0], xy[1], size[2] / 2), size, yaw, surface="container"))
-            yard.static_objects.append({"kind": "container", "center": [float(xy[0]), float(xy[1])], "yaw_deg": math.degrees(yaw)})
-    for _ in range(3):
-        spot = place("pole", 0.4, 0.4, ring=(8.0, 30.0))
-        if spot:
-            xy, _ = spot
-            yard.static_parts.append(m.cylinder((xy[0], xy[1], 4.0), 0.1, 8.0, surface="pole"))
-            yard.static_objects.append({"kind": "pole", "center": [float(xy[0]), float(xy[1])]})
-    if parked_trailer is not None:
+    def place_near(length, width, tries=400):
+        """The free spot (of ``tries`` random ones) nearest to the vehicles' swept area."""
+        best = None
+        for _ in range(tries):
+            xy = np.array(FIELD_CENTER_XY) + rng.uniform([-30.0, -20.0], [30.0, 26.0])
+            yaw = rng.uniform(-np.pi, np.pi)
+            pts = footprint_points(xy, length, width, yaw)
+            gap = float(swept.query(pts)[0].min())
+            if (best is None or gap < best[0]) and space.is_free(pts):
+                best = (gap, xy, yaw, pts)
+        if best is None:
+            return None
+        space.add(best[3])
+        return best[1], best[2]
+
+    def add_containers():
+        for _ in range(3):
+            spot = place("container", CONTAINER_SIZE_M[0], CONTAINER_SIZE_M[1])
+            if spot:
+                xy, yaw = spot
+                size = CONTAINER_SIZE_M
+                yard.static_parts.append(m.box((xy[0], xy[1], size[2] / 2), size, yaw, surface="container"))
+                yard.static_objects.append({"kind": "container", "center": [float(xy[0]), float(xy[1])], "yaw_deg": math.degrees(yaw)})
+
+    def add_poles():
+        for _ in range(3):
+            spot = place("pole", 0.4, 0.4, ring=(8.0, 30.0))
+            if spot:
+                xy, _ = spot
+                yard.static_parts.append(m.cylinder((xy[0], xy[1], 4.0), 0.1, 8.0, surface="pole"))
+                yard.static_objects.append({"kind": "pole", "center": [float(xy[0]), float(xy[1])]})
+
+    def add_parked_trailers():
+        if parked_trailer is None:
+            return
         for _ in range(2):
             spot = place("parked_trailer", parked_trailer.length_m, parked_trailer.width_m, ring=(20.0, 34.0))
             if spot:
@@ -136,6 +166,10 @@ def build_yard(
                 mesh = m.shifted(m.trailer_mesh(parked_trailer), (-center[0], 0.0, 0.0))
                 yard.static_parts.append(m.transformed(mesh, planar_pose(xy[0], xy[1], yaw)))
                 yard.static_objects.append({"kind": "parked_trailer", "center": [float(xy[0]), float(xy[1])], "yaw_deg": math.degrees(yaw)})
+
+    # Packed beside the vehicles, the long trailers go first: they fit fewer gaps.
+    for add in (add_parked_trailers, add_containers, add_poles) if clutter_near else (add_containers, add_poles, add_parked_trailers):
+        add()
     if distractors:
         _add_distractors(yard, rng, space)
     return yard
