@@ -66,13 +66,13 @@ def dock_wall(rear_center_xy, facing_yaw_rad: float, bays: int = 3, bay_width_m:
     half = bays * bay_width_m / 2
     edges = [-half] + [(-half + (i + 0.5) * bay_width_m) + s * door_w / 2 for i in range(bays) for s in (-1, 1)] + [half]
     for y0, y1 in zip(edges[0::2], edges[1::2]):  # pillars between the doors
-        parts.append(m.box_between(-thickness, 0.0, y0, y1, 0.0, height))
+        parts.append(m.box_between(-thickness, 0.0, y0, y1, 0.0, height, "concrete"))
     for i in range(bays):
         yc = -half + (i + 0.5) * bay_width_m
-        parts.append(m.box_between(-thickness - recess, -recess, yc - door_w / 2, yc + door_w / 2, 0.0, height))  # door
-        parts.append(m.box_between(-recess, 0.0, yc - door_w / 2, yc + door_w / 2, door_h, height))  # lintel
+        parts.append(m.box_between(-thickness - recess, -recess, yc - door_w / 2, yc + door_w / 2, 0.0, height, "steel"))  # door
+        parts.append(m.box_between(-recess, 0.0, yc - door_w / 2, yc + door_w / 2, door_h, height, "concrete"))  # lintel
         for s in (-1, 1):  # rubber bumpers at trailer-floor height
-            parts.append(m.box_between(0.0, 0.15, yc + s * 1.1 - 0.15, yc + s * 1.1 + 0.15, 0.9, 1.3))
+            parts.append(m.box_between(0.0, 0.15, yc + s * 1.1 - 0.15, yc + s * 1.1 + 0.15, 0.9, 1.3, "rubber"))
     # Local frame: x out of the wall, so rotate x onto the facing direction.
     pose = planar_pose(rear_center_xy[0], rear_center_xy[1], facing_yaw_rad)
     shift = np.eye(4)
