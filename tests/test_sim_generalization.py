@@ -17,6 +17,7 @@ from i2v_loc.geometry import extrinsics_matrix, pose_matrix, transform_points
 from i2v_loc.params import Params, ParamsError, load_params
 from i2v_loc.recording import Recording
 from i2v_loc.sim.generate import SimConfig, build_simulation, load_vehicles_file
+from i2v_loc.sim.sensor_model import model_beam_table
 from i2v_loc.sim.yard import CONTAINER_SIZE_M, footprint_points
 
 SUITE = SUITES_DIR / "generalization.yaml"
@@ -159,7 +160,7 @@ def suite_recordings(tmp_path_factory):
     return {e["name"].split("_")[0]: (e, Recording(root / "out" / e["name"])) for e in short}
 
 
-def test_one_side_sensors_each_see_the_vehicle_and_the_ground_from_9_5_m(suite_recordings):
+def test_one_side_sensors_each_see_the_vehicle_and_the_ground_from_10_m(suite_recordings):
     _, rec = suite_recordings["one"]
     assert rec.sensor_names == ["s1", "s2", "s3"]
     k = len(rec) // 2
@@ -170,8 +171,10 @@ def test_one_side_sensors_each_see_the_vehicle_and_the_ground_from_9_5_m(suite_r
         sensor = load_params(rec.sensors_file).sensor(name).extrinsics
         ahead = pts - (sensor.x_m, sensor.y_m, 0.0)
         ground = (pts[:, 2] < 0.1) & (ahead[:, 1] < 0)  # on the yard side
-        # The lowest beam, -22.5 - 10 deg, meets the ground 6 m / tan(32.5 deg) = 9.4 m away.
-        assert np.hypot(ahead[ground, 0], ahead[ground, 1]).min() == pytest.approx(6.0 / math.tan(math.radians(32.5)), abs=0.4)
+        # The lowest beam (-20.5 deg on an OS1-32, uniform), tilted 10 deg down, meets the ground
+        # 6 m / tan(30.5 deg) = 10.2 m away.
+        lowest_deg = -float(model_beam_table("OS1-32", 1024).altitude_deg[-1]) + 10.0
+        assert np.hypot(ahead[ground, 0], ahead[ground, 1]).min() == pytest.approx(6.0 / math.tan(math.radians(lowest_deg)), abs=0.4)
 
 
 # --------------------------------------------------------------------------- the suite

@@ -32,9 +32,11 @@ def vehicle_cost(gt: dict, est: dict) -> float:
 
 def same_type(gt: dict, est: dict) -> bool:
     """False when both name a vehicle type and the names differ: an estimate reported under a
-    type the vehicle is not is never a match (it is a false vehicle, the true one is missed)."""
+    type the vehicle is not is never a match (it is a false vehicle, the true one is missed). A
+    vehicle the catalogue does not hold (``unknown_*`` in the truth) has no type to get wrong: it
+    matches an estimate of any type (the nearest catalogue type, or ``unknown``)."""
     truth, estimate = gt.get("vehicle"), est.get("vehicle")
-    return not truth or truth == UNLABELLED or not estimate or truth == estimate
+    return not truth or truth == UNLABELLED or truth.startswith("unknown") or not estimate or truth == estimate
 
 
 def _unit_fields(prefix: str, gt: dict | None, est: dict | None) -> dict:
