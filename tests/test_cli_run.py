@@ -45,12 +45,14 @@ def hitch_errors(states: list[dict], ground_truth: list[dict]) -> tuple[int, lis
 SAMPLES = Path(__file__).resolve().parents[1] / "samples"
 
 
-# measured with the default method (50-60 frames each): both units 1.00 / 0.78 / 0.85 of the frames,
-# |hitch error| median 0.66 / 0.35 / 0.99 deg, p90 2.08 / 0.79 / 1.62, RMSE 1.14 / 0.56 / 1.05, no flips
+# measured with the default method (50-60 frames each) on the samples of the calibrated sensor model
+# (i2v-loc realism): both units 0.98 / 0.86 / 0.92 of the frames, |hitch error| median 2.55 / 1.80 / 0.81 deg,
+# p90 4.41 / 3.54 / 2.24, RMSE 2.82 / 2.28 / 1.53, max 4.8, no flips (the old, denser simulator gave 0.35-0.99 deg
+# medians); the bounds keep a margin and fail on a flip, a lost unit or a broken stage
 @pytest.mark.parametrize("sample, min_both_fraction, max_median_deg, max_p90_deg, max_rmse_deg", [
-    ("volvo_fh_u_turn", 0.9, 1.0, 2.5, 1.5),
-    ("twizy_single_turn", 0.7, 1.0, 2.0, 1.5),
-    ("man_tgx_docking", 0.75, 1.5, 2.5, 2.0),  # reversing at up to 45 deg hitch: the cab touches the trailer
+    ("volvo_fh_u_turn", 0.9, 3.5, 5.0, 4.0),
+    ("twizy_single_turn", 0.7, 3.0, 5.0, 3.5),
+    ("man_tgx_docking", 0.85, 1.5, 4.0, 2.5),  # reversing at up to 45 deg hitch: the cab touches the trailer
 ])
 def test_run_on_committed_samples_reports_both_units_in_most_frames(sample, min_both_fraction, max_median_deg,
                                                                      max_p90_deg, max_rmse_deg, tmp_path, capsys):

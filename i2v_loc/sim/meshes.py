@@ -85,13 +85,16 @@ def wheel_pair(x_m: float, track_half_m: float, radius_m: float, width_m: float)
 
 
 def cab(x_back: float, x_front: float, half_w: float, z0: float, z1: float, paint: str) -> list[Mesh]:
-    """A painted body whose upper front (windscreen and door windows, up to 1 m deep) is glass."""
+    """A painted body whose upper front (windscreen and door windows, up to 1 m deep, below a
+    painted roof) is glass."""
     glass_z0 = z0 + 0.55 * (z1 - z0)
+    roof_z0 = z1 - min(0.15, 0.1 * (z1 - z0))
     glass_x0 = max(x_back, x_front - min(1.0, 0.4 * (x_front - x_back)))
     return [
         box_between(x_back, x_front, -half_w, half_w, z0, glass_z0, surface=paint),
         box_between(x_back, glass_x0, -half_w, half_w, glass_z0, z1, surface=paint),
-        box_between(glass_x0, x_front, -half_w, half_w, glass_z0, z1, surface="glass"),
+        box_between(glass_x0, x_front, -half_w, half_w, glass_z0, roof_z0, surface="glass"),
+        box_between(glass_x0, x_front, -half_w, half_w, roof_z0, z1, surface=paint),
     ]
 
 
