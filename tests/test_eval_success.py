@@ -128,3 +128,15 @@ def test_frames_where_a_unit_is_hidden_leave_the_success_denominator_not_the_cov
     s = _summary(states, truth)
     assert s["visible_frames"] == 8 and s["success_frames"] == 8 and s["success_rate"] == 1.0
     assert s["trailer_coverage"] == pytest.approx(0.8) and s["trailer_detection_rate"] == 1.0
+
+
+def test_sweep_ranks_by_success_rate_descending_or_hitch_rmse_ascending():
+    from i2v_loc.evaluation.sweep import rank
+    from i2v_loc.params import Params
+
+    combos = [({"a": i}, Params()) for i in range(3)]
+    summaries = [{"hitch_rmse_deg": 0.5, "success_rate": 0.2},  # few, good frames
+                 {"hitch_rmse_deg": 1.5, "success_rate": 0.9},
+                 {"hitch_rmse_deg": 1.0, "success_rate": 0.9}]
+    assert [r["combination"] for r in rank(combos, summaries)] == [0, 2, 1]
+    assert [r["combination"] for r in rank(combos, summaries, "success_rate")] == [2, 1, 0]

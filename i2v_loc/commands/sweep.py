@@ -25,6 +25,8 @@ def register(sub) -> None:
     p.add_argument("--workers", type=int, default=1)
     p.add_argument("--executor", choices=["local", "dask"], default="local")
     p.add_argument("--address", help="Dask scheduler address (default: a local cluster)")
+    p.add_argument("--rank-by", choices=["hitch_rmse_deg", "success_rate"], default="hitch_rmse_deg",
+                   help="hitch RMSE (ascending; it ignores missed frames) or success rate (descending)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=run)
 
@@ -58,9 +60,11 @@ def run(args) -> int:
                             progress=not args.quiet, desc="sweeping")
     except EvaluationError as err:
         raise UserError(str(err).split("\nTraceback")[0]) from err
-    rows = sweep.rank(combos, sweep.summarize_by_tag(results, len(combos)))
-    files = sweep.write_sweep(rows, combos, args.out, [r.name for r in recordings], with_sensors="sensors" in patch)
+    rows = sweep.rank(combos, sweep.summarize_by_tag(results, len(combos)), args.rank_by)
+    files = sweep.write_sweep(rows, combos, args.out, [r.name for r in recordings], with_sensors="sensors" in patch,
+                              ranked_by=args.rank_by)
     best = rows[0]
-    print(f"best of {len(rows)}: {best['values']} -> hitch RMSE {best['metrics'].get('hitch_rmse_deg')}")
+    print(f"best of {len(rows)}: {best['values']} -> hitch RMSE {best['metrics'].get('hitch_rmse_deg')}, "
+          f"success rate {best['metrics'].get('success_rate')}")
     print(f"best parameters: {files['best_params']}; table: {files['md']}")
     return 0
