@@ -227,22 +227,18 @@ def _headline_table(res, methods, primary) -> list[str]:
         "| Flip frames truck / trailer | False vehicle-s |",
         "|---|---|---|---|---|---|---|---|---|",
     ]
-    for vehicle in _vehicles(res, methods, primary):
-        for m in methods:
-            s = res[m][primary]["by_vehicle"].get(vehicle)
-            if s is None:
-                continue
-            if not s["gt_vehicle_frames"]:
-                lines.append(f"| {_name(vehicle)} (not in the truth) | {m} | – | – | – | – | – | – "
-                             f"| {_f(s['false_vehicle_s'], 1)} |")
-                continue
-            lines.append(
-                f"| {_name(vehicle)} | {m} | {_pct_of(s, 'success_rate')} ({s['success_frames']}/{s['visible_frames']}) "
-                f"| {_pct_of(s, 'truck_coverage')} / {_pct_of(s, 'trailer_coverage')} / {_pct_of(s, 'both_units_rate')} "
-                f"| {_f(s['hitch_rmse_deg'])} | {_pair(s['truck_yaw_rmse_deg'], s['trailer_yaw_rmse_deg'])} "
-                f"| {_pair(s['truck_pos_rmse_m'], s['trailer_pos_rmse_m'], 3)} "
-                f"| {s['truck_flip_frames']} / {s['trailer_flip_frames']} | {_f(s['false_vehicle_s'], 1)} |"
-            )
+    for vehicle, m, s in _vehicle_summaries(res, methods, primary):
+        if not s["gt_vehicle_frames"]:
+            lines.append(f"| {_name(vehicle)} (not in the truth) | {m} | – | – | – | – | – | – "
+                         f"| {_f(s['false_vehicle_s'], 1)} |")
+            continue
+        lines.append(
+            f"| {_name(vehicle)} | {m} | {_pct_of(s, 'success_rate')} ({s['success_frames']}/{s['visible_frames']}) "
+            f"| {_pct_of(s, 'truck_coverage')} / {_pct_of(s, 'trailer_coverage')} / {_pct_of(s, 'both_units_rate')} "
+            f"| {_f(s['hitch_rmse_deg'])} | {_pair(s['truck_yaw_rmse_deg'], s['trailer_yaw_rmse_deg'])} "
+            f"| {_pair(s['truck_pos_rmse_m'], s['trailer_pos_rmse_m'], 3)} "
+            f"| {s['truck_flip_frames']} / {s['trailer_flip_frames']} | {_f(s['false_vehicle_s'], 1)} |"
+        )
     for m in methods:
         s = res[m][primary]["overall"]
         lines.append(
@@ -298,6 +294,15 @@ def _vehicles(res, methods, primary) -> list[str]:
     return sorted(names, key=lambda v: (order.index(v) if v in order else len(order), v))
 
 
+def _vehicle_summaries(res, methods, primary):
+    """(vehicle, method, summary) for every vehicle and method that has a summary."""
+    for vehicle in _vehicles(res, methods, primary):
+        for m in methods:
+            s = res[m][primary]["by_vehicle"].get(vehicle)
+            if s is not None:
+                yield vehicle, m, s
+
+
 def _table2(res, methods, primary) -> list[str]:
     lines = [
         "## Table 2 layout: overall metrics per vehicle",
@@ -336,17 +341,13 @@ def _detection_table(res, methods, primary) -> list[str]:
         "(vehicle / truck / trailer) | False vehicles |",
         "|---|---|---|---|---|---|---|---|",
     ]
-    for vehicle in _vehicles(res, methods, primary):
-        for m in methods:
-            s = res[m][primary]["by_vehicle"].get(vehicle)
-            if s is None:
-                continue
-            lines.append(
-                f"| {_name(vehicle)} | {m} | {_pct(s['truck_detection_rate'])} | {_pct(s['trailer_detection_rate'])} "
-                f"| {_pct(s['truck_heading_flip_rate'])} | {_pct(s['trailer_heading_flip_rate'])} "
-                f"| {s['vehicle_id_switches']} / {s['truck_id_switches']} / {s['trailer_id_switches']} "
-                f"| {s['false_vehicles']} |"
-            )
+    for vehicle, m, s in _vehicle_summaries(res, methods, primary):
+        lines.append(
+            f"| {_name(vehicle)} | {m} | {_pct(s['truck_detection_rate'])} | {_pct(s['trailer_detection_rate'])} "
+            f"| {_pct(s['truck_heading_flip_rate'])} | {_pct(s['trailer_heading_flip_rate'])} "
+            f"| {s['vehicle_id_switches']} / {s['truck_id_switches']} / {s['trailer_id_switches']} "
+            f"| {s['false_vehicles']} |"
+        )
     return lines + [""]
 
 
