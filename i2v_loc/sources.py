@@ -20,7 +20,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from i2v_loc.frame import Frame, SensorScan
-from i2v_loc.recording import Recording, RecordingError
+from i2v_loc.formats import open_recording
+from i2v_loc.recording import RecordingError
 
 DEFAULT_SCENARIO = "docking"
 DEFAULT_VEHICLE = "man_tgx"
@@ -37,7 +38,7 @@ class ReplaySource:
 
     def __init__(self, path: str | Path, loop: bool = False, label: str | None = None):
         try:
-            self.recording = Recording(path)
+            self.recording = open_recording(path)
         except RecordingError as err:
             raise SourceError(str(err)) from err
         if len(self.recording) == 0:

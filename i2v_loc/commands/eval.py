@@ -31,16 +31,18 @@ def register(sub) -> None:
 
 
 def find_recordings(inputs: list[str]) -> list[Path]:
-    """Recording folders (with meta.yaml) given directly or one level inside suite folders."""
+    """Recordings (any layout of `i2v-loc sources`) given directly or one level inside suite folders."""
+    from i2v_loc.formats import looks_like_recording
+
     found: list[Path] = []
     for item in inputs:
         path = Path(item)
         if not path.is_dir():
             raise UserError(f"{path}: no such folder")
-        if (path / "meta.yaml").is_file():
+        if looks_like_recording(path):
             found.append(path)
             continue
-        inner = sorted(d for d in path.iterdir() if (d / "meta.yaml").is_file())
+        inner = sorted(d for d in path.iterdir() if d.is_dir() and looks_like_recording(d))
         if not inner:
             raise UserError(f"{path}: neither a recording (meta.yaml) nor a suite of recordings")
         found += inner
@@ -82,11 +84,15 @@ def sensor_subsets(names: list[str]) -> list[tuple[str, ...]]:
 def build_tasks(recordings: list[Path], methods: list[str], subsets: bool, params: dict, labels: str | None,
                 gate_m: float) -> list:
     from i2v_loc.evaluation.runner import Task
-    from i2v_loc.recording import Recording
+    from i2v_loc.formats import open_recording
+    from i2v_loc.recording import RecordingError
 
     tasks = []
     for rec_path in recordings:
-        names = Recording(rec_path).sensor_names
+        try:
+            names = open_recording(rec_path).sensor_names
+        except RecordingError as err:
+            raise UserError(str(err)) from err
         choices = sensor_subsets(names) if subsets else [None]
         for method in methods:
             for sensors in choices:

@@ -23,6 +23,8 @@ def register(sub) -> None:
     p.add_argument("--slope-deg", type=float, default=0.0, help="ground grade along +x in degrees")
     p.add_argument("--no-distractors", action="store_true", help="no car and pedestrians")
     p.add_argument("--preview", help="write a bird's-eye-view PNG of the middle frame here")
+    p.add_argument("--format", default="native", choices=["native", "pcap", "rosbag2", "mcap", "pcd"],
+                   help="layout of --out (docs/formats.md; default native: meta.yaml + scans/*.npz)")
     p.add_argument("--suite", help="generate every entry of a suite (name in samples/suites/ or a YAML file) into --out")
     p.set_defaults(func=_run)
 
@@ -44,6 +46,12 @@ def _run(args) -> int:
         raise UserError(f"--slope-deg must be within ±10 degrees, got {args.slope_deg}")
     entry = {"vehicles": vehicles, "scenario": args.scenario, "seed": args.seed, "duration_s": args.duration,
              "start_s": args.start, "columns": args.columns, "slope_deg": args.slope_deg, "distractors": not args.no_distractors}
+    if args.format != "native":
+        from i2v_loc.commands.sources import converted_output
+
+        with converted_output(Path(args.out), args.format) as native:
+            _generate(entry, params, native, args.preview)
+        return 0
     _generate(entry, params, Path(args.out), args.preview)
     return 0
 
