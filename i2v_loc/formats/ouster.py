@@ -151,6 +151,13 @@ class SweepDecoder:
         done, self.frame = self.frame, self.core.LidarFrame(self.info)
         return self._sweep(done)
 
+    def flush(self) -> tuple[int, SensorScan] | None:
+        """The sweep in progress when the stream ends (its last packets never came)."""
+        if not (np.asarray(self.frame.status) & 1).any():
+            return None
+        done, self.frame = self.frame, self.core.LidarFrame(self.info)
+        return self._sweep(done)
+
     def _sweep(self, lf) -> tuple[int, SensorScan] | None:
         valid_columns = (np.asarray(lf.status) & 1).astype(bool)
         missing = int((~valid_columns).sum())
@@ -170,8 +177,9 @@ class SweepDecoder:
         return int(lf.frame_id), scan
 
 
-def _pcap_packets(path: Path, info):
-    """The lidar packets of a pcap file, through the SDK's pcap reader."""
+def _pcap_packets(path: Path, info, rejected: dict):
+    """The lidar packets of a pcap file, through the SDK's pcap reader; the packets it rejects
+    (another sensor's serial / init id, another size) are counted into ``rejected``."""
     core, pcap = _sdk()
     try:
         source = pcap.PcapPacketSource(str(path), sensor_info=[info])
@@ -181,6 +189,8 @@ def _pcap_packets(path: Path, info):
         for _, packet in source:
             if isinstance(packet, core.LidarPacket):
                 yield packet
+        rejected["id"] = int(source.id_error_count)
+        rejected["size"] = int(source.size_error_count)
     finally:
         source.close()
 
@@ -237,14 +247,15 @@ class OusterRecording(PointRecording):
         decoder = SweepDecoder(info, name)
         sweeps: dict[int, SensorScan] = {}
         first_id = None
-        for packet in _pcap_packets(pcap_file, info):
-            done = decoder.add(packet)
+        rejected = {"id": 0, "size": 0}
+        for done in (*map(decoder.add, _pcap_packets(pcap_file, info, rejected)), decoder.flush()):
             if done is None:
                 continue
             frame_id, scan = done
             first_id = frame_id if first_id is None else first_id
             sweeps[(frame_id - first_id) % FRAME_ID_MODULO] = scan
         counters = decoder.counters
+        counters["foreign_packets"] += rejected["id"]
         if not sweeps:
             if counters["foreign_packets"]:
                 raise FormatError(f"{pcap_file}: its {counters['foreign_packets']} lidar packets are from another sensor "
