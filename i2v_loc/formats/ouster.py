@@ -14,6 +14,7 @@ recording's points exactly (ranges are integer millimetres in both).
 from __future__ import annotations
 
 import json
+import time
 from pathlib import Path
 
 import numpy as np
@@ -138,6 +139,7 @@ class SweepDecoder:
         self.frame = core.LidarFrame(info)
         self.column_period_ns = 1e9 / (info.format.fps * info.w)
         self.per_packet = info.format.columns_per_packet
+        self.packet_format = core.PacketFormat.from_info(info)
         self.counters = {"packets": 0, "foreign_packets": 0, "lost_packets": 0, "incomplete_sweeps": 0}
 
     def add(self, packet) -> tuple[int, SensorScan] | None:
@@ -150,6 +152,17 @@ class SweepDecoder:
             return None
         done, self.frame = self.frame, self.core.LidarFrame(self.info)
         return self._sweep(done)
+
+    def add_bytes(self, data) -> tuple[int, SensorScan] | None:
+        """Feed one UDP payload (bytes); a payload of another size is another sensor's."""
+        if len(data) != self.packet_format.lidar_packet_size:
+            self.counters["packets"] += 1
+            self.counters["foreign_packets"] += 1
+            return None
+        packet = self.core.LidarPacket(self.packet_format)
+        packet.buf[:] = data
+        packet.host_timestamp = time.time_ns()
+        return self.add(packet)
 
     def flush(self) -> tuple[int, SensorScan] | None:
         """The sweep in progress when the stream ends (its last packets never came)."""
