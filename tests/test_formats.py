@@ -238,7 +238,7 @@ def test_bin_of_unknown_layout_names_the_option(tmp_path, capsys):
 def test_unknown_folder_is_one_error_line(tmp_path, capsys):
     (tmp_path / "notes.txt").write_text("nothing here")
     err = one_error_line(capsys, ["run", str(tmp_path), "--out", str(tmp_path / "s.jsonl"), "--quiet"])
-    assert "no recording layout recognised" in err
+    assert "not a recording in any known layout" in err
 
 
 # --------------------------------------------------------------------------- real recordings

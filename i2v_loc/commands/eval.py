@@ -44,7 +44,7 @@ def find_recordings(inputs: list[str]) -> list[Path]:
             continue
         inner = sorted(d for d in path.iterdir() if d.is_dir() and looks_like_recording(d))
         if not inner:
-            raise UserError(f"{path}: neither a recording (meta.yaml) nor a suite of recordings")
+            raise UserError(f"{path}: neither a recording (any layout of `i2v-loc sources`) nor a suite of recordings")
         found += inner
     return found
 

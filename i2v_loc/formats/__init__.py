@@ -28,7 +28,7 @@ def open_recording(path: str | Path, bin_layout: str | None = None, topics: dict
     files whose content fits both. ``topics``: sensor name → PointCloud2 topic of a bag."""
     path = Path(str(path).removeprefix("replay:"))
     if not path.exists():
-        raise RecordingError(f"{path}: no such recording file or folder")
+        raise RecordingError(f"{path}: no such recording directory or file")
     if path.is_dir() and (path / "meta.yaml").is_file():
         return Recording(path)
     from i2v_loc.formats import rosbag
@@ -46,7 +46,7 @@ def open_recording(path: str | Path, bin_layout: str | None = None, topics: dict
     if recording is not None:
         return recording
     raise RecordingError(
-        f"{path}: no recording layout recognised (a recording folder with meta.yaml, Ouster <sensor>.pcap + .json, "
+        f"{path}: not a recording in any known layout (a recording folder with meta.yaml, Ouster <sensor>.pcap + .json, "
         f"a ROS bag, or a folder of .pcd/.ply/.npy/.bin clouds; see `i2v-loc sources --help`)")
 
 
