@@ -299,7 +299,7 @@ def _send_pcaps(folder: Path, ports: dict[str, int], drop: dict[str, set[int]], 
         source.close()
         per_sweep = info.w // info.format.columns_per_packet
         order = list(range(len(packets)))
-        for i in range(swap_every - 1, len(order) - 1, swap_every):
+        for i in range(swap_every - 1, len(order) - 1, swap_every) if swap_every else ():
             if i % per_sweep != per_sweep - 1:  # never across a sweep's end
                 order[i], order[i + 1] = order[i + 1], order[i]
         queue += [(packets[i][0], name, packets[j][1]) for i, j in enumerate(order) if j not in drop.get(name, set())]
@@ -315,15 +315,51 @@ def _send_pcaps(folder: Path, ports: dict[str, int], drop: dict[str, set[int]], 
 
 
 def _live_frames(pcap_dir: Path, drop: dict[str, set[int]]):
-    from i2v_loc.sources import open_source
+    from i2v_loc.formats.live import OusterUdpSource
 
-    source = open_source(f"ouster-udp:{pcap_dir}@0,0,0,0")
+    source = OusterUdpSource(pcap_dir, ports=[0, 0, 0, 0], in_order=True)  # every sweep, in order
     try:
         sent = _send_pcaps(pcap_dir, dict(source.ports), drop, swap_every=5)
         frames = [source.frame(k) for k in range(COUNT)]
         return sent, frames, source.counters
     finally:
         source.close()
+
+
+def test_service_udp_source_delivers_the_newest_sweeps(pcap_dir, native):
+    """As the service reads it (serve --source ouster-udp:): a consumer that fell behind gets the
+    newest sweep of every sensor, the skipped ones are counted."""
+    from i2v_loc.sources import open_source
+
+    source = open_source(f"ouster-udp:{pcap_dir}@0,0,0,0")
+    try:
+        import time
+
+        sent = _send_pcaps(pcap_dir, dict(source.ports), {}, swap_every=0)
+        for _ in range(200):  # until the receiver thread has decoded every packet
+            if all(source.counters[f"{n}.packets"] == sent[n] for n in sent):
+                break
+            time.sleep(0.05)
+        frame = source.frame(0)
+        counters = source.counters
+        empty = source.frame(1)  # nothing new within the timeout: every sensor missing
+    finally:
+        source.close()
+    expected = Recording(native).frame(COUNT - 1)
+    assert sorted(frame.scans) == sorted(expected.scans)
+    for name, scan in frame.scans.items():
+        np.testing.assert_array_equal(scan.points, expected.scans[name].points)
+        assert counters[f"{name}.late_sweeps"] == COUNT - 1
+    assert empty.scans == {}
+
+
+def test_ouster_udp_spec_errors_are_source_errors(tmp_path):
+    from i2v_loc.sources import SourceError, open_source
+
+    with pytest.raises(SourceError, match="no sensor metadata"):
+        open_source(f"ouster-udp:{tmp_path}")
+    with pytest.raises(SourceError, match="ports must be integers"):
+        open_source(f"ouster-udp:{tmp_path}@x")
 
 
 def test_live_udp_on_loopback_gives_the_native_states(pcap_dir, native_states):

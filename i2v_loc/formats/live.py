@@ -29,7 +29,7 @@ KEEP_SWEEPS = 50  # sweeps kept per sensor for frame(k) (5 s at 10 Hz)
 
 class OusterUdpSource:
     def __init__(self, metadata_dir: str | Path, ports: list[int] | None = None, host: str = "127.0.0.1",
-                 timeout_s: float = 1.0, label: str | None = None):
+                 timeout_s: float = 1.0, label: str | None = None, in_order: bool = False):
         core, _ = _sdk()
         self._core = core
         folder = Path(metadata_dir)
@@ -42,10 +42,13 @@ class OusterUdpSource:
         self.folder = folder
         self.label = label or f"ouster-udp:{folder}"
         self.timeout_s = timeout_s
+        self.in_order = in_order
         self.decoders = {name: SweepDecoder(info, name) for name, info in infos.items()}
         self.rates = {info.format.fps for info in infos.values()}
         self._sweeps: dict[str, dict[int, SensorScan]] = {name: {} for name in infos}
         self._first_id: dict[str, int] = {}
+        self._delivered = dict.fromkeys(infos, -1)
+        self._late = dict.fromkeys(infos, 0)
         self._cond = threading.Condition()
         self._selector = selectors.DefaultSelector()
         self.ports: dict[str, int] = {}
@@ -85,24 +88,46 @@ class OusterUdpSource:
 
     @property
     def counters(self) -> dict[str, int]:
-        return {f"{name}.{k}": v for name, d in self.decoders.items() for k, v in d.counters.items()}
+        counts = {f"{name}.{k}": v for name, d in self.decoders.items() for k, v in d.counters.items()}
+        return counts | {f"{name}.late_sweeps": n for name, n in self._late.items()}
 
-    def frame(self, k: int, wait: bool = True) -> Frame:
-        """The k-th sweep of every sensor; a sensor whose sweep k has not come within the timeout
-        (or was overtaken by newer sweeps) is left out of the frame."""
-        deadline = time.monotonic() + (self.timeout_s if wait else 0.0)
+    def frame(self, k: int) -> Frame:
+        """Live (``in_order`` False, the service): the newest sweep of every sensor that has not
+        been delivered yet, waiting up to the timeout for each sensor to send one; older undelivered
+        sweeps are skipped and counted (``late_sweeps``), so a slow consumer stays current.
+        ``in_order``: the k-th sweep of every sensor (k counted from each sensor's first sweep by
+        the packets' frame id), for reading a replay completely. A sensor without a sweep in time
+        is left out of the frame (the pipeline reports it ``missing``)."""
+        deadline = time.monotonic() + self.timeout_s
         with self._cond:
-            while True:
-                complete = all(k in s or any(i > k for i in s) for s in self._sweeps.values())
-                left = deadline - time.monotonic()
-                if complete or left <= 0:
-                    break
-                self._cond.wait(left)
-            scans = {name: s[k] for name, s in self._sweeps.items() if k in s}
-            for sweeps in self._sweeps.values():
-                for old in [i for i in sweeps if i <= k - KEEP_SWEEPS]:
-                    del sweeps[old]
+            while not self._ready(k) and deadline - time.monotonic() > 0:
+                self._cond.wait(deadline - time.monotonic())
+            scans = self._take(k)
         return Frame(index=k, scans=scans)
+
+    def _ready(self, k: int) -> bool:
+        if self.in_order:
+            return all(k in s or any(i > k for i in s) for s in self._sweeps.values())
+        return all(any(i > self._delivered[n] for i in s) for n, s in self._sweeps.items())
+
+    def _take(self, k: int) -> dict[str, SensorScan]:
+        scans = {}
+        for name, sweeps in self._sweeps.items():
+            if self.in_order:
+                if k in sweeps:
+                    scans[name] = sweeps[k]
+                stale = [i for i in sweeps if i <= k - KEEP_SWEEPS]
+            else:
+                fresh = [i for i in sweeps if i > self._delivered[name]]
+                if fresh:
+                    newest = max(fresh)
+                    scans[name] = sweeps[newest]
+                    self._late[name] += len(fresh) - 1
+                    self._delivered[name] = newest
+                stale = [i for i in sweeps if i <= self._delivered[name]]
+            for i in stale:
+                del sweeps[i]
+        return scans
 
     def describe(self) -> dict:
         return {"source": self.label, "ports": dict(self.ports), "frames": None, "rate_hz": self.rate_hz,
