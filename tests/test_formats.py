@@ -391,3 +391,16 @@ def test_live_udp_counts_lost_packets_and_undoes_reordering(pcap_dir, native):
             np.testing.assert_array_equal(scan.points, expected.scans[name].points)  # reordering undone
             np.testing.assert_allclose(scan.time_offset_s, expected.scans[name].time_offset_s, atol=1e-6)
             assert abs(scan.stamp_s - expected.scans[name].stamp_s) < 1e-6
+
+
+def test_state_lines_follow_the_published_schema(native_states, capsys):
+    import jsonschema
+
+    assert main(["params", "schema", "--state"]) == 0
+    schema = json.loads(capsys.readouterr().out)
+    validator = jsonschema.Draft202012Validator(schema)
+    for line in native_states:
+        validator.validate(line)
+    bad = {**native_states[-1], "vehicles": [{**native_states[-1]["vehicles"][0], "hitch_deg": "12"}]}
+    assert not validator.is_valid(bad)
+    assert not validator.is_valid({**native_states[0], "faults": {"l1": "on_fire"}})
