@@ -404,3 +404,32 @@ def test_state_lines_follow_the_published_schema(native_states, capsys):
     bad = {**native_states[-1], "vehicles": [{**native_states[-1]["vehicles"][0], "hitch_deg": "12"}]}
     assert not validator.is_valid(bad)
     assert not validator.is_valid({**native_states[0], "faults": {"l1": "on_fire"}})
+
+
+def test_ros1_bag_is_read(tmp_path):
+    from rosbags.rosbag1 import Writer
+    from rosbags.typesys import Stores, get_typestore
+
+    store = get_typestore(Stores.ROS1_NOETIC)
+    types = store.types
+    rng = np.random.default_rng(1)
+    clouds = [rng.uniform(-10, 10, (100, 3)).astype(np.float32) for _ in range(3)]
+    bag = tmp_path / "yard.bag"
+    with Writer(bag) as writer:
+        conn = writer.add_connection("/front/points", "sensor_msgs/msg/PointCloud2", typestore=store)
+        for k, xyz in enumerate(clouds):
+            data = np.zeros(len(xyz), dtype=[("x", ">f4"), ("y", ">f4"), ("z", ">f4"), ("intensity", ">f4")])
+            data["x"], data["y"], data["z"] = xyz.T
+            data["x"][7] = np.nan  # a missing return
+            fields = [types["sensor_msgs/msg/PointField"](name=n, offset=4 * i, datatype=7, count=1)
+                      for i, n in enumerate(("x", "y", "z", "intensity"))]
+            header = types["std_msgs/msg/Header"](seq=k, stamp=types["builtin_interfaces/msg/Time"](sec=100, nanosec=k * 100_000_000), frame_id="front")
+            msg = types["sensor_msgs/msg/PointCloud2"](header=header, height=1, width=len(xyz), fields=fields, is_bigendian=True,
+                                                       point_step=16, row_step=16 * len(xyz), data=data.view(np.uint8).reshape(-1), is_dense=False)
+            writer.write(conn, 100_000_000_000 + k * 100_000_000, store.serialize_ros1(msg, "sensor_msgs/msg/PointCloud2"))
+    rec = open_recording(bag)
+    assert rec.layout == "rosbag1" and rec.sensor_names == ["front"] and len(rec) == 3
+    assert rec.rate_hz == pytest.approx(10.0)
+    scan = rec.frame(2).scans["front"]
+    assert scan.stamp_s == pytest.approx(100.2)
+    np.testing.assert_array_equal(scan.points, np.delete(clouds[2], 7, axis=0))

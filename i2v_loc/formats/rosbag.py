@@ -228,7 +228,7 @@ class BagRecording(PointRecording):
                     stamp = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
                     self._sweeps[name].append(SensorScan(sensor=name, stamp_s=stamp, points=pts, time_offset_s=off))
                 tf_conns = [c for c in reader.connections if c.topic == TF_STATIC]
-                for conn, _, raw in reader.messages(connections=tf_conns):
+                for conn, _, raw in reader.messages(connections=tf_conns) if tf_conns else ():  # [] means all
                     for tf in reader.deserialize(raw, conn.msgtype).transforms:
                         self._tf[tf.child_frame_id] = _tf_extrinsics(tf)
         except AnyReaderError as err:
