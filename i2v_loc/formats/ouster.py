@@ -77,7 +77,9 @@ def read_metadata(path: Path):
         text = Path(path).read_text()
         info = core.SensorInfo(text)
     except (OSError, RuntimeError, ValueError) as err:
-        raise FormatError(f"{path}: not Ouster sensor metadata: {str(err).splitlines()[0] if str(err) else type(err).__name__}") from None
+        issues = [line.strip() for line in str(err).splitlines() if line.strip()]
+        detail = "; ".join(issues[1:4] if len(issues) > 1 else issues) or type(err).__name__
+        raise FormatError(f"{path}: not Ouster sensor metadata: {detail}") from None
     if info.w <= 0 or info.h <= 0 or len(info.beam_altitude_angles) != info.h:
         raise FormatError(f"{path}: Ouster metadata without a usable lidar data format ({info.h} x {info.w})")
     return info
@@ -199,9 +201,12 @@ def _pcap_packets(path: Path, info, rejected: dict):
     except (RuntimeError, ValueError) as err:
         raise FormatError(f"{path}: not a readable pcap: {str(err).splitlines()[0] if str(err) else type(err).__name__}") from None
     try:
-        for _, packet in source:
-            if isinstance(packet, core.LidarPacket):
-                yield packet
+        try:
+            for _, packet in source:
+                if isinstance(packet, core.LidarPacket):
+                    yield packet
+        except RuntimeError as err:
+            raise FormatError(f"{path}: cannot read the pcap: {' '.join(str(err).split())[:300]}") from None
         rejected["id"] = int(source.id_error_count)
         rejected["size"] = int(source.size_error_count)
     finally:

@@ -231,8 +231,10 @@ class BagRecording(PointRecording):
                 for conn, _, raw in reader.messages(connections=tf_conns) if tf_conns else ():  # [] means all
                     for tf in reader.deserialize(raw, conn.msgtype).transforms:
                         self._tf[tf.child_frame_id] = _tf_extrinsics(tf)
-        except AnyReaderError as err:
-            raise FormatError(f"{bag_path}: cannot read the bag: {err}") from None
+        except FormatError:
+            raise
+        except (AnyReaderError, Exception) as err:  # rosbags, sqlite3 and the MCAP parser raise many kinds on corrupt bags
+            raise FormatError(f"{bag_path}: cannot read the bag: {' '.join(str(err).split())[:300]}") from None
         for name, sweeps in self._sweeps.items():
             if not sweeps:
                 raise FormatError(f"{bag_path}: topic {wanted[name]} of sensor {name} has no messages")
