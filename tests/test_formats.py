@@ -433,3 +433,17 @@ def test_ros1_bag_is_read(tmp_path):
     scan = rec.frame(2).scans["front"]
     assert scan.stamp_s == pytest.approx(100.2)
     np.testing.assert_array_equal(scan.points, np.delete(clouds[2], 7, axis=0))
+
+
+@pytest.mark.parametrize("fmt", ["rosbag2", "mcap"])
+def test_run_writes_its_states_to_a_bag(fmt, native, native_states, tmp_path):
+    from rosbags.highlevel import AnyReader
+
+    out = tmp_path / "states_bag"
+    assert main(["run", str(native), "--out", str(out), "--quiet", "--format", fmt, "--frames", "4"]) == 0
+    with AnyReader([out]) as reader:
+        assert [c.topic for c in reader.connections] == ["/i2v_loc/states"]
+        lines = [json.loads(reader.deserialize(raw, c.msgtype).data) for c, _, raw in reader.messages()]
+    def strip(line):
+        return {k: v for k, v in line.items() if k != "latency_ms"}
+    assert [strip(line) for line in lines] == [strip(line) for line in native_states[:4]]

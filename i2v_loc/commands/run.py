@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import json
 import sys
 from pathlib import Path
@@ -13,8 +14,9 @@ def register(sub) -> None:
     p = sub.add_parser("run", help="run the localization pipeline on a recording, write state lines (JSONL)")
     p.add_argument("recording", metavar="REC", help="recording in any layout of `i2v-loc sources` (docs/formats.md)")
     p.add_argument("--out", required=True, help="output file of state lines (missing parent folders are created)")
-    p.add_argument("--format", default="jsonl", choices=["jsonl", "openlabel"],
-                   help="jsonl: one state line per frame (default); openlabel: ASAM OpenLABEL (TRUCK/TRAILER cuboids)")
+    p.add_argument("--format", default="jsonl", choices=["jsonl", "openlabel", "rosbag2", "mcap"],
+                   help="jsonl: one state line per frame (default); openlabel: ASAM OpenLABEL (TRUCK/TRAILER cuboids); "
+                        "rosbag2/mcap: a ROS 2 bag folder with the lines as std_msgs/String on /i2v_loc/states")
     p.add_argument("--bin-layout", choices=["kitti", "nuscenes"], help="layout of .bin clouds when their content fits both")
     p.add_argument("--method", default="paper", help="pipeline method (default: paper)")
     p.add_argument("--sensors", help="comma-separated subset of the sensors, e.g. l1,l4 (default: all)")
@@ -69,10 +71,12 @@ def run(args) -> int:
     pipeline = Pipeline(params, method=args.method)
     n_frames = len(recording) if args.frames is None else min(args.frames, len(recording))
     out = Path(args.out)
+    if args.format in ("rosbag2", "mcap") and out.exists() and (not out.is_dir() or any(out.iterdir())):
+        raise UserError(f"{out}: exists and is not an empty folder; a bag is written into a new folder")
     out.parent.mkdir(parents=True, exist_ok=True)
     summary = Summary()
     lines = []
-    with out.open("w") as f:
+    with out.open("w") if args.format == "jsonl" else contextlib.nullcontext() as f:
         for index in tqdm(range(n_frames), desc=rec_path.name, unit="frame", disable=args.quiet, file=sys.stderr):
             try:
                 line = pipeline.process(recording.frame(index, sensors)).to_json()
@@ -87,6 +91,13 @@ def run(args) -> int:
         from i2v_loc.formats.openlabel_out import write_openlabel
 
         write_openlabel(lines, out)
+    elif args.format in ("rosbag2", "mcap"):
+        from i2v_loc.formats.rosbag import write_states_bag
+
+        try:
+            write_states_bag(lines, out, storage="mcap" if args.format == "mcap" else "sqlite3")
+        except RecordingError as err:
+            raise UserError(str(err)) from err
     print(summary.text(out, pipeline.counters))
     return 0
 

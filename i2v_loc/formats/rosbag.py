@@ -103,14 +103,39 @@ def _bag_messages(recording):
 
 def write_bag(recording, out: str | Path, storage: str = "sqlite3") -> Path:
     """A rosbag2 folder (sqlite3 or MCAP storage) with the recording's sweeps and /tf_static."""
+    store, items = _bag_messages(recording)
+    write_items(out, store, items, storage)
+    copy_side_files(recording, out)
+    return out
+
+
+def write_states_bag(states: list[dict], out: str | Path, storage: str = "sqlite3") -> Path:
+    """State lines as ``std_msgs/msg/String`` (the JSON line) on ``/i2v_loc/states``, logged at
+    their ``stamp_s`` (frames without a stamp at the previous one)."""
+    import json
+
+    store = _typestore()
+    String = store.types["std_msgs/msg/String"]
+    items, last_ns = [], 1
+    for line in states:
+        if line.get("stamp_s") is not None:
+            last_ns = max(int(round(line["stamp_s"] * 1e9)), 1)
+        items.append((STATES_TOPIC, "std_msgs/msg/String", last_ns, String(data=json.dumps(line, separators=(",", ":")))))
+    write_items(out, store, items, storage)
+    return Path(out)
+
+
+STATES_TOPIC = "/i2v_loc/states"
+
+
+def write_items(out: str | Path, store, items, storage: str) -> None:
     from rosbags.rosbag2 import Writer
 
     out = Path(out)
-    if out.exists() and any(out.iterdir()):
-        raise FormatError(f"{out}: exists and is not empty; a bag is written into a new folder")
+    if out.exists() and (not out.is_dir() or any(out.iterdir())):
+        raise FormatError(f"{out}: exists and is not an empty folder; a bag is written into a new folder")
     if out.exists():
         out.rmdir()
-    store, items = _bag_messages(recording)
     with Writer(out) as writer:
         connections = {}
         for topic, msgtype, _, _ in items:
@@ -121,8 +146,6 @@ def write_bag(recording, out: str | Path, storage: str = "sqlite3") -> Path:
             writer.write(connections[topic], stamp, store.serialize_cdr(msg, msgtype))
     if storage == "mcap":
         _sqlite_to_mcap(out, store, items)
-    copy_side_files(recording, out)
-    return out
 
 
 _LATCHED_QOS = ("- history: 3\n  depth: 0\n  reliability: 1\n  durability: 1\n  deadline:\n    sec: 2147483647\n"
