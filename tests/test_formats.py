@@ -447,3 +447,26 @@ def test_run_writes_its_states_to_a_bag(fmt, native, native_states, tmp_path):
     def strip(line):
         return {k: v for k, v in line.items() if k != "latency_ms"}
     assert [strip(line) for line in lines] == [strip(line) for line in native_states[:4]]
+
+
+def test_pcap_with_lost_packets_is_read_and_counted(pcap_dir, native, tmp_path, capsys):
+    from ouster.sdk import pcap
+
+    from i2v_loc.formats.ouster import read_metadata
+
+    bad = tmp_path / "lossy"
+    shutil.copytree(pcap_dir, bad)
+    source = pcap.PcapPacketSource(str(pcap_dir / "l2.pcap"), sensor_info=[read_metadata(pcap_dir / "l2.json")])
+    kept = [p for i, (_, p) in enumerate(source) if i not in (64 + 10, 64 + 11, 3 * 64 + 63)]  # sweeps 1 and 3
+    source.close()
+    (bad / "l2.pcap").unlink()
+    pcap.record(kept, str(bad / "l2.pcap"))
+    rec = open_recording(bad)
+    assert rec.counters["l2.lost_packets"] == 3 and rec.counters["l2.incomplete_sweeps"] == 2
+    assert len(rec) == COUNT
+    ref = Recording(native)
+    for k in range(5):
+        got, expected = len(rec.frame(k).scans["l2"].points), len(ref.frame(k).scans["l2"].points)
+        assert (got < expected) if k in (1, 3) else (got == expected)
+    assert main(["run", str(bad), "--out", str(tmp_path / "s.jsonl"), "--quiet", "--frames", "2"]) == 0
+    assert "source: l2.incomplete_sweeps 2, l2.lost_packets 3" in capsys.readouterr().out

@@ -99,6 +99,9 @@ def run(args) -> int:
         except RecordingError as err:
             raise UserError(str(err)) from err
     print(summary.text(out, pipeline.counters))
+    source_counts = {k: v for k, v in getattr(recording, "counters", {}).items() if v and not k.endswith(".packets")}
+    if source_counts:  # e.g. lost or foreign packets of an Ouster pcap
+        print("source: " + ", ".join(f"{k} {v}" for k, v in sorted(source_counts.items())))
     return 0
 
 
