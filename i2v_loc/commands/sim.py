@@ -35,6 +35,8 @@ def _run(args) -> int:
 
     params = load_params(args.sensors) if args.sensors else load_params()
     if args.suite:
+        if args.format != "native":
+            raise UserError("--format applies to one recording; convert suite entries with `i2v-loc sources --convert`")
         return _run_suite(args, params)
     vehicles = [v.strip() for v in (args.vehicles or args.vehicle).split(",") if v.strip()]
     unknown = [v for v in vehicles if v not in params.vehicles]
