@@ -470,3 +470,15 @@ def test_pcap_with_lost_packets_is_read_and_counted(pcap_dir, native, tmp_path, 
         assert (got < expected) if k in (1, 3) else (got == expected)
     assert main(["run", str(bad), "--out", str(tmp_path / "s.jsonl"), "--quiet", "--frames", "2"]) == 0
     assert "source: l2.incomplete_sweeps 2, l2.lost_packets 3" in capsys.readouterr().out
+
+
+def test_bench_reports_latency_on_the_chengdu_frames(realdata, tmp_path, capsys):
+    params = tmp_path / "chengdu.yaml"
+    params.write_text(yaml.safe_dump({"sensors": [{"name": "frames", "extrinsics": {"z_m": 7.5}}],
+                                      "background": {"window_frames": 10, "learn_every_frames": 1, "min_samples": 8}}))
+    folder = realdata / "roadside80_chengdu" / "frames"
+    assert main(["bench", str(folder), "--params", str(params), "--method", "default", "--warmup", "10", "--json"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert report["frames"] == 10
+    assert {"concatenation", "background", "region", "clustering", "total"} <= set(report["latency_ms"])
+    assert report["latency_ms"]["total"]["p95"] >= report["latency_ms"]["total"]["p50"] > 0
