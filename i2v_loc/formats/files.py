@@ -19,7 +19,6 @@ from datetime import datetime, timezone
 from pathlib import Path
 
 import numpy as np
-import yaml
 
 from i2v_loc.formats.base import FormatError, PointRecording, copy_side_files
 from i2v_loc.frame import SensorScan
@@ -278,7 +277,3 @@ def write_pcd_folder(recording, out: str | Path, encoding: str = "binary_compres
                                                        for s in scans.stamp_ns))
     copy_side_files(recording, out)
     return out
-
-
-def write_sensors_yaml(out: Path, sensors: list[dict]) -> None:
-    (out / "sensors.yaml").write_text(yaml.safe_dump({"sensors": sensors}, sort_keys=False))

@@ -14,6 +14,7 @@ recording's points exactly (ranges are integer millimetres in both).
 from __future__ import annotations
 
 import json
+import struct
 import time
 from pathlib import Path
 
@@ -215,24 +216,25 @@ def _pcap_packets(path: Path, info, rejected: dict):
 
 def _check_pcap_complete(path: Path) -> None:
     """A pcap cut short (copy aborted, disk full) ends inside a record: libpcap stops silently
-    there, so the record lengths are walked here to say so."""
-    data = path.read_bytes()
-    if len(data) < 24:
-        raise FormatError(f"{path}: truncated pcap ({len(data)} bytes, shorter than the 24-byte file header)")
-    magic = data[:4]
-    order = {b"\xd4\xc3\xb2\xa1": "<", b"\xa1\xb2\xc3\xd4": ">", b"\x4d\x3c\xb2\xa1": "<", b"\xa1\xb2\x3c\x4d": ">"}.get(magic)
-    if order is None:
-        raise FormatError(f"{path}: not a pcap file (magic {magic.hex()})")
-    offset, records = 24, 0
-    while offset < len(data):
-        if offset + 16 > len(data):
-            raise FormatError(f"{path}: truncated pcap: the file ends inside the header of packet {records + 1} (byte {offset})")
-        caplen = int(np.frombuffer(data, dtype=f"{order}u4", count=1, offset=offset + 8)[0])
-        if offset + 16 + caplen > len(data):
-            raise FormatError(f"{path}: truncated pcap: packet {records + 1} needs {caplen} bytes, "
-                              f"{len(data) - offset - 16} are left")
-        offset += 16 + caplen
-        records += 1
+    there, so the record headers are walked here (seeking, not reading the packets) to say so."""
+    size = path.stat().st_size
+    with path.open("rb") as fh:
+        magic = fh.read(4)
+        if size < 24:
+            raise FormatError(f"{path}: truncated pcap ({size} bytes, shorter than the 24-byte file header)")
+        order = {b"\xd4\xc3\xb2\xa1": "<", b"\xa1\xb2\xc3\xd4": ">", b"\x4d\x3c\xb2\xa1": "<", b"\xa1\xb2\x3c\x4d": ">"}.get(magic)
+        if order is None:
+            raise FormatError(f"{path}: not a pcap file (magic {magic.hex()})")
+        offset, records = 24, 0
+        while offset < size:
+            if offset + 16 > size:
+                raise FormatError(f"{path}: truncated pcap: the file ends inside the header of packet {records + 1} (byte {offset})")
+            fh.seek(offset + 8)
+            (caplen,) = struct.unpack(f"{order}I", fh.read(4))
+            if offset + 16 + caplen > size:
+                raise FormatError(f"{path}: truncated pcap: packet {records + 1} needs {caplen} bytes, {size - offset - 16} are left")
+            offset += 16 + caplen
+            records += 1
 
 
 class OusterRecording(PointRecording):
