@@ -482,3 +482,31 @@ def test_bench_reports_latency_on_the_chengdu_frames(realdata, tmp_path, capsys)
     assert report["frames"] == 10
     assert {"concatenation", "background", "region", "clustering", "total"} <= set(report["latency_ms"])
     assert report["latency_ms"]["total"]["p95"] >= report["latency_ms"]["total"]["p50"] > 0
+
+
+def test_every_pcd_variant_ply_and_npy_give_the_same_points(tmp_path):
+    import open3d as o3d
+    from pypcd4 import Encoding, PointCloud
+
+    rng = np.random.default_rng(7)
+    xyz = _cloud_rows(600, rng)
+    organized = np.full((20, 40, 3), np.nan, dtype=np.float32)  # 800 cells, 600 returns, NaN elsewhere
+    cells = np.sort(rng.choice(800, 600, replace=False))
+    organized.reshape(-1, 3)[cells] = xyz
+    for encoding in ("ascii", "binary", "binary_compressed"):
+        folder = tmp_path / encoding / "lidar"
+        folder.mkdir(parents=True)
+        flat = organized.reshape(-1, 3)
+        cloud = PointCloud.from_points([flat[:, 0], flat[:, 1], flat[:, 2]], ("x", "y", "z"), (np.float32,) * 3)
+        cloud.metadata.width, cloud.metadata.height = 40, 20  # organized: rows of the sensor
+        cloud.save(folder / "1700000000_100000000.pcd", encoding=Encoding(encoding))
+    (tmp_path / "npy" / "lidar").mkdir(parents=True)
+    np.save(tmp_path / "npy" / "lidar" / "000000.npy", np.column_stack([xyz, np.ones(600)]))
+    (tmp_path / "ply" / "lidar").mkdir(parents=True)
+    o3d.io.write_point_cloud(str(tmp_path / "ply" / "lidar" / "000000.ply"), o3d.geometry.PointCloud(o3d.utility.Vector3dVector(xyz.astype(np.float64))))
+    for layout in ("ascii", "binary", "binary_compressed", "npy", "ply"):
+        rec = open_recording(tmp_path / layout)
+        scan = rec.frame(0).scans["lidar"]
+        np.testing.assert_allclose(scan.points, xyz, atol=1e-5 if layout == "ascii" else 0, err_msg=layout)
+        if layout in ("ascii", "binary", "binary_compressed"):
+            assert scan.stamp_s == pytest.approx(1700000000.1), layout  # from the file name
