@@ -510,3 +510,13 @@ def test_every_pcd_variant_ply_and_npy_give_the_same_points(tmp_path):
         np.testing.assert_allclose(scan.points, xyz, atol=1e-5 if layout == "ascii" else 0, err_msg=layout)
         if layout in ("ascii", "binary", "binary_compressed"):
             assert scan.stamp_s == pytest.approx(1700000000.1), layout  # from the file name
+
+
+def test_eval_task_on_a_pcap_folder_equals_the_native_one(pcap_dir, native):
+    from i2v_loc.evaluation.runner import Task, base_params, run_task
+
+    params = base_params(None)
+    results = [run_task(Task(str(path), "paper", None, params)) for path in (native, pcap_dir)]
+    rows = [[{k: v for k, v in row.items() if "latency" not in k and k != "recording"}
+             for row in r["records"] + r["frames"]] for r in results]
+    assert rows[0] and json.dumps(rows[0], default=str) == json.dumps(rows[1], default=str)  # NaN-safe
