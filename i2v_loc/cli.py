@@ -12,7 +12,7 @@ import sys
 from i2v_loc import __version__
 from i2v_loc.params import ParamsError
 
-COMMANDS = ["sim", "realism", "params", "calibrate", "run", "detect", "eval", "sweep", "serve", "bench"]
+COMMANDS = ["sim", "realism", "params", "calibrate", "run", "detect", "eval", "sweep", "serve", "bench", "sources"]
 
 
 class UserError(Exception):

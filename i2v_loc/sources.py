@@ -20,7 +20,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from i2v_loc.frame import Frame, SensorScan
-from i2v_loc.recording import Recording, RecordingError
+from i2v_loc.formats import open_recording
+from i2v_loc.recording import RecordingError
 
 DEFAULT_SCENARIO = "docking"
 DEFAULT_VEHICLE = "man_tgx"
@@ -37,7 +38,7 @@ class ReplaySource:
 
     def __init__(self, path: str | Path, loop: bool = False, label: str | None = None):
         try:
-            self.recording = Recording(path)
+            self.recording = open_recording(path)
         except RecordingError as err:
             raise SourceError(str(err)) from err
         if len(self.recording) == 0:
@@ -185,10 +186,15 @@ def open_source(
     duration_s: float = DEFAULT_SIM_DURATION_S,
     cache_dir: str | Path | None = None,
 ) -> ReplaySource:
-    """``sim``, ``sim:SCENARIO`` (always loops) or ``replay:REC_DIR`` (loops with ``loop``)."""
+    """``sim``, ``sim:SCENARIO`` (always loops), ``replay:REC`` (any layout of docs/formats.md; loops
+    with ``loop``) or ``ouster-udp:DIR[@PORT,...]`` (live Ouster packets)."""
+    if spec.strip().startswith("ouster-udp:"):
+        from i2v_loc.formats.live import open_udp_source
+
+        return open_udp_source(spec.strip().removeprefix("ouster-udp:"))
     match = _SPEC.match(spec.strip())
     if not match:
-        raise SourceError(f"unknown source {spec!r}: use sim, sim:SCENARIO or replay:REC_DIR")
+        raise SourceError(f"unknown source {spec!r}: use sim, sim:SCENARIO, replay:REC or ouster-udp:DIR[@PORT,...]")
     kind, arg = match["kind"], match["arg"]
     if kind == "replay":
         if not arg:

@@ -95,7 +95,7 @@ class Service:
             "live": runner.error is None and (runner.alive or not runner.started_s),
             "ready": status in ("ok", "degraded"),
             "error": runner.error,
-            "source": self.source_info,
+            "source": {**self.source_info, **({"counters": runner.source.counters} if hasattr(runner.source, "counters") else {})},
             "method": runner.method,
             "uptime_s": None if runner.started_s is None else round(now - runner.started_s, 3),
             "last_frame_age_s": None if age is None else round(age, 3),

@@ -54,12 +54,14 @@ def summarize(latencies: list[dict[str, float]]) -> dict[str, dict[str, float]]:
 def run(args) -> int:
     from i2v_loc.params import load_params
     from i2v_loc.pipeline import Pipeline
-    from i2v_loc.recording import Recording
+    from i2v_loc.formats import open_recording
+    from i2v_loc.recording import RecordingError
 
     rec_path = Path(args.recording)
-    if not (rec_path / "meta.yaml").is_file():
-        raise UserError(f"{rec_path} is not a recording directory (no meta.yaml)")
-    recording = Recording(rec_path)
+    try:
+        recording = open_recording(rec_path)
+    except RecordingError as err:
+        raise UserError(str(err)) from err
     params = load_params(recording.sensors_file, *args.params)
     frames = list(recording.frames())
     if len(frames) <= args.warmup:

@@ -20,12 +20,14 @@ def register(sub) -> None:
 def run(args) -> int:
     from i2v_loc.evaluation.calibration import run_calibration, sensor_errors
     from i2v_loc.params import dump_yaml, load_params
-    from i2v_loc.recording import Recording
+    from i2v_loc.formats import open_recording
+    from i2v_loc.recording import RecordingError
 
     rec_path = Path(args.recording)
-    if not (rec_path / "meta.yaml").is_file():
-        raise UserError(f"{rec_path}: not a recording folder (no meta.yaml)")
-    recording = Recording(rec_path)
+    try:
+        recording = open_recording(rec_path)
+    except RecordingError as err:
+        raise UserError(str(err)) from err
     guess_file = Path(args.guess) if args.guess else recording.sensors_guess_file
     params = load_params(guess_file, *args.params)
     _set_threads(args.threads)

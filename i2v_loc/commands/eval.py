@@ -57,18 +57,20 @@ def calibrate(recordings: list[Path], patch: dict, args) -> dict[str, dict]:
 
 
 def find_recordings(inputs: list[str]) -> list[Path]:
-    """Recording folders (with meta.yaml) given directly or one level inside suite folders."""
+    """Recordings (any layout of `i2v-loc sources`) given directly or one level inside suite folders."""
+    from i2v_loc.formats import looks_like_recording
+
     found: list[Path] = []
     for item in inputs:
         path = Path(item)
         if not path.is_dir():
             raise UserError(f"{path}: no such folder")
-        if (path / "meta.yaml").is_file():
+        if looks_like_recording(path):
             found.append(path)
             continue
-        inner = sorted(d for d in path.iterdir() if (d / "meta.yaml").is_file())
+        inner = sorted(d for d in path.iterdir() if d.is_dir() and looks_like_recording(d))
         if not inner:
-            raise UserError(f"{path}: neither a recording (meta.yaml) nor a suite of recordings")
+            raise UserError(f"{path}: neither a recording (any layout of `i2v-loc sources`) nor a suite of recordings")
         found += inner
     return found
 
@@ -111,11 +113,15 @@ def build_tasks(recordings: list[Path], methods: list[str], subsets: bool, param
     any, ``calibrations`` keyed by its path) come before the --params patch."""
     from i2v_loc.evaluation.calibration import task_patch
     from i2v_loc.evaluation.runner import Task
-    from i2v_loc.recording import Recording
+    from i2v_loc.formats import open_recording
+    from i2v_loc.recording import RecordingError
 
     tasks = []
     for rec_path in recordings:
-        names = Recording(rec_path).sensor_names
+        try:
+            names = open_recording(rec_path).sensor_names
+        except RecordingError as err:
+            raise UserError(str(err)) from err
         choices = sensor_subsets(names) if subsets else [None]
         patch = task_patch(params, (calibrations or {}).get(str(rec_path), {}))
         for method in methods:

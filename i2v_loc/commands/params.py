@@ -21,6 +21,7 @@ def register(sub) -> None:
     check.set_defaults(func=_check)
 
     schema = ps.add_parser("schema", help="print the JSON Schema of the parameter model")
+    schema.add_argument("--state", action="store_true", help="the schema of the state line (run JSONL, WebSocket) instead")
     schema.set_defaults(func=_schema)
 
 
@@ -36,5 +37,10 @@ def _check(args) -> int:
 
 
 def _schema(args) -> int:
+    if args.state:
+        from i2v_loc.formats.state_schema import state_json_schema
+
+        print(json.dumps(state_json_schema(), indent=2))
+        return 0
     print(json.dumps(json_schema(), indent=2))
     return 0

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import json
 import sys
 from pathlib import Path
@@ -12,8 +13,12 @@ from i2v_loc.params import DEFAULT_METHOD
 
 def register(sub) -> None:
     p = sub.add_parser("run", help="run the localization pipeline on a recording, write state lines (JSONL)")
-    p.add_argument("recording", metavar="REC", help="recording folder (docs/formats.md)")
-    p.add_argument("--out", required=True, help="output JSONL file of state lines (missing parent folders are created)")
+    p.add_argument("recording", metavar="REC", help="recording in any layout of `i2v-loc sources` (docs/formats.md)")
+    p.add_argument("--out", required=True, help="output file of state lines (missing parent folders are created)")
+    p.add_argument("--format", default="jsonl", choices=["jsonl", "openlabel", "rosbag2", "mcap"],
+                   help="jsonl: one state line per frame (default); openlabel: ASAM OpenLABEL (TRUCK/TRAILER cuboids); "
+                        "rosbag2/mcap: a ROS 2 bag folder with the lines as std_msgs/String on /i2v_loc/states")
+    p.add_argument("--bin-layout", choices=["kitti", "nuscenes"], help="layout of .bin clouds when their content fits both")
     p.add_argument("--method", default=DEFAULT_METHOD, help=f"pipeline method (default: {DEFAULT_METHOD})")
     p.add_argument("--sensors", help="comma-separated subset of the sensors, e.g. l1,l4 (default: all)")
     p.add_argument("--vehicles", help="comma-separated subset of the configured vehicles to look for (default: all)")
@@ -48,16 +53,18 @@ def run(args) -> int:
 
     from i2v_loc.params import load_params
     from i2v_loc.pipeline import METHODS, Pipeline
-    from i2v_loc.recording import Recording
+    from i2v_loc.formats import open_recording
+    from i2v_loc.recording import RecordingError
 
     rec_path = Path(args.recording)
-    if not (rec_path / "meta.yaml").is_file():
-        raise UserError(f"{rec_path}: not a recording folder (no meta.yaml)")
     if args.frames is not None and args.frames < 1:
         raise UserError(f"--frames must be at least 1, got {args.frames}")
     if args.method not in METHODS:
         raise UserError(f"unknown method {args.method!r}; known: {', '.join(METHODS)}")
-    recording = Recording(rec_path)
+    try:
+        recording = open_recording(rec_path, bin_layout=args.bin_layout)
+    except RecordingError as err:
+        raise UserError(str(err)) from err
     params = load_params(recording.sensors_file, *args.params)
     sensors = parse_list(args.sensors, recording.sensor_names, "sensor")
     vehicles = parse_list(args.vehicles, list(params.vehicles), "vehicle")
@@ -65,14 +72,37 @@ def run(args) -> int:
     pipeline = Pipeline(params, method=args.method)
     n_frames = len(recording) if args.frames is None else min(args.frames, len(recording))
     out = Path(args.out)
+    if args.format in ("rosbag2", "mcap") and out.exists() and (not out.is_dir() or any(out.iterdir())):
+        raise UserError(f"{out}: exists and is not an empty folder; a bag is written into a new folder")
     out.parent.mkdir(parents=True, exist_ok=True)
     summary = Summary()
-    with out.open("w") as f:
+    lines = []
+    with out.open("w") if args.format == "jsonl" else contextlib.nullcontext() as f:
         for index in tqdm(range(n_frames), desc=rec_path.name, unit="frame", disable=args.quiet, file=sys.stderr):
-            line = pipeline.process(recording.frame(index, sensors)).to_json()
-            f.write(json.dumps(line, separators=(",", ":")) + "\n")
+            try:
+                line = pipeline.process(recording.frame(index, sensors)).to_json()
+            except RecordingError as err:  # a file of the recording that is read per frame
+                raise UserError(str(err)) from err
+            if args.format == "jsonl":
+                f.write(json.dumps(line, separators=(",", ":")) + "\n")
+            else:
+                lines.append(line)
             summary.add(line)
+    if args.format == "openlabel":
+        from i2v_loc.formats.openlabel_out import write_openlabel
+
+        write_openlabel(lines, out)
+    elif args.format in ("rosbag2", "mcap"):
+        from i2v_loc.formats.rosbag import write_states_bag
+
+        try:
+            write_states_bag(lines, out, storage="mcap" if args.format == "mcap" else "sqlite3")
+        except RecordingError as err:
+            raise UserError(str(err)) from err
     print(summary.text(out, pipeline.counters))
+    source_counts = {k: v for k, v in getattr(recording, "counters", {}).items() if v and not k.endswith(".packets")}
+    if source_counts:  # e.g. lost or foreign packets of an Ouster pcap
+        print("source: " + ", ".join(f"{k} {v}" for k, v in sorted(source_counts.items())))
     return 0
 
 

@@ -23,7 +23,7 @@ def register(sub) -> None:
         description="Run the pipeline live on a source and serve its states (see docs/service.md).",
     )
     p.add_argument("--source", default=DEFAULT_SOURCE,
-                   help="sim[:SCENARIO] (simulated yard, loops; default %(default)s) or replay:REC_DIR")
+                   help="sim[:SCENARIO] (simulated yard, loops; default %(default)s), replay:REC (any layout of `i2v-loc sources`) or ouster-udp:DIR[@PORT,...]")
     p.add_argument("--method", default=DEFAULT_METHOD, metavar="paper|default",
                    help="pipeline method (default %(default)s: fast enough for 10 Hz; paper: the published one)")
     p.add_argument("--params", type=Path, metavar="FILE",

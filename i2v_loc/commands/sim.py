@@ -28,6 +28,8 @@ def register(sub) -> None:
     p.add_argument("--clutter-near", action="store_true", help="containers and parked trailers right beside the vehicles' paths")
     p.add_argument("--preview", nargs="?", const="", metavar="PNG",
                    help="write a bird's-eye-view PNG of the middle frame here (no value: preview.png in each recording)")
+    p.add_argument("--format", default="native", choices=["native", "pcap", "rosbag2", "mcap", "pcd"],
+                   help="layout of --out (docs/formats.md; default native: meta.yaml + scans/*.npz)")
     p.add_argument("--suite", help="generate every entry of a suite (name in samples/suites/ or a YAML file) into --out")
     p.set_defaults(func=_run)
 
@@ -38,6 +40,8 @@ def _run(args) -> int:
 
     params = load_params(args.sensors) if args.sensors else load_params()
     if args.suite:
+        if args.format != "native":
+            raise UserError("--format applies to one recording; convert suite entries with `i2v-loc sources --convert`")
         return _run_suite(args, params)
     extra = _extra_vehicles(args.vehicles_file, params)
     vehicles = [v.strip() for v in (args.vehicles or args.vehicle).split(",") if v.strip()]
@@ -49,6 +53,12 @@ def _run(args) -> int:
              "start_s": args.start, "columns": args.columns, "slope_deg": args.slope_deg, "distractors": not args.no_distractors,
              "clutter_near": args.clutter_near, "extra_vehicles": extra}
     preview = args.preview or (str(Path(args.out) / "preview.png") if args.preview == "" else None)
+    if args.format != "native":
+        from i2v_loc.commands.sources import converted_output
+
+        with converted_output(Path(args.out), args.format) as native:
+            _generate(entry, params, native, preview)
+        return 0
     _generate(entry, params, Path(args.out), preview)
     return 0
 

@@ -75,12 +75,13 @@ def _file_hash(path: Path) -> str:
 
 def cache_key(recording, calibration_params) -> str:
     """Hash of what the calibration depends on (module docstring)."""
-    scans = sorted((p.name, p.stat().st_size) for p in (recording.path / "scans").glob("*.npz"))
+    root = Path(recording.path)
+    files = sorted((str(p.relative_to(root)), p.stat().st_size) for p in root.rglob("*") if p.is_file())
     content = {
         "version": CACHE_VERSION,
-        "recording": str(Path(recording.path).resolve()),
-        "meta": _file_hash(recording.path / "meta.yaml"),
-        "scans": scans,
+        "recording": str(root.resolve()),
+        "meta": _file_hash(root / "meta.yaml") if (root / "meta.yaml").is_file() else None,
+        "files": files,
         "guess": _file_hash(recording.sensors_guess_file),
         "calibration": calibration_params.model_dump(mode="json"),
     }
@@ -103,10 +104,10 @@ def calibrate_recording(recording_path: str, patch: dict, cache_dir: str | Path 
     dict: ``recording``, ``status``, ``message``, ``sensors`` (list of sensor dicts; None = the
     recording's sensors.yaml), ``per_sensor`` (fitness and errors against the truth), ``cached``).
     ``patch`` is the merged --params files: its calibration section is used."""
+    from i2v_loc.formats import open_recording
     from i2v_loc.params import apply_patch, load_params
-    from i2v_loc.recording import Recording
 
-    recording = Recording(recording_path)
+    recording = open_recording(recording_path)
     name = Path(recording_path).name
     truth = load_params(recording.sensors_file).sensors if recording.sensors_file.is_file() else []
     if "sensors" in patch:

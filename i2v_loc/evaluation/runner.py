@@ -47,9 +47,9 @@ def recording_params(patch: dict, recording: str, sensors: Sequence[str] | None)
     """The parameters for a recording, in the order of ``i2v-loc run``: the defaults, then the
     recording's sensors.yaml (its true extrinsics), then ``patch`` (the --params files merged, see
     ``base_params``), then only the chosen sensors."""
-    from i2v_loc.recording import Recording
+    from i2v_loc.formats import open_recording
 
-    rec = Recording(recording)
+    rec = open_recording(recording)
     params = load_params(rec.sensors_file if rec.sensors_file.is_file() else None)
     params = apply_patch(params, patch, source=f"{recording}: parameters after its sensors.yaml")
     if sensors:
@@ -64,9 +64,9 @@ def recording_params(patch: dict, recording: str, sensors: Sequence[str] | None)
 def run_pipeline(task: Task) -> list[dict]:
     """State lines of the pipeline on every frame of the task's recording."""
     from i2v_loc.pipeline import Pipeline
-    from i2v_loc.recording import Recording
+    from i2v_loc.formats import open_recording
 
-    rec = Recording(task.recording)
+    rec = open_recording(task.recording)
     params = recording_params(task.params, task.recording, task.sensors)
     pipeline = Pipeline(params, method=task.method)
     return [pipeline.process(frame).to_json() for frame in rec.frames(sensors=task.sensors)]
@@ -80,9 +80,9 @@ def run_task(task: Task) -> dict:
 
     try:
         if task.labels:
-            from i2v_loc.recording import Recording
+            from i2v_loc.formats import open_recording
 
-            gt_lines = load_ground_truth(task.labels, rate_hz=Recording(task.recording).rate_hz)
+            gt_lines = load_ground_truth(task.labels, rate_hz=open_recording(task.recording).rate_hz)
         else:
             gt_lines = load_ground_truth(task.recording)
         states = run_pipeline(task)
