@@ -5,7 +5,9 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import json
+import logging
 import math
+import threading
 from pathlib import Path
 
 from fastapi import APIRouter, Depends, FastAPI, HTTPException, Request, WebSocket, WebSocketDisconnect
@@ -14,6 +16,7 @@ from fastapi.exceptions import RequestValidationError
 from fastapi.responses import FileResponse, JSONResponse, Response
 from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
 from fastapi.staticfiles import StaticFiles
+import uvicorn
 from prometheus_client import CONTENT_TYPE_LATEST
 
 from i2v_loc import __version__
@@ -25,6 +28,7 @@ from service.params_store import ParamsNotSaved, PatchRejected, UnknownVersion
 STATIC_DIR = Path(__file__).with_name("static")
 WS_AUTH_TIMEOUT_S = 5.0
 MAX_PATCH_BYTES = 1_000_000
+MAX_PATCH_DEPTH = 16  # the parameters nest 4 deep (vehicles.NAME.truck.length_m)
 PATCH_MEDIA_TYPES = ("application/json", "application/merge-patch+json")
 TRUE_WORDS = ("1", "true", "yes", "on")
 FALSE_WORDS = ("", "0", "false", "no", "off")
@@ -134,10 +138,10 @@ def create_app(service: Service) -> FastAPI:
                responses={400: _error(400, "Body is not JSON"), 415: _error(415, "Not a JSON body"),
                           422: _error(422, "Validation failed: field, value and allowed range per error"),
                           NOT_SAVED_STATUS: _not_saved_doc})
-    async def patch_params(request: Request):
+    async def patch_params(request: Request, creds: HTTPAuthorizationCredentials | None = Depends(_bearer)):
         patch = await _json_body(request)
         try:
-            version = await asyncio.to_thread(service.store.patch, patch)
+            version = await in_daemon_thread(service.store.patch, patch, _change_source(service, creds))
         except PatchRejected as err:
             return _rejected(err)
         except ParamsNotSaved as err:
@@ -147,9 +151,9 @@ def create_app(service: Service) -> FastAPI:
     @api.post("/params/rollback/{version}", tags=["parameters"], summary="Make an earlier version current again",
               dependencies=[write_guard],
               responses={404: _error(404, "Unknown version"), NOT_SAVED_STATUS: _not_saved_doc})
-    async def rollback(version: int):
+    async def rollback(version: int, creds: HTTPAuthorizationCredentials | None = Depends(_bearer)):
         try:
-            entry = await asyncio.to_thread(service.store.rollback, version)
+            entry = await in_daemon_thread(service.store.rollback, version, _change_source(service, creds))
         except UnknownVersion as err:
             raise HTTPException(404, err.args[0]) from None
         except PatchRejected as err:  # an old version that today's model refuses
@@ -180,6 +184,23 @@ def create_app(service: Service) -> FastAPI:
     app.include_router(api)
     _document_patch_body(app)
     return app
+
+
+SHUTDOWN_GRACE_S = 1.0  # open requests get this long at shutdown; the whole stop stays under 2 s
+
+
+def server_config(app: FastAPI, access_log: bool = False, **options) -> uvicorn.Config:
+    """uvicorn's configuration for the service (``i2v-loc serve`` and the tests use it).
+
+    No per-message deflate: compressing every state with points for every client made the event
+    loop the bottleneck (each client compresses the same bytes again), and the states are small
+    enough uncompressed. A bounded graceful shutdown: a request still running is cut off.
+    """
+    config = uvicorn.Config(app, log_level="warning", access_log=access_log, lifespan="on",
+                            ws_per_message_deflate=False, timeout_graceful_shutdown=SHUTDOWN_GRACE_S, **options)
+    if access_log:  # uvicorn sets its access logger to log_level, which would silence it
+        logging.getLogger("uvicorn.access").setLevel(logging.INFO)
+    return config
 
 
 def patch_schema_components() -> dict[str, dict]:
@@ -222,23 +243,82 @@ def _document_patch_body(app: FastAPI) -> None:
     app.openapi = openapi
 
 
+def in_daemon_thread(fn, *args):
+    """Run ``fn`` in a daemon thread of its own: unlike ``asyncio.to_thread`` nothing waits for
+    it when the server stops, so a change still in flight never holds up the shutdown."""
+    loop = asyncio.get_running_loop()
+    future = loop.create_future()
+
+    def settle(outcome, error) -> None:
+        if not future.done():
+            future.set_exception(error) if error is not None else future.set_result(outcome)
+
+    def work() -> None:
+        try:
+            outcome, error = fn(*args), None
+        except BaseException as err:  # handed to the awaiting request
+            outcome, error = None, err
+        with contextlib.suppress(RuntimeError):  # the loop closed meanwhile
+            loop.call_soon_threadsafe(settle, outcome, error)
+
+    threading.Thread(target=work, name="i2v-loc-params-change", daemon=True).start()
+    return future
+
+
+def _change_source(service: Service, creds: HTTPAuthorizationCredentials | None) -> str:
+    """Who made a change, for the history and the log: the token's id, never the token."""
+    return f"token {service.auth.token_id}" if creds is not None else "anonymous"
+
+
 async def _json_body(request: Request):
     media = request.headers.get("content-type", "").split(";")[0].strip().lower()
     if media not in PATCH_MEDIA_TYPES:
         raise HTTPException(415, f"send the patch as JSON (Content-Type {' or '.join(PATCH_MEDIA_TYPES)}), got {media or 'none'!r}")
-    body = await request.body()
-    if len(body) > MAX_PATCH_BYTES:
-        raise HTTPException(413, f"the patch is larger than {MAX_PATCH_BYTES} bytes")
+    body = await _read_limited(request, MAX_PATCH_BYTES)
     if not body.strip():
         raise HTTPException(400, "empty body: send a JSON object, e.g. {\"clustering\": {\"tolerance_m\": 0.5}}")
     try:
-        return json.loads(body, parse_constant=_non_finite, parse_float=_finite_float)
+        data = json.loads(body, parse_constant=_non_finite, parse_float=_finite_float)
     except (UnicodeDecodeError, json.JSONDecodeError) as err:
         raise HTTPException(400, f"the body is not valid JSON: {err}") from None
     except ValueError as err:
         raise HTTPException(400, str(err)) from None
     except RecursionError:
-        raise HTTPException(400, "the body is nested too deeply") from None
+        raise HTTPException(400, f"the body is nested deeper than {MAX_PATCH_DEPTH} levels") from None
+    if nesting_depth(data) > MAX_PATCH_DEPTH:
+        raise HTTPException(400, f"the body is nested deeper than {MAX_PATCH_DEPTH} levels; the parameters nest 4 deep")
+    return data
+
+
+async def _read_limited(request: Request, limit: int) -> bytes:
+    """The body, refused with 413 by its declared Content-Length or as soon as it passes ``limit``."""
+    too_large = HTTPException(413, f"the patch is larger than {limit} bytes")
+    declared = request.headers.get("content-length")
+    if declared is not None:
+        if not declared.strip().isdigit():
+            raise HTTPException(400, f"Content-Length {declared!r} is not a number of bytes")
+        if int(declared) > limit:
+            raise too_large
+    chunks, size = [], 0
+    async for chunk in request.stream():
+        size += len(chunk)
+        if size > limit:
+            raise too_large
+        chunks.append(chunk)
+    return b"".join(chunks)
+
+
+def nesting_depth(value) -> int:
+    """Levels of objects and arrays in a parsed JSON value (a scalar is 0), without recursion."""
+    depth, level = 0, [(value, 1)]
+    while level:
+        node, d = level.pop()
+        children = node.values() if isinstance(node, dict) else node if isinstance(node, list) else None
+        if children is None:
+            continue
+        depth = max(depth, d)
+        level.extend((child, d + 1) for child in children)
+    return depth
 
 
 def _non_finite(word: str):
@@ -287,6 +367,11 @@ def parse_flag(text: str | None) -> bool | None:
 
 async def _serve_states(service: Service, websocket: WebSocket, points: str | None) -> None:
     """One JSON message per frame; a slow client only ever gets the newest state."""
+    auth = service.auth
+    if not auth.origin_allowed(websocket.headers.get("origin"), websocket.headers.get("host"), websocket.url.scheme):
+        # Refused before the handshake completes: a page of another site never gets a stream.
+        await websocket.close(code=1008, reason="origin not allowed")
+        return
     await websocket.accept()
     want_points = parse_flag(points)
     if want_points is None:

@@ -9,6 +9,7 @@ nothing. A change in force whose file could not be written raises ``ParamsNotSav
 
 from __future__ import annotations
 
+import json
 import logging
 import threading
 import time
@@ -116,12 +117,12 @@ class ParamStore:
             new_params = _validated(self.params, patch)
             return self._commit(new_params, patch, source)
 
-    def rollback(self, version: int) -> Version:
+    def rollback(self, version: int, source: str | None = None) -> Version:
         """A new version whose parameters equal those of ``version``."""
         with self._lock:
             target = self.get(version).params
             patch = merge_patch_diff(self.params.model_dump(mode="json"), target.model_dump(mode="json"))
-            return self._commit(target, patch, f"rollback to {version}")
+            return self._commit(target, patch, f"rollback to {version}" + (f" by {source}" if source else ""))
 
     def save(self) -> None:
         """Write the parameters in force to the file (OSError if it cannot be written)."""
@@ -136,6 +137,8 @@ class ParamStore:
             except ValueError as err:  # ParamsError: a check only the pipeline makes (e.g. grid size)
                 raise PatchRejected(f"{source}: the pipeline refused the parameters: {err}", [
                     {"source": source, "field": "", "value": None, "message": str(err), "allowed": ""}]) from err
+        log.info("parameter version %d (%s): %s", entry.version, source,
+                 describe_changes(self.params.model_dump(mode="json"), params.model_dump(mode="json")))
         self._history.append(entry)
         if len(self._history) > HISTORY_LIMIT:
             del self._history[1:len(self._history) - HISTORY_LIMIT + 1]
@@ -147,6 +150,28 @@ class ParamStore:
                 log.error("%s", failure)
                 raise failure from err
         return entry
+
+
+def describe_changes(old: dict, new: dict, limit: int = 20) -> str:
+    """'a.b: 1 -> 2, c: x -> (removed)', from the merge patch of ``old`` to ``new``."""
+    changes: list[str] = []
+
+    def walk(patch: dict, before: Any, prefix: str) -> None:
+        for key, value in patch.items():
+            name, previous = f"{prefix}{key}", before.get(key) if isinstance(before, dict) else None
+            if isinstance(value, dict) and isinstance(previous, dict):
+                walk(value, previous, name + ".")
+            else:
+                changes.append(f"{name}: {_short(previous)} -> {'(removed)' if value is None else _short(value)}")
+
+    walk(merge_patch_diff(old, new), old, "")
+    more = f", and {len(changes) - limit} more" if len(changes) > limit else ""
+    return (", ".join(changes[:limit]) + more) or "no change"
+
+
+def _short(value: Any, width: int = 80) -> str:
+    text = json.dumps(value, separators=(",", ":"), default=str)
+    return text if len(text) <= width else text[: width - 3] + "..."
 
 
 def _refuse_section_nulls(patch: Any) -> None:

@@ -16,7 +16,7 @@ import uvicorn
 
 from i2v_loc.params import load_params
 from i2v_loc.sources import ReplaySource, SimSpec, simulated_recording
-from service.app import create_app
+from service.app import create_app, server_config
 from service.auth import AuthConfig
 from service.core import build_service
 
@@ -50,7 +50,7 @@ class LiveServer:
         self.port = self.sock.getsockname()[1]
         self.url = f"http://127.0.0.1:{self.port}"
         self.ws_url = f"ws://127.0.0.1:{self.port}"
-        config = uvicorn.Config(app, log_level="warning", lifespan="on", ws_ping_interval=None)
+        config = server_config(app, ws_ping_interval=None)
         self.server = uvicorn.Server(config)
         self.thread = threading.Thread(target=self.server.run, kwargs={"sockets": [self.sock]}, daemon=True)
 
