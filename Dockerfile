@@ -22,4 +22,6 @@ EXPOSE 8000
 # Inside a container the service must listen on all interfaces to be reachable through -p.
 HEALTHCHECK --interval=15s --timeout=3s --start-period=60s --retries=3 \
     CMD python -c "import urllib.request,sys; sys.exit(0 if urllib.request.urlopen('http://127.0.0.1:8000/api/v1/health', timeout=2).status == 200 else 1)"
-CMD ["i2v-loc", "serve", "--source", "sim:docking", "--host", "0.0.0.0", "--port", "8000", "--params", "/app/params/service.yaml"]
+# Reads are open inside the container network (--allow-open-reads); put TLS in front (a reverse proxy) or
+# pass --ssl-keyfile/--ssl-certfile, else the write token travels in clear text.
+CMD ["i2v-loc", "serve", "--source", "sim:docking", "--host", "0.0.0.0", "--allow-open-reads", "--port", "8000", "--params", "/app/params/service.yaml"]

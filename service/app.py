@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import copy
 import json
 import logging
 import math
@@ -18,6 +19,7 @@ from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
 from fastapi.staticfiles import StaticFiles
 import uvicorn
 from prometheus_client import CONTENT_TYPE_LATEST
+from uvicorn.config import LOGGING_CONFIG
 
 from i2v_loc import __version__
 from i2v_loc.params import json_schema
@@ -196,7 +198,9 @@ def server_config(app: FastAPI, access_log: bool = False, **options) -> uvicorn.
     loop the bottleneck (each client compresses the same bytes again), and the states are small
     enough uncompressed. A bounded graceful shutdown: a request still running is cut off.
     """
-    config = uvicorn.Config(app, log_level="warning", access_log=access_log, lifespan="on",
+    log_config = copy.deepcopy(LOGGING_CONFIG)
+    log_config["handlers"]["access"]["stream"] = "ext://sys.stderr"  # stdout stays empty, as for the rest
+    config = uvicorn.Config(app, log_level="warning", access_log=access_log, lifespan="on", log_config=log_config,
                             ws_per_message_deflate=False, timeout_graceful_shutdown=SHUTDOWN_GRACE_S, **options)
     if access_log:  # uvicorn sets its access logger to log_level, which would silence it
         logging.getLogger("uvicorn.access").setLevel(logging.INFO)

@@ -70,12 +70,13 @@ class LiveServer:
 
 
 def make_service(recording: Path, params_file: Path | None = None, token: str | None = TOKEN,
-                 require_token_for_reads: bool = False, loop: bool = True, **kwargs):
+                 require_token_for_reads: bool = False, loop: bool = True, allowed_origins: tuple = (), **kwargs):
     """A service with the real pipeline replaying ``recording``."""
     source = ReplaySource(recording, loop=loop)
     existing = params_file if params_file is not None and params_file.is_file() else None
     params = load_params(source.sensors_file, existing)
-    return build_service(source, params, params_file, AuthConfig(token, require_token_for_reads), **kwargs)
+    auth = AuthConfig(token, require_token_for_reads, allowed_origins)
+    return build_service(source, params, params_file, auth, **kwargs)
 
 
 def serve(recording: Path, send_buffer_bytes: int | None = None, **kwargs) -> tuple[LiveServer, object]:
