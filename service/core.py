@@ -89,7 +89,12 @@ class Service:
             return "starting", ["waiting for the first frame"]
         if not fresh:
             return "stalled", ["no frame processed recently"]
-        reasons = [f"sensor {s['name']}: {s['status']}" for s in sensors if s["status"] != "ok"]
+        damaged = getattr(runner.source, "damaged", None) or {}
+        faulty = [s for s in sensors if s["status"] != "ok"]
+        reasons = [f"sensor {s['name']}: {s['status']}" + (f" ({damaged[s['name']]})" if s["name"] in damaged else "")
+                   for s in faulty]
+        if sensors and len(faulty) == len(sensors) and all(s["status"].startswith("fault") for s in faulty):
+            return "failed", ["no sensor delivers", *reasons]
         frame_drops, ws_drops = runner.drop_rate(), self.hub.drop_rate()
         if frame_drops > DEGRADED_DROP_RATE:
             reasons.append(f"{frame_drops:.0%} of the last frames dropped (late or unreadable)")

@@ -71,8 +71,8 @@ class SensorStats:
         arrivals = [t for t in self._arrivals[name] if now_s - t <= RATE_WINDOW_S]
         rate = (len(arrivals) - 1) / (arrivals[-1] - arrivals[0]) if len(arrivals) >= 2 and arrivals[-1] > arrivals[0] else 0.0
         last = self._arrivals[name][-1] if self._arrivals[name] else None
-        if last is None:
-            status = "waiting"
+        if last is None:  # never delivered: faulty if the frames so far said why
+            status = f"fault:{self._last_fault[name]}" if self._last_fault[name] else "waiting"
         elif now_s - last > STALE_AFTER_S:
             status = "stale"
         elif self._last_fault[name]:

@@ -10,7 +10,10 @@ from i2v_loc.cli import UserError
 
 
 def register(sub) -> None:
-    p = sub.add_parser("run", help="run the localization pipeline on a recording, write state lines (JSONL)")
+    p = sub.add_parser("run", help="run the localization pipeline on a recording, write state lines (JSONL)",
+                       description="Exit status: 0, or 1 when damaged sensors were left out (the output holds "
+                                   "every frame, from the sensors that could be read; stderr says what was skipped), "
+                                   "2 for bad input.")
     p.add_argument("recording", metavar="REC", help="recording folder (docs/formats.md)")
     p.add_argument("--out", required=True, help="output JSONL file of state lines (missing parent folders are created)")
     p.add_argument("--method", default="paper", help="pipeline method (default: paper)")
@@ -47,7 +50,7 @@ def run(args) -> int:
 
     from i2v_loc.params import load_params
     from i2v_loc.pipeline import METHODS, Pipeline
-    from i2v_loc.recording import Recording
+    from i2v_loc.recording import Recording, RecordingError
 
     rec_path = Path(args.recording)
     if not (rec_path / "meta.yaml").is_file():
@@ -56,23 +59,34 @@ def run(args) -> int:
         raise UserError(f"--frames must be at least 1, got {args.frames}")
     if args.method not in METHODS:
         raise UserError(f"unknown method {args.method!r}; known: {', '.join(METHODS)}")
-    recording = Recording(rec_path)
+    try:
+        recording = Recording(rec_path)
+    except RecordingError as err:
+        raise UserError(str(err)) from err
     params = load_params(recording.sensors_file, *args.params)
     sensors = parse_list(args.sensors, recording.sensor_names, "sensor")
     vehicles = parse_list(args.vehicles, list(params.vehicles), "vehicle")
     params = restricted_params(params, sensors, vehicles)
     pipeline = Pipeline(params, method=args.method)
     n_frames = len(recording) if args.frames is None else min(args.frames, len(recording))
+    if n_frames == 0:
+        raise UserError(f"{rec_path}: the recording has no frames")
+    first = recording.frame(0, sensors, skip_damaged=True)
+    if not first.scans:
+        raise UserError(f"{rec_path}: no sensor can be read: " + "; ".join(recording.damaged.values()))
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
     summary = Summary()
     with out.open("w") as f:
         for index in tqdm(range(n_frames), desc=rec_path.name, unit="frame", disable=args.quiet, file=sys.stderr):
-            line = pipeline.process(recording.frame(index, sensors)).to_json()
+            frame = first if index == 0 else recording.frame(index, sensors, skip_damaged=True)
+            line = pipeline.process(frame).to_json()
             f.write(json.dumps(line, separators=(",", ":")) + "\n")
             summary.add(line)
     print(summary.text(out, pipeline.counters))
-    return 0
+    for name, reason in recording.damaged.items():
+        print(f"skipped sensor {name}: {reason}", file=sys.stderr)
+    return 1 if recording.damaged else 0
 
 
 class Summary:
