@@ -17,6 +17,7 @@ from fastapi.exceptions import RequestValidationError
 from fastapi.responses import FileResponse, JSONResponse, Response
 from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
 from fastapi.staticfiles import StaticFiles
+from fastapi_offline import FastAPIOffline
 import uvicorn
 from prometheus_client import CONTENT_TYPE_LATEST
 from uvicorn.config import LOGGING_CONFIG
@@ -54,7 +55,7 @@ def create_app(service: Service) -> FastAPI:
             service.hub.unbind()
             await asyncio.to_thread(service.stop)
 
-    app = FastAPI(
+    app = FastAPIOffline(  # /docs and /redoc from assets in the package: they work without internet
         title="i2v-loc yard service",
         version=__version__,
         description="Live localization of articulated vehicles (truck + trailer) from infrastructure LiDARs. "
@@ -71,9 +72,14 @@ def create_app(service: Service) -> FastAPI:
 
         return check
 
-    read_guard, write_guard = Depends(guard(False)), Depends(guard(True))
+    # Only the operations that check the token are marked secured in the OpenAPI document: reads
+    # are, when the service runs with --require-token-for-reads.
     auth_errors = {401: _error(401, "Token missing"), 403: _error(403, "Token wrong or none configured")}
-    api = APIRouter(prefix="/api/v1", dependencies=[read_guard], responses=auth_errors)
+    write_guard = Depends(guard(True))
+    reads_guarded = service.auth.require_token_for_reads
+    read_deps = [Depends(guard(False))] if reads_guarded else []
+    read_errors = auth_errors if reads_guarded else {}
+    api = APIRouter(prefix="/api/v1", dependencies=read_deps, responses=read_errors)
 
     @app.exception_handler(RequestValidationError)
     async def _invalid_request(request: Request, exc: RequestValidationError):
@@ -137,7 +143,7 @@ def create_app(service: Service) -> FastAPI:
 
     @api.patch("/params", tags=["parameters"], summary="Change parameters with a JSON merge patch",
                dependencies=[write_guard], openapi_extra=patch_body,
-               responses={400: _error(400, "Body is not JSON"), 415: _error(415, "Not a JSON body"),
+               responses={**auth_errors, 400: _error(400, "Body is not JSON"), 415: _error(415, "Not a JSON body"),
                           422: _error(422, "Validation failed: field, value and allowed range per error"),
                           NOT_SAVED_STATUS: _not_saved_doc})
     async def patch_params(request: Request, creds: HTTPAuthorizationCredentials | None = Depends(_bearer)):
@@ -152,7 +158,7 @@ def create_app(service: Service) -> FastAPI:
 
     @api.post("/params/rollback/{version}", tags=["parameters"], summary="Make an earlier version current again",
               dependencies=[write_guard],
-              responses={404: _error(404, "Unknown version"), NOT_SAVED_STATUS: _not_saved_doc})
+              responses={**auth_errors, 404: _error(404, "Unknown version"), NOT_SAVED_STATUS: _not_saved_doc})
     async def rollback(version: int, creds: HTTPAuthorizationCredentials | None = Depends(_bearer)):
         try:
             entry = await in_daemon_thread(service.store.rollback, version, _change_source(service, creds))
@@ -166,8 +172,8 @@ def create_app(service: Service) -> FastAPI:
 
     # ------------------------------------------------------------------ metrics, dashboard
 
-    @app.get("/metrics", tags=["status"], summary="Prometheus metrics", dependencies=[read_guard],
-             response_class=Response, responses={200: {"content": {"text/plain": {}}}, **auth_errors})
+    @app.get("/metrics", tags=["status"], summary="Prometheus metrics", dependencies=read_deps,
+             response_class=Response, responses={200: {"content": {"text/plain": {}}}, **read_errors})
     def metrics() -> Response:
         return Response(service.metrics.render(), media_type=CONTENT_TYPE_LATEST)
 
