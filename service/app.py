@@ -24,6 +24,7 @@ from uvicorn.config import LOGGING_CONFIG
 
 from i2v_loc import __version__
 from i2v_loc.params import json_schema
+from service import models
 from service.auth import bearer_from_header
 from service.core import Service
 from service.params_store import ParamsNotSaved, PatchRejected, UnknownVersion
@@ -92,25 +93,25 @@ def create_app(service: Service) -> FastAPI:
     # ------------------------------------------------------------------ state
 
     @api.get("/health", tags=["status"], summary="Liveness, readiness and per-sensor status")
-    def health() -> dict:
+    def health() -> models.Health:
         return service.health()
 
     @api.get("/state", tags=["state"], summary="The latest frame (state line of docs/formats.md)",
              responses={503: _error(503, "No frame processed yet")})
-    def state() -> dict:
+    def state() -> models.State:
         latest = service.runner.latest
         if latest is None:
             raise HTTPException(503, "no frame has been processed yet; retry shortly", headers={"Retry-After": "1"})
         return latest
 
     @api.get("/vehicles", tags=["state"], summary="Vehicles of the latest frame")
-    def vehicles() -> dict:
+    def vehicles() -> models.Vehicles:
         latest = service.runner.latest or {}
         return {"frame": latest.get("frame"), "stamp_s": latest.get("stamp_s"), "vehicles": latest.get("vehicles") or []}
 
     @api.get("/vehicles/{vehicle_id}", tags=["state"], summary="One vehicle of the latest frame",
              responses={404: _error(404, "No such vehicle in the latest frame")})
-    def vehicle(vehicle_id: int) -> dict:
+    def vehicle(vehicle_id: int) -> models.Vehicle:
         latest = service.runner.latest or {}
         found = [v for v in latest.get("vehicles") or [] if v.get("id") == vehicle_id]
         if not found:
@@ -119,13 +120,13 @@ def create_app(service: Service) -> FastAPI:
         return found[0]
 
     @api.get("/sensors", tags=["status"], summary="Rate, last stamp and drops per sensor")
-    def sensors() -> dict:
+    def sensors() -> models.Sensors:
         return {"sensors": service.sensors()}
 
     # ------------------------------------------------------------------ parameters
 
     @api.get("/params", tags=["parameters"], summary="The parameters in force and their version")
-    def get_params() -> dict:
+    def get_params() -> models.ParamsInForce:
         current = service.store.current
         return {"version": current.version, "applied_version": service.runner.params_version,
                 "params": current.params.model_dump(mode="json")}
@@ -135,14 +136,14 @@ def create_app(service: Service) -> FastAPI:
         return json_schema()
 
     @api.get("/params/history", tags=["parameters"], summary="Versions of the parameters since start-up")
-    def get_history() -> dict:
+    def get_history() -> models.History:
         return {"current": service.store.version, "versions": service.store.history()}
 
     patch_body = {"requestBody": {"required": True, "description": "A JSON merge patch (RFC 7396) of the parameters",
                                   "content": {t: {"schema": {"type": "object"}} for t in PATCH_MEDIA_TYPES}}}
 
     @api.patch("/params", tags=["parameters"], summary="Change parameters with a JSON merge patch",
-               dependencies=[write_guard], openapi_extra=patch_body,
+               dependencies=[write_guard], openapi_extra=patch_body, response_model=models.ChangeAccepted,
                responses={**auth_errors, 400: _error(400, "Body is not JSON"), 415: _error(415, "Not a JSON body"),
                           422: _error(422, "Validation failed: field, value and allowed range per error"),
                           NOT_SAVED_STATUS: _not_saved_doc})
@@ -157,7 +158,7 @@ def create_app(service: Service) -> FastAPI:
         return _accepted(version)
 
     @api.post("/params/rollback/{version}", tags=["parameters"], summary="Make an earlier version current again",
-              dependencies=[write_guard],
+              dependencies=[write_guard], response_model=models.ChangeAccepted,
               responses={**auth_errors, 404: _error(404, "Unknown version"), NOT_SAVED_STATUS: _not_saved_doc})
     async def rollback(version: int, creds: HTTPAuthorizationCredentials | None = Depends(_bearer)):
         try:

@@ -510,3 +510,40 @@ def test_the_server_stops_while_a_change_is_still_in_flight(tmp_path):
     finally:
         release.set()
     assert stopped  # the server did not wait for the change that hangs
+
+
+# ------------------------------------------------------------------ the API documentation
+
+
+def test_api_docs_need_no_internet(client):
+    import re
+
+    for page in ("/docs", "/redoc"):
+        html = client.get(page).text
+        refs = re.findall(r'(?:src|href)="([^"]+)"', html)
+        assert len(refs) >= 2 and [r for r in refs if "//" in r] == [], refs  # nothing from another host
+        for ref in refs:
+            assert client.get(ref).status_code == 200, ref
+    assert "swagger-ui-bundle.js" in client.get("/docs").text
+
+
+def test_openapi_marks_only_guarded_operations_and_types_every_answer(client):
+    spec = client.get("/openapi.json").json()
+    secured = {(path, method) for path, ops in spec["paths"].items() for method, op in ops.items() if op.get("security")}
+    assert secured == {("/api/v1/params", "patch"), ("/api/v1/params/rollback/{version}", "post")}
+    for path, ops in spec["paths"].items():
+        for method, op in ops.items():
+            if path in ("/metrics", "/api/v1/params/schema"):  # Prometheus text; a JSON Schema document
+                continue
+            schema = op["responses"]["200"]["content"]["application/json"]["schema"]
+            assert "$ref" in schema, (method, path, schema)
+    health = spec["components"]["schemas"]["Health"]["properties"]
+    assert {"status", "reasons", "frame_drop_rate", "sensors"} <= set(health)
+
+
+def test_openapi_marks_reads_secured_when_they_need_the_token(tmp_path):
+    server, _ = serve(sample_recording(), require_token_for_reads=True)
+    with server, httpx.Client(base_url=server.url) as c:
+        spec = c.get("/openapi.json").json()
+    assert spec["paths"]["/api/v1/state"]["get"]["security"] == [{"HTTPBearer": []}]
+    assert "401" in spec["paths"]["/api/v1/state"]["get"]["responses"]
