@@ -8,12 +8,13 @@ RUN apt-get update \
 
 RUN useradd --create-home --uid 1000 i2v
 WORKDIR /app
-COPY pyproject.toml README.md ./
+COPY pyproject.toml setup.py README.md ./
 COPY i2v_loc ./i2v_loc
 COPY service ./service
-RUN pip install --no-cache-dir . && rm -rf /root/.cache
-COPY params ./params
+# The sample recordings and suites go into the package (bench and sim --suite find them there).
 COPY samples ./samples
+RUN pip install --no-cache-dir . && rm -rf /root/.cache /app/i2v_loc /app/service /app/samples
+COPY params ./params
 RUN chown -R i2v /app
 
 USER i2v
