@@ -195,7 +195,7 @@ def create_app(service: Service) -> FastAPI:
     return app
 
 
-SHUTDOWN_GRACE_S = 1.0  # open requests get this long at shutdown; the whole stop stays under 2 s
+SHUTDOWN_GRACE_S = 0.5  # open requests get this long at shutdown; the whole stop stays under 2 s
 
 
 def server_config(app: FastAPI, access_log: bool = False, **options) -> uvicorn.Config:

@@ -226,3 +226,13 @@ def test_hand_written_subset_file_still_loads(tmp_path):
     path = tmp_path / "p.yaml"
     path.write_text("clustering:\n  tolerance_m: 0.5\n")
     assert load_params(path).clustering.tolerance_m == 0.5
+
+
+def test_parameter_reference_in_docs_is_generated_from_the_model():
+    from i2v_loc.params_doc import render
+
+    committed = (REPO / "docs" / "parameters.md").read_text()
+    assert committed == render(), "docs/parameters.md drifted: python -m i2v_loc.params_doc > docs/parameters.md"
+    for section in Params.model_fields:
+        assert f"## `{section}`" in committed
+    assert "| `measurement_noise_m` | number | 0.15 | >= 0.001, <= 10 |" in committed
