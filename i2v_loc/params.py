@@ -25,6 +25,8 @@ YARD_EXTENT_M = 10_000.0  # positions and region bounds: a yard is never 10 km f
 MAST_HEIGHT_M = 200.0
 MAX_POINTS_PER_FRAME = 10_000_000  # point counts: far above what four 128-beam sensors deliver
 MAX_VOLUME_TOLERANCE_M3 = 2_000.0
+MAX_SENSORS = 64
+MAX_VEHICLES = 100
 
 
 class Section(BaseModel):
@@ -303,8 +305,8 @@ class BackgroundParams(Section):
 class Params(Section):
     """All parameters of i2v-loc."""
 
-    sensors: list[SensorConfig] = Field(default_factory=_paper_field_sensors, min_length=1)
-    vehicles: dict[str, VehicleConfig] = Field(default_factory=_paper_vehicles, min_length=1, description="The vehicle catalogue: at least one vehicle, or nothing is ever detected")
+    sensors: list[SensorConfig] = Field(default_factory=_paper_field_sensors, min_length=1, max_length=MAX_SENSORS)
+    vehicles: dict[str, VehicleConfig] = Field(default_factory=_paper_vehicles, min_length=1, max_length=MAX_VEHICLES, description="The vehicle catalogue: at least one vehicle, or nothing is ever detected")
     calibration: CalibrationParams = Field(default_factory=CalibrationParams)
     concatenation: ConcatenationParams = Field(default_factory=ConcatenationParams)
     region: RegionParams = Field(default_factory=RegionParams)

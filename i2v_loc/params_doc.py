@@ -30,7 +30,11 @@ def render() -> str:
         ref, shape = _container(prop)
         out.append(f"## `{section}`\n")
         described = prop.get("description", "").rstrip(".")
-        text = " ".join(filter(None, [described and described + ".", shape and f"A {shape} of the fields below."]))
+        sizes = [f"{word} {prop[key]}" for key, word in (("minItems", "at least"), ("maxItems", "at most"),
+                                                         ("minProperties", "at least"), ("maxProperties", "at most"))
+                 if key in prop]
+        size = f" ({', '.join(sizes)} entries)" if sizes else ""
+        text = " ".join(filter(None, [described and described + ".", shape and f"A {shape} of the fields below{size}."]))
         if text:
             out.append(text + "\n")
         out.extend(_tables(defs, ref, section))
@@ -43,7 +47,7 @@ def _container(prop: dict) -> tuple[str, str]:
         return _name(prop["$ref"]), ""
     if "items" in prop:
         return _name(prop["items"]["$ref"]), "list"
-    return _name(prop["additionalProperties"]["$ref"]), "map from a name to one"
+    return _name(prop["additionalProperties"]["$ref"]), "map from names to objects"
 
 
 def _tables(defs: dict, model: str, path: str) -> list[str]:

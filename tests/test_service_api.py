@@ -429,7 +429,8 @@ def test_a_patch_of_many_unknown_keys_is_refused_with_a_short_list(client, live)
     response = client.patch("/api/v1/params", json={"clustering": {f"k{i}": 1 for i in range(200)}}, headers=AUTH)
     assert response.status_code == 422
     errors = response.json()["errors"]
-    assert len(errors) == 21 and errors[0]["message"].startswith("200 errors")
+    assert len(errors) == 20 and {e["message"] for e in errors} == {"unknown key"}
+    assert response.json()["detail"].startswith("patch: 200 unknown keys: clustering.k0, clustering.k1, ")
     assert service.store.version == before
 
 

@@ -483,3 +483,25 @@ def test_health_degrades_with_the_reason_when_frames_or_messages_are_dropped(tmp
     health = service.health()
     assert slow.dropped == 3
     assert health["status"] == "degraded" and health["reasons"] == ["75% of the recent WebSocket messages dropped for slow clients"]
+
+
+def test_unknown_keys_are_refused_before_the_model_is_validated(tmp_path, monkeypatch):
+    store = ParamStore(Params(), tmp_path / "p.yaml")
+    monkeypatch.setattr(params_store, "apply_patch", lambda *a: pytest.fail("the model was validated"))
+    patch = {"clustering": {f"k{i}": 1 for i in range(100_000)}, "nonsense": {}, "tracking": {"min_hits": 2}}
+    with pytest.raises(PatchRejected) as info:
+        store.patch(patch)
+    errors = info.value.errors
+    assert len(errors) == 20 and [e["field"] for e in errors[:3]] == ["nonsense", "clustering.k0", "clustering.k1"]
+    assert str(info.value).startswith("patch: 100001 unknown keys: nonsense, clustering.k0, clustering.k1, ")
+    assert str(info.value).count("(and 99981 more)") == 1
+    assert store.version == 0 and not (tmp_path / "p.yaml").exists()
+
+
+def test_an_oversized_list_or_catalogue_is_refused_before_validation(tmp_path, monkeypatch):
+    store = ParamStore(Params(), tmp_path / "p.yaml")
+    monkeypatch.setattr(params_store, "apply_patch", lambda *a: pytest.fail("the model was validated"))
+    with pytest.raises(PatchRejected, match="sensors holds 20000 entries, at most 64 are allowed"):
+        store.patch({"sensors": [{"name": f"s{i}"} for i in range(20000)]})
+    with pytest.raises(PatchRejected, match="vehicles holds 101 entries, at most 100 are allowed"):
+        store.patch({"vehicles": {f"v{i}": {} for i in range(101)}})
