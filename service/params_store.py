@@ -86,6 +86,7 @@ class ParamStore:
     def __init__(self, params: Params, path: str | Path | None = None,
                  on_change: Callable[[Version], None] | None = None):
         self._lock = threading.Lock()
+        self._save_lock = threading.Lock()  # one writer of the file at a time (a change, the shutdown)
         self.path = Path(path) if path else None
         self.on_change = on_change
         self._history: list[Version] = [Version(0, time.time(), "start", {}, params)]
@@ -130,7 +131,8 @@ class ParamStore:
     def save(self) -> None:
         """Write the parameters in force to the file (OSError if it cannot be written)."""
         if self.path is not None:
-            save_params(self.params, self.path)
+            with self._save_lock:
+                save_params(self.params, self.path)
 
     def _commit(self, params: Params, patch: dict, source: str) -> Version:
         entry = Version(self.current.version + 1, time.time(), source, patch, params)
@@ -147,7 +149,8 @@ class ParamStore:
             del self._history[1:len(self._history) - HISTORY_LIMIT + 1]
         if self.path is not None:
             try:
-                save_params(params, self.path)
+                with self._save_lock:
+                    save_params(params, self.path)
             except OSError as err:
                 failure = ParamsNotSaved(entry, self.path, err)
                 log.error("%s", failure)
