@@ -18,7 +18,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from annotated_types import MaxLen
 from pydantic import BaseModel, ValidationError
 
 from i2v_loc.params import (MAX_ERRORS_REPORTED, Params, ParamsError, apply_patch, describe_validation_error,
@@ -207,7 +206,7 @@ def _refuse_unknown_keys(patch: Any) -> None:
         model = getattr(field, "annotation", None)
         if isinstance(value, dict) and isinstance(model, type) and issubclass(model, BaseModel):
             unknown.extend(f"{section}.{k}" for k in value if k not in model.model_fields)
-        limit = next((m.max_length for m in getattr(field, "metadata", ()) if isinstance(m, MaxLen)), None)
+        limit = next((m.max_length for m in getattr(field, "metadata", ()) if hasattr(m, "max_length")), None)
         if limit is not None and isinstance(value, (list, dict)) and len(value) > limit:
             raise PatchRejected(f"patch: {section} holds {len(value)} entries, at most {limit} are allowed", [
                 {"source": "patch", "field": section, "value": None, "allowed": f"at most {limit} entries",
