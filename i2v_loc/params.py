@@ -20,7 +20,6 @@ from typing import Any, Literal
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
-
 YARD_EXTENT_M = 10_000.0  # positions and region bounds: a yard is never 10 km from its origin
 MAST_HEIGHT_M = 200.0
 MAX_POINTS_PER_FRAME = 10_000_000  # point counts: far above what four 128-beam sensors deliver

@@ -146,7 +146,7 @@ async def run_load(url: str, args) -> dict:
             while not stop.is_set():
                 try:
                     await asyncio.wait_for(ws.recv(), 1.0)
-                except asyncio.TimeoutError:
+                except TimeoutError:
                     continue
                 except websockets.ConnectionClosed:
                     disconnects[0] += 1

@@ -12,6 +12,7 @@ import math
 import threading
 from pathlib import Path
 
+import uvicorn
 from fastapi import APIRouter, Depends, FastAPI, HTTPException, Request, WebSocket, WebSocketDisconnect
 from fastapi.encoders import jsonable_encoder
 from fastapi.exceptions import RequestValidationError
@@ -19,7 +20,6 @@ from fastapi.responses import FileResponse, JSONResponse, Response
 from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
 from fastapi.staticfiles import StaticFiles
 from fastapi_offline import FastAPIOffline
-import uvicorn
 from prometheus_client import CONTENT_TYPE_LATEST
 from uvicorn.config import LOGGING_CONFIG
 
@@ -271,7 +271,7 @@ def in_daemon_thread(fn, *args):
     def work() -> None:
         try:
             outcome, error = fn(*args), None
-        except BaseException as err:  # handed to the awaiting request
+        except Exception as err:  # handed to the awaiting request
             outcome, error = None, err
         with contextlib.suppress(RuntimeError):  # the loop closed meanwhile
             loop.call_soon_threadsafe(settle, outcome, error)

@@ -20,8 +20,7 @@ from typing import Any
 
 from pydantic import BaseModel, ValidationError
 
-from i2v_loc.params import (MAX_ERRORS_REPORTED, Params, ParamsError, apply_patch, describe_validation_error,
-                            save_params)
+from i2v_loc.params import MAX_ERRORS_REPORTED, Params, ParamsError, apply_patch, describe_validation_error, save_params
 
 log = logging.getLogger("i2v_loc.service")
 

@@ -8,12 +8,11 @@ import shutil
 
 import numpy as np
 import pytest
+from conftest import SAMPLES
+from test_service_support import serve, wait_for
 
 from i2v_loc.cli import main
 from i2v_loc.recording import Recording, RecordingError
-from test_service_support import serve, wait_for
-
-from conftest import SAMPLES
 
 pytestmark = pytest.mark.timeout(120)
 SAMPLE = SAMPLES / "man_tgx_docking"

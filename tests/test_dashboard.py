@@ -111,7 +111,10 @@ def test_dashboard_shows_confirmed_vehicles_only_unconfirmed_greyed_on_request(b
         # No live stream: the states below are the only ones the page sees.
         page.add_init_script("window.WebSocket = class { constructor() {} send() {} close() {} };")
         page.goto(server.url + "/")
-        shown = lambda: page.eval_on_selector_all("#vehicles .vehicle", "rows => rows.map(r => [r.dataset.id, r.className])")  # noqa: E731
+
+        def shown():
+            return page.eval_on_selector_all("#vehicles .vehicle", "rows => rows.map(r => [r.dataset.id, r.className])")
+
         for k in range(4):  # a vehicle seen whole in 4 states and a half-seen one (only a truck): neither is shown
             page.evaluate("s => onState(s)", _state(k, [_vehicle(3, "man_tgx", 12.0), _vehicle(7, "twizy", 100.0, whole=False)]))
         page.wait_for_timeout(100)

@@ -3,10 +3,9 @@
 from __future__ import annotations
 
 import pytest
+from conftest import SAMPLES
 
 from i2v_loc.cli import main
-
-from conftest import SAMPLES
 
 pytest.importorskip("distributed")
 pytestmark = pytest.mark.timeout(120)

@@ -11,7 +11,6 @@ import sysconfig
 from pathlib import Path
 
 import pytest
-
 from conftest import REPO
 
 pytestmark = pytest.mark.timeout(600)
@@ -23,7 +22,7 @@ def installed(tmp_path_factory):
     environment through a path file (installing open3d and the rest again would take minutes)."""
     tmp = tmp_path_factory.mktemp("wheel")
     build = subprocess.run([sys.executable, "-m", "pip", "wheel", "--no-deps", "-q", "-w", str(tmp / "dist"), str(REPO)],
-                           capture_output=True, text=True)
+                           capture_output=True, text=True, check=False)
     assert build.returncode == 0, build.stderr
     (wheel,) = (tmp / "dist").glob("i2v_loc-*.whl")
     venv = tmp / "venv"
@@ -33,7 +32,7 @@ def installed(tmp_path_factory):
                                capture_output=True, text=True, check=True).stdout.strip())
     env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "VIRTUAL_ENV")}
     install = subprocess.run([sys.executable, "-m", "pip", "--python", str(python), "install", "--no-deps", "--no-index",
-                              "-q", str(wheel)], capture_output=True, text=True, env=env)
+                              "-q", str(wheel)], capture_output=True, text=True, env=env, check=False)
     assert install.returncode == 0, install.stderr
     # After the install (else pip finds the checkout's editable install there and installs nothing).
     (site / "dependencies.pth").write_text(sysconfig.get_paths()["purelib"] + "\n")
@@ -45,7 +44,7 @@ def installed(tmp_path_factory):
 def _run(installed, *args):
     venv, _, env, run_dir = installed
     return subprocess.run([str(venv / "bin" / "i2v-loc"), *args], capture_output=True, text=True, env=env,
-                          cwd=run_dir, timeout=500)
+                          cwd=run_dir, timeout=500, check=False)
 
 
 def test_the_wheel_holds_the_samples_and_imports_from_the_venv(installed):
