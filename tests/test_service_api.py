@@ -7,7 +7,9 @@ import asyncio
 import base64
 import json
 import os
+import re
 import socket
+import threading
 import time
 
 import httpx
@@ -488,8 +490,6 @@ def test_allowed_origins_may_open_the_websocket(tmp_path):
 
 
 def test_the_server_stops_while_a_change_is_still_in_flight(tmp_path):
-    import threading
-
     server, service = serve(sample_recording())
     release = threading.Event()
     pipeline = service.runner.pipeline
@@ -516,8 +516,6 @@ def test_the_server_stops_while_a_change_is_still_in_flight(tmp_path):
 
 
 def test_api_docs_need_no_internet(client):
-    import re
-
     for page in ("/docs", "/redoc"):
         html = client.get(page).text
         refs = re.findall(r'(?:src|href)="([^"]+)"', html)
