@@ -505,3 +505,29 @@ def test_an_oversized_list_or_catalogue_is_refused_before_validation(tmp_path, m
         store.patch({"sensors": [{"name": f"s{i}"} for i in range(20000)]})
     with pytest.raises(PatchRejected, match="vehicles holds 101 entries, at most 100 are allowed"):
         store.patch({"vehicles": {f"v{i}": {} for i in range(101)}})
+
+
+def test_health_fails_with_the_reason_when_no_frame_can_be_read(tmp_path):
+    rec = _tiny_recording(tmp_path / "rec", frames=5)
+    service = build_service(ReplaySource(rec, loop=True), Params(), pipeline_factory=lambda p, m: None)
+    runner = service.runner
+    for k in range(19):
+        runner._skip(k, "source_error", OSError("disk gone"))
+    assert service.health()["status"] == "starting"
+    runner._skip(19, "source_error", OSError("disk gone"))
+    health = service.health()
+    assert health["status"] == "failed" and health["ready"] is False
+    assert health["reasons"] == ["no frame processed, 20 skipped; last error: OSError: disk gone"]
+
+
+def test_every_client_gets_the_one_serialised_message():
+    hub = Hub()
+    plain, with_points = hub.add(want_points=False), hub.add(want_points=True)
+    message = Message("state", '{"frame":1}', '{"frame":1,"foreground":{"xy":[1,2]}}')
+    hub._deliver(message)
+
+    async def take(client):
+        return await client.next_text()
+
+    assert asyncio.run(take(plain)) is message.plain
+    assert asyncio.run(take(with_points)) is message.with_points
