@@ -8,12 +8,13 @@ RUN apt-get update \
 
 RUN useradd --create-home --uid 1000 i2v
 WORKDIR /app
-COPY pyproject.toml README.md ./
+COPY pyproject.toml setup.py README.md ./
 COPY i2v_loc ./i2v_loc
 COPY service ./service
-RUN pip install --no-cache-dir . && rm -rf /root/.cache
-COPY params ./params
+# The sample recordings and suites go into the package (bench and sim --suite find them there).
 COPY samples ./samples
+RUN pip install --no-cache-dir . && rm -rf /root/.cache /app/i2v_loc /app/service /app/samples
+COPY params ./params
 RUN chown -R i2v /app
 
 USER i2v
@@ -22,4 +23,6 @@ EXPOSE 8000
 # Inside a container the service must listen on all interfaces to be reachable through -p.
 HEALTHCHECK --interval=15s --timeout=3s --start-period=60s --retries=3 \
     CMD python -c "import urllib.request,sys; sys.exit(0 if urllib.request.urlopen('http://127.0.0.1:8000/api/v1/health', timeout=2).status == 200 else 1)"
-CMD ["i2v-loc", "serve", "--source", "sim:docking", "--host", "0.0.0.0", "--port", "8000", "--params", "/app/params/service.yaml"]
+# Reads are open inside the container network (--allow-open-reads); put TLS in front (a reverse proxy) or
+# pass --ssl-keyfile/--ssl-certfile, else the write token travels in clear text.
+CMD ["i2v-loc", "serve", "--source", "sim:docking", "--host", "0.0.0.0", "--allow-open-reads", "--port", "8000", "--params", "/app/params/service.yaml"]

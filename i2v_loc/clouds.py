@@ -52,8 +52,45 @@ def _read_kitti_bin(path: Path) -> np.ndarray:
     return np.fromfile(path, dtype=np.float32).reshape(-1, 4)[:, :3].copy()
 
 
+PCD_HEADER_LINES_MAX = 20
+
+
+def _check_pcd_complete(path: Path) -> None:
+    """A PCD file must hold the points its header declares: open3d pads a truncated ASCII file
+    with made-up points instead of failing."""
+    with open(path, "rb") as fh:
+        header: dict[str, list[str]] = {}
+        for _ in range(PCD_HEADER_LINES_MAX):
+            line = fh.readline().decode("ascii", errors="replace").strip()
+            if not line or line.startswith("#"):
+                continue
+            key, *values = line.split()
+            header[key.upper()] = values
+            if key.upper() == "DATA":
+                break
+        data_start = fh.tell()
+        if "DATA" not in header or "POINTS" not in header:
+            raise CloudError(f"{path}: not a PCD file (no POINTS / DATA in its header)")
+        declared = int(header["POINTS"][0])
+        kind = header["DATA"][0].lower() if header["DATA"] else ""
+        if kind == "ascii":
+            found = sum(1 for line in fh if line.strip())
+        elif kind == "binary":
+            point_bytes = sum(int(size) * int(count) for size, count in
+                              zip(header.get("SIZE", []), header.get("COUNT", ["1"] * len(header.get("SIZE", [])))))
+            found = (path.stat().st_size - data_start) // point_bytes if point_bytes else 0
+        else:  # binary_compressed: open3d checks the compressed size itself
+            return
+    if found < declared:
+        raise CloudError(f"{path}: the file holds {found} of the {declared} points its header declares "
+                         "(cut short?)")
+
+
 def _read_open3d(path: Path) -> np.ndarray:
     import open3d as o3d
+
+    if path.suffix.lower() == ".pcd":
+        _check_pcd_complete(path)
 
     cloud = o3d.io.read_point_cloud(str(path), remove_nan_points=False, remove_infinite_points=False)
     points = np.asarray(cloud.points, dtype=np.float32)

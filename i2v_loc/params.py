@@ -10,8 +10,10 @@ files given, in order, over the built-in defaults and validates the result.
 from __future__ import annotations
 
 import copy
+import functools
 import json
 import math
+import os
 from pathlib import Path
 from typing import Any, Literal
 
@@ -19,6 +21,12 @@ import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
 DEFAULT_METHOD = "default"  # the pipeline method run, eval, bench, sweep and serve use (i2v_loc.pipeline.METHODS)
+YARD_EXTENT_M = 10_000.0  # positions and region bounds: a yard is never 10 km from its origin
+MAST_HEIGHT_M = 200.0
+MAX_POINTS_PER_FRAME = 10_000_000  # point counts: far above what four 128-beam sensors deliver
+MAX_VOLUME_TOLERANCE_M3 = 2_000.0
+MAX_SENSORS = 64
+MAX_VEHICLES = 100
 
 
 class Section(BaseModel):
@@ -34,9 +42,9 @@ class Section(BaseModel):
 class Extrinsics(Section):
     """Pose of a sensor in the yard frame (x east, y north, z up; angles applied Z-Y-X)."""
 
-    x_m: float = 0.0
-    y_m: float = 0.0
-    z_m: float = 0.0
+    x_m: float = Field(0.0, ge=-YARD_EXTENT_M, le=YARD_EXTENT_M)
+    y_m: float = Field(0.0, ge=-YARD_EXTENT_M, le=YARD_EXTENT_M)
+    z_m: float = Field(0.0, ge=-MAST_HEIGHT_M, le=MAST_HEIGHT_M)
     roll_deg: float = Field(0.0, ge=-180, le=180)
     pitch_deg: float = Field(0.0, ge=-90, le=90)
     yaw_deg: float = Field(0.0, ge=-180, le=180)
@@ -122,8 +130,8 @@ class VehicleConfig(Section):
     description: str = ""
     truck: TruckGeometry
     trailer: TrailerGeometry
-    vehicle_volume_tolerance_m3: float = Field(..., gt=0.0, description="δV of the whole-vehicle volume gate (paper Eq. 5)")
-    trailer_volume_tolerance_m3: float = Field(..., gt=0.0, description="δV of the trailer volume gate (paper section 3.4)")
+    vehicle_volume_tolerance_m3: float = Field(..., gt=0.0, le=MAX_VOLUME_TOLERANCE_M3, description="δV of the whole-vehicle volume gate (paper Eq. 5)")
+    trailer_volume_tolerance_m3: float = Field(..., gt=0.0, le=MAX_VOLUME_TOLERANCE_M3, description="δV of the trailer volume gate (paper section 3.4)")
 
     @property
     def vehicle_volume_m3(self) -> float:
@@ -185,7 +193,7 @@ class CalibrationParams(Section):
     max_iterations: int = Field(60, ge=1, le=1000)
     fitness_distance_m: float = Field(0.3, gt=0.0, le=2.0, description="Fitness: share of the sensor's overlapping structure (walls, not the ground) with a registered neighbour this close")
     min_fitness: float = Field(0.4, ge=0.0, le=1.0, description="Results below this fitness are refused (sample yard: correct 0.45-0.75, a guess off by 3 m / 20 deg 0.25-0.35)")
-    min_overlap_points: int = Field(500, ge=10, description="Overlap needed to register two sensors directly")
+    min_overlap_points: int = Field(500, ge=10, le=MAX_POINTS_PER_FRAME, description="Overlap needed to register two sensors directly")
 
 
 class ConcatenationParams(Section):
@@ -196,12 +204,12 @@ class ConcatenationParams(Section):
 
 
 class RegionParams(Section):
-    x_min_m: float = -40.0
-    x_max_m: float = 40.0
-    y_min_m: float = -25.0
-    y_max_m: float = 40.0
-    z_min_m: float = -1.0
-    z_max_m: float = 5.0
+    x_min_m: float = Field(-40.0, ge=-YARD_EXTENT_M, le=YARD_EXTENT_M)
+    x_max_m: float = Field(40.0, ge=-YARD_EXTENT_M, le=YARD_EXTENT_M)
+    y_min_m: float = Field(-25.0, ge=-YARD_EXTENT_M, le=YARD_EXTENT_M)
+    y_max_m: float = Field(40.0, ge=-YARD_EXTENT_M, le=YARD_EXTENT_M)
+    z_min_m: float = Field(-1.0, ge=-MAST_HEIGHT_M, le=MAST_HEIGHT_M)
+    z_max_m: float = Field(5.0, ge=-MAST_HEIGHT_M, le=MAST_HEIGHT_M)
     ground_distance_threshold_m: float = Field(0.15, gt=0.0, le=2.0)
     ransac_iterations: int = Field(100, ge=1, le=10000)
     ransac_sample_voxel_m: float = Field(0.5, ge=0.0, le=5.0, description="Voxel size of the cloud RANSAC samples from; 0 uses every point")
@@ -223,8 +231,8 @@ class ClusteringParams(Section):
     algorithm: Literal["kdtree", "grid"] = Field("kdtree", description="kdtree: Eq. 4 on voxel centroids; grid: 26-connected components of a voxel occupancy grid of grid_voxel_m")
     voxel_size_m: float = Field(0.2, ge=0.0, le=2.0, description="Neighbour search on voxel centroids of this size (0 = every point)")
     grid_voxel_m: float = Field(0.5, ge=0.1, le=2.0, description="Voxel of the grid algorithm (0.3 m splits a vehicle: 32-beam rings are 0.5 m apart at 20 m)")
-    min_points: int = Field(10, ge=1)
-    max_points: int = Field(200000, ge=1)
+    min_points: int = Field(10, ge=1, le=MAX_POINTS_PER_FRAME)
+    max_points: int = Field(200000, ge=1, le=MAX_POINTS_PER_FRAME)
     hitch_range_deg: float = Field(0.0, ge=0.0, le=90.0, description="The whole-vehicle gate also admits the vehicle's oriented box at any hitch angle up to this, from its kinematic figures (0 = Eq. 5 alone)")
 
     @model_validator(mode="after")
@@ -236,8 +244,8 @@ class ClusteringParams(Section):
 
 class ClassificationParams(Section):
     trailer_tolerance_m: float = Field(0.35, gt=0.0, le=5.0, description="ε of the second clustering inside a vehicle cluster")
-    min_trailer_points: int = Field(30, ge=1)
-    min_truck_points: int = Field(10, ge=1, description="Fewer points left after removing the trailer: the truck is not seen")
+    min_trailer_points: int = Field(30, ge=1, le=MAX_POINTS_PER_FRAME)
+    min_truck_points: int = Field(10, ge=1, le=MAX_POINTS_PER_FRAME, description="Fewer points left after removing the trailer: the truck is not seen")
     max_length_excess_m: float = Field(1.0, ge=0.0, le=20.0, description="A trailer candidate longer than the trailer plus this is rejected")
     floor_margin_m: float = Field(0.1, ge=-1.0, le=2.0, description="The second clustering uses points higher than the trailer floor plus this above the ground")
     xy_grid_m: float = Field(0.05, gt=0.0, le=0.3, description="The xy projection is thinned to one point per cell of this size before the second clustering (neighbour pairs fall with its square)")
@@ -256,8 +264,8 @@ class TrackingParams(Section):
     max_distance_m: float = Field(1.0, gt=0.0, le=20.0, description="Association gate (paper: 1 m)")
     max_age_frames: int = Field(3, ge=1, le=100)
     min_hits: int = Field(3, ge=1, le=100)
-    process_noise: float = Field(1.0, gt=0.0)
-    measurement_noise_m: float = Field(0.15, gt=0.0)
+    process_noise: float = Field(1.0, ge=1e-4, le=1e4, description="Variance of the white-noise acceleration of the Kalman filter")
+    measurement_noise_m: float = Field(0.15, ge=0.001, le=10.0, description="Standard deviation of a measured unit centre")
     confirm_paired: bool = Field(False, description="A unit found together with its partner unit (truck and trailer of one classified cluster) is confirmed at once")
     reacquire_distance_m: float = Field(0.0, ge=0.0, le=20.0, description="A new unit this close to the last position of a lost track of its kind continues it (ID, yaw); 0 = never")
     reacquire_max_age_s: float = Field(5.0, ge=0.0, le=600.0, description="Lost tracks can be continued for this long")
@@ -303,8 +311,8 @@ class BackgroundParams(Section):
 class Params(Section):
     """All parameters of i2v-loc."""
 
-    sensors: list[SensorConfig] = Field(default_factory=_paper_field_sensors, min_length=1)
-    vehicles: dict[str, VehicleConfig] = Field(default_factory=_paper_vehicles)
+    sensors: list[SensorConfig] = Field(default_factory=_paper_field_sensors, min_length=1, max_length=MAX_SENSORS)
+    vehicles: dict[str, VehicleConfig] = Field(default_factory=_paper_vehicles, min_length=1, max_length=MAX_VEHICLES, description="The vehicle catalogue: at least one vehicle, or nothing is ever detected")
     calibration: CalibrationParams = Field(default_factory=CalibrationParams)
     concatenation: ConcatenationParams = Field(default_factory=ConcatenationParams)
     region: RegionParams = Field(default_factory=RegionParams)
@@ -356,7 +364,7 @@ def deep_merge(base: dict, patch: dict) -> dict:
 
 def _constraint_text(model: type[BaseModel], loc: tuple) -> str:
     """The allowed range of the field at ``loc``, from the schema, e.g. '>= 0, <= 5'."""
-    schema = model.model_json_schema()
+    schema = _cached_schema(model)
     node: dict[str, Any] = schema
     defs = schema.get("$defs", {})
     for part in loc:
@@ -384,10 +392,26 @@ def _constraint_text(model: type[BaseModel], loc: tuple) -> str:
     return ", ".join(parts)
 
 
+@functools.cache
+def _cached_schema(model: type[BaseModel]) -> dict:
+    """Built once: building it takes tens of ms, far too long to repeat per error of a patch."""
+    return model.model_json_schema()
+
+
+MAX_ERRORS_REPORTED = 20
+
+
 def describe_validation_error(err: ValidationError, source: str = "parameters") -> list[dict[str, Any]]:
-    """Turn a pydantic error into records with field, value, message and allowed range."""
+    """Turn a pydantic error into records with field, value, message and allowed range (the
+    first ``MAX_ERRORS_REPORTED``, then one record saying how many more there are)."""
     out = []
-    for e in err.errors():
+    errors = err.errors(include_url=False)
+    if len(errors) > MAX_ERRORS_REPORTED:
+        more = len(errors) - MAX_ERRORS_REPORTED
+        out.append({"source": source, "field": "", "value": None, "allowed": "",
+                    "message": f"{len(errors)} errors; the first {MAX_ERRORS_REPORTED} follow, {more} more not listed"})
+        errors = errors[:MAX_ERRORS_REPORTED]
+    for e in errors:
         loc = tuple(e["loc"])
         out.append(
             {
@@ -405,6 +429,9 @@ def format_errors(records: list[dict[str, Any]]) -> str:
     lines = []
     for r in records:
         allowed = f" (allowed: {r['allowed']})" if r["allowed"] else ""
+        if not r["field"]:
+            lines.append(f"{r['source']}: {r['message']}{allowed}")
+            continue
         value = json.dumps(r["value"], default=str) if not isinstance(r["value"], dict) else "{...}"
         lines.append(f"{r['source']}: {r['field']} = {value}: {r['message']}{allowed}")
     return "\n".join(lines)
@@ -422,15 +449,41 @@ def read_yaml(path: str | Path) -> dict:
     if not path.is_file():
         raise ParamsError(f"{path}: no such parameter file")
     try:
-        data = yaml.safe_load(path.read_text()) or {}
+        text = path.read_text()
+        data = yaml.safe_load(text) or {}
     except yaml.YAMLError as err:
+        _check_complete(path, text, None)
         mark = getattr(err, "problem_mark", None)
         where = f":{mark.line + 1}:{mark.column + 1}" if mark else ""
         problem = getattr(err, "problem", None) or str(err).splitlines()[0]
         raise ParamsError(f"{path}{where}: not valid YAML: {problem}") from err
     if not isinstance(data, dict):
         raise ParamsError(f"{path}: expected a mapping of sections at the top level, got {type(data).__name__}")
+    _check_complete(path, text, data)
     return data
+
+
+# A file the service writes names its sections in its first line and ends with END_MARK: a file
+# cut short (disk full, a crash while copying) is refused instead of falling back to defaults.
+# Hand-written files carry neither line and may hold any subset of the sections.
+HEADER_PREFIX = "# i2v-loc parameters; sections: "
+END_MARK = "# end of i2v-loc parameters"
+
+
+def _check_complete(path: Path, text: str, data: dict | None) -> None:
+    """ParamsError if a file the service wrote lost its end or sections (``data`` None: unparsable)."""
+    first = text.split("\n", 1)[0].strip()
+    if not first.startswith(HEADER_PREFIX):
+        return
+    listed = [name.strip() for name in first[len(HEADER_PREFIX):].split(",") if name.strip()]
+    lost = [name for name in listed if data is not None and name not in data]
+    ended = text.rstrip().endswith(END_MARK)
+    if lost or not ended:
+        what = f"sections lost: {', '.join(lost)}" if lost else "the last section is cut short"
+        previous = path.with_name(path.name + PREVIOUS_SUFFIX)
+        hint = f"; the previous version is {previous}" if previous.is_file() else ""
+        raise ParamsError(f"{path}: the file is incomplete (it does not end with '{END_MARK}'; {what}); "
+                          f"refusing to start from it{hint}")
 
 
 def load_params(*paths: str | Path | None) -> Params:
@@ -459,14 +512,52 @@ def dump_yaml(params: Params | dict, sections: list[str] | None = None) -> str:
     return yaml.safe_dump(data, sort_keys=False, allow_unicode=True)
 
 
+PREVIOUS_SUFFIX = ".prev"
+
+
 def save_params(params: Params, path: str | Path) -> None:
-    """Write atomically: a temporary file in the same folder, then rename."""
+    """Write atomically and durably: a temporary file in the same folder, flushed to disk, then
+    renamed over ``path``; the version it replaces is kept as ``<path>.prev``. The file names its
+    sections and ends with END_MARK (see ``_check_complete``)."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_suffix(path.suffix + ".tmp")
-    tmp.write_text(dump_yaml(params))
+    data = params.model_dump(mode="json")
+    text = f"{HEADER_PREFIX}{', '.join(data)}\n{dump_yaml(data)}{END_MARK}\n"
+    tmp = path.with_name(path.name + ".tmp")
+    with open(tmp, "w") as fh:
+        fh.write(text)
+        fh.flush()
+        os.fsync(fh.fileno())
+    if path.is_file():
+        _keep_previous(path)
     tmp.replace(path)
+    _fsync_dir(path.parent)
+
+
+def _keep_previous(path: Path) -> None:
+    """``path`` stays in place (a crash now loses nothing); a hard link of it becomes ``.prev``."""
+    previous = path.with_name(path.name + PREVIOUS_SUFFIX)
+    staging = path.with_name(path.name + PREVIOUS_SUFFIX + ".tmp")
+    staging.unlink(missing_ok=True)
+    try:
+        os.link(path, staging)
+    except OSError:  # no hard links on this file system
+        staging.write_bytes(path.read_bytes())
+    staging.replace(previous)
+
+
+def _fsync_dir(folder: Path) -> None:
+    try:
+        fd = os.open(folder, os.O_RDONLY)
+    except OSError:
+        return
+    try:
+        os.fsync(fd)
+    except OSError:  # some file systems refuse fsync on a directory
+        pass
+    finally:
+        os.close(fd)
 
 
 def json_schema() -> dict:
-    return Params.model_json_schema()
+    return copy.deepcopy(_cached_schema(Params))

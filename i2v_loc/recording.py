@@ -7,6 +7,7 @@ models in ``meta.yaml``, the true and guessed extrinsics, and one ground-truth l
 from __future__ import annotations
 
 import json
+import zipfile
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -185,6 +186,9 @@ class Recording:
         self._scans: dict[str, SensorScans] = {}
         self._directions: dict[str, np.ndarray] = {}
         self._ground_truth: list[dict] | None = None
+        # What ``frame(..., skip_damaged=True)`` left out: sensor -> why (file missing or unreadable,
+        # or fewer frames than meta.yaml says).
+        self.damaged: dict[str, str] = {}
 
     def __len__(self) -> int:
         return int(self.meta.get("n_frames", 0))
@@ -205,25 +209,41 @@ class Recording:
         return self.path / "sensors_guess.yaml"
 
     def scans(self, sensor: str) -> SensorScans:
-        """All sweeps of one sensor (loaded on first use)."""
+        """All sweeps of one sensor (loaded on first use); RecordingError if its file is missing,
+        unreadable or holds another number of frames than meta.yaml says."""
+        scans = self._loaded(sensor)
+        if scans.n_frames != len(self):
+            raise RecordingError(f"{self._file(sensor)}: {scans.n_frames} frames but meta.yaml says {len(self)}")
+        return scans
+
+    def _file(self, sensor: str) -> Path:
+        return self.path / "scans" / f"{sensor}.npz"
+
+    def _loaded(self, sensor: str) -> SensorScans:
         if sensor not in self.sensor_names:
             raise KeyError(f"no sensor {sensor!r} in {self.path}; known: {self.sensor_names}")
         if sensor not in self._scans:
-            file = self.path / "scans" / f"{sensor}.npz"
+            file = self._file(sensor)
             if not file.is_file():
                 raise RecordingError(f"{file}: missing scan file of sensor {sensor}")
-            with np.load(file) as data:
-                missing = {"range_mm", "stamp_ns", "column_time_ns", "beam_altitude_deg", "beam_azimuth_offset_deg"} - set(data.files)
-                if missing:
-                    raise RecordingError(f"{file}: missing arrays {sorted(missing)}")
-                scans = SensorScans(**{k: data[k] for k in data.files if k in SensorScans.__dataclass_fields__})
-            if scans.n_frames != len(self):
-                raise RecordingError(f"{file}: {scans.n_frames} frames but meta.yaml says {len(self)}")
+            try:
+                with np.load(file) as data:
+                    missing = {"range_mm", "stamp_ns", "column_time_ns", "beam_altitude_deg", "beam_azimuth_offset_deg"} - set(data.files)
+                    if missing:
+                        raise RecordingError(f"{file}: missing arrays {sorted(missing)}")
+                    scans = SensorScans(**{k: data[k] for k in data.files if k in SensorScans.__dataclass_fields__})
+            except (OSError, EOFError, ValueError, zipfile.BadZipFile) as err:  # RecordingError is a ValueError
+                if isinstance(err, RecordingError):
+                    raise
+                raise RecordingError(f"{file}: unreadable scan file of sensor {sensor}: {err}") from err
             self._scans[sensor] = scans
             self._directions[sensor] = scans.unit_directions()
         return self._scans[sensor]
 
-    def frame(self, index: int, sensors: Sequence[str] | None = None) -> Frame:
+    def frame(self, index: int, sensors: Sequence[str] | None = None, skip_damaged: bool = False) -> Frame:
+        """The sweeps of frame ``index``. A damaged sensor raises RecordingError, or, with
+        ``skip_damaged``, is left out of the frame (the pipeline then marks it missing) and
+        recorded in ``damaged``; a sensor whose file holds fewer frames is left out past its end."""
         n = len(self)
         if not -n <= index < n:
             raise IndexError(f"frame {index} out of range: the recording has {n} frames")
@@ -231,12 +251,33 @@ class Recording:
         names = list(sensors) if sensors is not None else self.sensor_names
         frame = Frame(index=index)
         for name in names:
-            scans = self.scans(name)
+            scans = self._usable(name, index) if skip_damaged else self.scans(name)
+            if scans is None:
+                continue
             points, offsets = scans.points(index, self._directions[name])
             frame.scans[name] = SensorScan(
                 sensor=name, stamp_s=float(scans.stamp_ns[index]) * 1e-9, points=points, time_offset_s=offsets
             )
         return frame
+
+    def _usable(self, sensor: str, index: int) -> SensorScans | None:
+        """The sweeps of ``sensor`` if it has frame ``index``, else None (the reason in ``damaged``)."""
+        if sensor in self.damaged and sensor not in self._scans:
+            return None
+        try:
+            scans = self._loaded(sensor)
+        except RecordingError as err:
+            self.damaged[sensor] = str(err)
+            return None
+        if scans.n_frames > len(self):
+            self.damaged[sensor] = f"{self._file(sensor)}: {scans.n_frames} frames but meta.yaml says {len(self)}"
+            del self._scans[sensor]
+            return None
+        if index >= scans.n_frames:
+            self.damaged[sensor] = (f"{self._file(sensor)}: holds {scans.n_frames} of the {len(self)} frames; "
+                                    f"frames {scans.n_frames}-{len(self) - 1} of this sensor are missing")
+            return None
+        return scans
 
     def frames(self, sensors: Sequence[str] | None = None) -> Iterator[Frame]:
         for i in range(len(self)):

@@ -11,6 +11,7 @@ seed and duration) and replayed in a loop.
 
 from __future__ import annotations
 
+import logging
 import os
 import re
 import shutil
@@ -27,6 +28,9 @@ DEFAULT_SCENARIO = "docking"
 DEFAULT_VEHICLE = "man_tgx"
 DEFAULT_SIM_DURATION_S = 30.0
 DEFAULT_SIM_SEED = 1
+
+
+log = logging.getLogger("i2v_loc.sources")
 
 
 class SourceError(ValueError):
@@ -75,7 +79,11 @@ class ReplaySource:
         if k < 0 or (not self.loop and k >= n):
             raise IndexError(f"frame {k} out of range: the source has {n} frames")
         lap, index = divmod(k, n)
-        frame = self.recording.frame(index)
+        known = len(self.recording.damaged)
+        frame = self.recording.frame(index, skip_damaged=True)  # the sensors that work keep working
+        if len(self.recording.damaged) > known:
+            for name, reason in list(self.recording.damaged.items())[known:]:
+                log.warning("sensor %s is left out of the replay from frame %d on: %s", name, index, reason)
         if lap == 0:
             return frame
         shift_s = lap * self.duration_s
@@ -84,6 +92,11 @@ class ReplaySource:
             for name, s in frame.scans.items()
         }
         return Frame(index=k, scans=scans)
+
+    @property
+    def damaged(self) -> dict[str, str]:
+        """Sensors of the recording that cannot be replayed (in full), and why."""
+        return dict(self.recording.damaged)
 
     def describe(self) -> dict:
         meta = self.recording.meta

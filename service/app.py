@@ -4,20 +4,28 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import copy
+import gc
 import json
+import logging
 import math
+import threading
 from pathlib import Path
 
+import uvicorn
 from fastapi import APIRouter, Depends, FastAPI, HTTPException, Request, WebSocket, WebSocketDisconnect
 from fastapi.encoders import jsonable_encoder
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import FileResponse, JSONResponse, Response
 from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
 from fastapi.staticfiles import StaticFiles
+from fastapi_offline import FastAPIOffline
 from prometheus_client import CONTENT_TYPE_LATEST
+from uvicorn.config import LOGGING_CONFIG
 
 from i2v_loc import __version__
 from i2v_loc.params import json_schema
+from service import models
 from service.auth import bearer_from_header
 from service.core import Service
 from service.params_store import ParamsNotSaved, PatchRejected, UnknownVersion
@@ -25,6 +33,7 @@ from service.params_store import ParamsNotSaved, PatchRejected, UnknownVersion
 STATIC_DIR = Path(__file__).with_name("static")
 WS_AUTH_TIMEOUT_S = 5.0
 MAX_PATCH_BYTES = 1_000_000
+MAX_PATCH_DEPTH = 16  # the parameters nest 4 deep (vehicles.NAME.truck.length_m)
 PATCH_MEDIA_TYPES = ("application/json", "application/merge-patch+json")
 TRUE_WORDS = ("1", "true", "yes", "on")
 FALSE_WORDS = ("", "0", "false", "no", "off")
@@ -42,13 +51,14 @@ def create_app(service: Service) -> FastAPI:
     async def lifespan(app: FastAPI):
         service.hub.bind(asyncio.get_running_loop())
         service.start()
+        gc.freeze()  # the objects of the start-up live forever: full collections skip them (they cost the loop)
         try:
             yield
         finally:
             service.hub.unbind()
             await asyncio.to_thread(service.stop)
 
-    app = FastAPI(
+    app = FastAPIOffline(  # /docs and /redoc from assets in the package: they work without internet
         title="i2v-loc yard service",
         version=__version__,
         description="Live localization of articulated vehicles (truck + trailer) from infrastructure LiDARs. "
@@ -65,9 +75,14 @@ def create_app(service: Service) -> FastAPI:
 
         return check
 
-    read_guard, write_guard = Depends(guard(False)), Depends(guard(True))
+    # Only the operations that check the token are marked secured in the OpenAPI document: reads
+    # are, when the service runs with --require-token-for-reads.
     auth_errors = {401: _error(401, "Token missing"), 403: _error(403, "Token wrong or none configured")}
-    api = APIRouter(prefix="/api/v1", dependencies=[read_guard], responses=auth_errors)
+    write_guard = Depends(guard(True))
+    reads_guarded = service.auth.require_token_for_reads
+    read_deps = [Depends(guard(False))] if reads_guarded else []
+    read_errors = auth_errors if reads_guarded else {}
+    api = APIRouter(prefix="/api/v1", dependencies=read_deps, responses=read_errors)
 
     @app.exception_handler(RequestValidationError)
     async def _invalid_request(request: Request, exc: RequestValidationError):
@@ -78,27 +93,29 @@ def create_app(service: Service) -> FastAPI:
              "errors": errors}))
 
     # ------------------------------------------------------------------ state
+    # The reads are async: they only copy what the pipeline thread left, so they run on the event
+    # loop instead of taking a detour through the thread pool (a quarter of the loop's time under load).
 
     @api.get("/health", tags=["status"], summary="Liveness, readiness and per-sensor status")
-    def health() -> dict:
+    async def health() -> models.Health:
         return service.health()
 
     @api.get("/state", tags=["state"], summary="The latest frame (state line of docs/formats.md)",
              responses={503: _error(503, "No frame processed yet")})
-    def state() -> dict:
+    async def state() -> models.State:
         latest = service.runner.latest
         if latest is None:
             raise HTTPException(503, "no frame has been processed yet; retry shortly", headers={"Retry-After": "1"})
         return latest
 
     @api.get("/vehicles", tags=["state"], summary="Vehicles of the latest frame")
-    def vehicles() -> dict:
+    async def vehicles() -> models.Vehicles:
         latest = service.runner.latest or {}
         return {"frame": latest.get("frame"), "stamp_s": latest.get("stamp_s"), "vehicles": latest.get("vehicles") or []}
 
     @api.get("/vehicles/{vehicle_id}", tags=["state"], summary="One vehicle of the latest frame",
              responses={404: _error(404, "No such vehicle in the latest frame")})
-    def vehicle(vehicle_id: int) -> dict:
+    async def vehicle(vehicle_id: int) -> models.Vehicle:
         latest = service.runner.latest or {}
         found = [v for v in latest.get("vehicles") or [] if v.get("id") == vehicle_id]
         if not found:
@@ -107,37 +124,37 @@ def create_app(service: Service) -> FastAPI:
         return found[0]
 
     @api.get("/sensors", tags=["status"], summary="Rate, last stamp and drops per sensor")
-    def sensors() -> dict:
+    async def sensors() -> models.Sensors:
         return {"sensors": service.sensors()}
 
     # ------------------------------------------------------------------ parameters
 
     @api.get("/params", tags=["parameters"], summary="The parameters in force and their version")
-    def get_params() -> dict:
+    async def get_params() -> models.ParamsInForce:
         current = service.store.current
         return {"version": current.version, "applied_version": service.runner.params_version,
                 "params": current.params.model_dump(mode="json")}
 
     @api.get("/params/schema", tags=["parameters"], summary="JSON Schema of the parameters")
-    def get_schema() -> dict:
+    async def get_schema() -> dict:
         return json_schema()
 
     @api.get("/params/history", tags=["parameters"], summary="Versions of the parameters since start-up")
-    def get_history() -> dict:
+    async def get_history() -> models.History:
         return {"current": service.store.version, "versions": service.store.history()}
 
     patch_body = {"requestBody": {"required": True, "description": "A JSON merge patch (RFC 7396) of the parameters",
                                   "content": {t: {"schema": {"type": "object"}} for t in PATCH_MEDIA_TYPES}}}
 
     @api.patch("/params", tags=["parameters"], summary="Change parameters with a JSON merge patch",
-               dependencies=[write_guard], openapi_extra=patch_body,
-               responses={400: _error(400, "Body is not JSON"), 415: _error(415, "Not a JSON body"),
+               dependencies=[write_guard], openapi_extra=patch_body, response_model=models.ChangeAccepted,
+               responses={**auth_errors, 400: _error(400, "Body is not JSON"), 415: _error(415, "Not a JSON body"),
                           422: _error(422, "Validation failed: field, value and allowed range per error"),
                           NOT_SAVED_STATUS: _not_saved_doc})
-    async def patch_params(request: Request):
+    async def patch_params(request: Request, creds: HTTPAuthorizationCredentials | None = Depends(_bearer)):
         patch = await _json_body(request)
         try:
-            version = await asyncio.to_thread(service.store.patch, patch)
+            version = await in_daemon_thread(service.store.patch, patch, _change_source(service, creds))
         except PatchRejected as err:
             return _rejected(err)
         except ParamsNotSaved as err:
@@ -145,11 +162,11 @@ def create_app(service: Service) -> FastAPI:
         return _accepted(version)
 
     @api.post("/params/rollback/{version}", tags=["parameters"], summary="Make an earlier version current again",
-              dependencies=[write_guard],
-              responses={404: _error(404, "Unknown version"), NOT_SAVED_STATUS: _not_saved_doc})
-    async def rollback(version: int):
+              dependencies=[write_guard], response_model=models.ChangeAccepted,
+              responses={**auth_errors, 404: _error(404, "Unknown version"), NOT_SAVED_STATUS: _not_saved_doc})
+    async def rollback(version: int, creds: HTTPAuthorizationCredentials | None = Depends(_bearer)):
         try:
-            entry = await asyncio.to_thread(service.store.rollback, version)
+            entry = await in_daemon_thread(service.store.rollback, version, _change_source(service, creds))
         except UnknownVersion as err:
             raise HTTPException(404, err.args[0]) from None
         except PatchRejected as err:  # an old version that today's model refuses
@@ -160,8 +177,8 @@ def create_app(service: Service) -> FastAPI:
 
     # ------------------------------------------------------------------ metrics, dashboard
 
-    @app.get("/metrics", tags=["status"], summary="Prometheus metrics", dependencies=[read_guard],
-             response_class=Response, responses={200: {"content": {"text/plain": {}}}, **auth_errors})
+    @app.get("/metrics", tags=["status"], summary="Prometheus metrics", dependencies=read_deps,
+             response_class=Response, responses={200: {"content": {"text/plain": {}}}, **read_errors})
     def metrics() -> Response:
         return Response(service.metrics.render(), media_type=CONTENT_TYPE_LATEST)
 
@@ -180,6 +197,25 @@ def create_app(service: Service) -> FastAPI:
     app.include_router(api)
     _document_patch_body(app)
     return app
+
+
+SHUTDOWN_GRACE_S = 0.5  # open requests get this long at shutdown; the whole stop stays under 2 s
+
+
+def server_config(app: FastAPI, access_log: bool = False, **options) -> uvicorn.Config:
+    """uvicorn's configuration for the service (``i2v-loc serve`` and the tests use it).
+
+    No per-message deflate: compressing every state with points for every client made the event
+    loop the bottleneck (each client compresses the same bytes again), and the states are small
+    enough uncompressed. A bounded graceful shutdown: a request still running is cut off.
+    """
+    log_config = copy.deepcopy(LOGGING_CONFIG)
+    log_config["handlers"]["access"]["stream"] = "ext://sys.stderr"  # stdout stays empty, as for the rest
+    config = uvicorn.Config(app, log_level="warning", access_log=access_log, lifespan="on", log_config=log_config,
+                            ws_per_message_deflate=False, timeout_graceful_shutdown=SHUTDOWN_GRACE_S, **options)
+    if access_log:  # uvicorn sets its access logger to log_level, which would silence it
+        logging.getLogger("uvicorn.access").setLevel(logging.INFO)
+    return config
 
 
 def patch_schema_components() -> dict[str, dict]:
@@ -222,23 +258,82 @@ def _document_patch_body(app: FastAPI) -> None:
     app.openapi = openapi
 
 
+def in_daemon_thread(fn, *args):
+    """Run ``fn`` in a daemon thread of its own: unlike ``asyncio.to_thread`` nothing waits for
+    it when the server stops, so a change still in flight never holds up the shutdown."""
+    loop = asyncio.get_running_loop()
+    future = loop.create_future()
+
+    def settle(outcome, error) -> None:
+        if not future.done():
+            future.set_exception(error) if error is not None else future.set_result(outcome)
+
+    def work() -> None:
+        try:
+            outcome, error = fn(*args), None
+        except Exception as err:  # handed to the awaiting request
+            outcome, error = None, err
+        with contextlib.suppress(RuntimeError):  # the loop closed meanwhile
+            loop.call_soon_threadsafe(settle, outcome, error)
+
+    threading.Thread(target=work, name="i2v-loc-params-change", daemon=True).start()
+    return future
+
+
+def _change_source(service: Service, creds: HTTPAuthorizationCredentials | None) -> str:
+    """Who made a change, for the history and the log: the token's id, never the token."""
+    return f"token {service.auth.token_id}" if creds is not None else "anonymous"
+
+
 async def _json_body(request: Request):
     media = request.headers.get("content-type", "").split(";")[0].strip().lower()
     if media not in PATCH_MEDIA_TYPES:
         raise HTTPException(415, f"send the patch as JSON (Content-Type {' or '.join(PATCH_MEDIA_TYPES)}), got {media or 'none'!r}")
-    body = await request.body()
-    if len(body) > MAX_PATCH_BYTES:
-        raise HTTPException(413, f"the patch is larger than {MAX_PATCH_BYTES} bytes")
+    body = await _read_limited(request, MAX_PATCH_BYTES)
     if not body.strip():
         raise HTTPException(400, "empty body: send a JSON object, e.g. {\"clustering\": {\"tolerance_m\": 0.5}}")
     try:
-        return json.loads(body, parse_constant=_non_finite, parse_float=_finite_float)
+        data = json.loads(body, parse_constant=_non_finite, parse_float=_finite_float)
     except (UnicodeDecodeError, json.JSONDecodeError) as err:
         raise HTTPException(400, f"the body is not valid JSON: {err}") from None
     except ValueError as err:
         raise HTTPException(400, str(err)) from None
     except RecursionError:
-        raise HTTPException(400, "the body is nested too deeply") from None
+        raise HTTPException(400, f"the body is nested deeper than {MAX_PATCH_DEPTH} levels") from None
+    if nesting_depth(data) > MAX_PATCH_DEPTH:
+        raise HTTPException(400, f"the body is nested deeper than {MAX_PATCH_DEPTH} levels; the parameters nest 4 deep")
+    return data
+
+
+async def _read_limited(request: Request, limit: int) -> bytes:
+    """The body, refused with 413 by its declared Content-Length or as soon as it passes ``limit``."""
+    too_large = HTTPException(413, f"the patch is larger than {limit} bytes")
+    declared = request.headers.get("content-length")
+    if declared is not None:
+        if not declared.strip().isdigit():
+            raise HTTPException(400, f"Content-Length {declared!r} is not a number of bytes")
+        if int(declared) > limit:
+            raise too_large
+    chunks, size = [], 0
+    async for chunk in request.stream():
+        size += len(chunk)
+        if size > limit:
+            raise too_large
+        chunks.append(chunk)
+    return b"".join(chunks)
+
+
+def nesting_depth(value) -> int:
+    """Levels of objects and arrays in a parsed JSON value (a scalar is 0), without recursion."""
+    depth, level = 0, [(value, 1)]
+    while level:
+        node, d = level.pop()
+        children = node.values() if isinstance(node, dict) else node if isinstance(node, list) else None
+        if children is None:
+            continue
+        depth = max(depth, d)
+        level.extend((child, d + 1) for child in children)
+    return depth
 
 
 def _non_finite(word: str):
@@ -287,6 +382,11 @@ def parse_flag(text: str | None) -> bool | None:
 
 async def _serve_states(service: Service, websocket: WebSocket, points: str | None) -> None:
     """One JSON message per frame; a slow client only ever gets the newest state."""
+    auth = service.auth
+    if not auth.origin_allowed(websocket.headers.get("origin"), websocket.headers.get("host"), websocket.url.scheme):
+        # Refused before the handshake completes: a page of another site never gets a stream.
+        await websocket.close(code=1008, reason="origin not allowed")
+        return
     await websocket.accept()
     want_points = parse_flag(points)
     if want_points is None:

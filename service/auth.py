@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import hashlib
 import hmac
 import os
 from dataclasses import dataclass, field
@@ -45,6 +46,24 @@ class AuthDecision:
 class AuthConfig:
     token: str | None = field(default=None, repr=False)
     require_token_for_reads: bool = False
+    # Browser pages allowed to open the WebSocket besides the service's own (scheme://host[:port]).
+    allowed_origins: tuple[str, ...] = ()
+
+    @property
+    def token_id(self) -> str:
+        """Names the token in logs and the parameter history without revealing it."""
+        return hashlib.sha256(self.token.encode()).hexdigest()[:8] if self.token else "none"
+
+    def origin_allowed(self, origin: str | None, host: str | None, ws_scheme: str = "ws") -> bool:
+        """A WebSocket handshake from ``origin``: clients outside a browser send none (allowed);
+        a browser page must come from this service itself or from an allowed origin."""
+        if origin is None:
+            return True
+        origin = origin.rstrip("/").lower()
+        page_scheme = {"ws": "http", "wss": "https"}.get(ws_scheme, ws_scheme)
+        if host and origin == f"{page_scheme}://{host}".lower():
+            return True
+        return origin in {o.rstrip("/").lower() for o in self.allowed_origins}
 
     def check(self, presented: str | None, write: bool) -> AuthDecision:
         """Decide on a request carrying bearer token ``presented`` (None when absent)."""

@@ -8,7 +8,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
-from i2v_loc.params import Params
+from i2v_loc.params import DEFAULT_METHOD, Params
 from service.auth import AuthConfig
 from service.hub import Hub
 from service.metrics import ServiceMetrics
@@ -18,7 +18,9 @@ from service.runner import PipelineRunner
 log = logging.getLogger("i2v_loc.service")
 
 DEFAULT_POINTS_CAP = 2000
-DEFAULT_METHOD = "default"
+DEGRADED_DROP_RATE = 0.1  # of frames, or of WebSocket messages: above it the service is degraded
+FAILED_AFTER_SKIPPED_FRAMES = 20  # skipped in a row from the start: the source does not work
+STOP_WAIT_S = 0.5  # for the frame in progress; the thread is a daemon, so a stuck frame cannot hold up the exit
 
 
 def real_pipeline(params: Params, method: str = DEFAULT_METHOD):
@@ -47,7 +49,7 @@ class Service:
 
     def stop(self) -> None:
         """Stop the pipeline thread and save the parameters in force (a failure is logged and kept)."""
-        self.runner.stop()
+        self.runner.stop(timeout_s=STOP_WAIT_S)
         try:
             self.store.save()
         except OSError as err:
@@ -71,6 +73,34 @@ class Service:
             out.append(entry)
         return out
 
+    def _status(self, sensors: list[dict], fresh: bool) -> tuple[str, list[str]]:
+        """The overall status and, unless it is ok, why."""
+        runner = self.runner
+        if runner.error:
+            return "failed", [f"the pipeline thread stopped: {runner.error}"]
+        if runner.finished:
+            return "finished", [f"the source delivered all its {runner.source.n_frames} frames"]
+        if runner.frames_processed == 0:
+            skipped = sum(runner.frames_dropped.values())
+            if skipped >= FAILED_AFTER_SKIPPED_FRAMES:
+                last = (runner.last_frame_error or {}).get("error")
+                return "failed", [f"no frame processed, {skipped} skipped; last error: {last}"]
+            return "starting", ["waiting for the first frame"]
+        if not fresh:
+            return "stalled", ["no frame processed recently"]
+        damaged = getattr(runner.source, "damaged", None) or {}
+        faulty = [s for s in sensors if s["status"] != "ok"]
+        reasons = [f"sensor {s['name']}: {s['status']}" + (f" ({damaged[s['name']]})" if s["name"] in damaged else "")
+                   for s in faulty]
+        if sensors and len(faulty) == len(sensors) and all(s["status"].startswith("fault") for s in faulty):
+            return "failed", ["no sensor delivers", *reasons]
+        frame_drops, ws_drops = runner.drop_rate(), self.hub.drop_rate()
+        if frame_drops > DEGRADED_DROP_RATE:
+            reasons.append(f"{frame_drops:.0%} of the last frames dropped (late or unreadable)")
+        if ws_drops > DEGRADED_DROP_RATE:
+            reasons.append(f"{ws_drops:.0%} of the recent WebSocket messages dropped for slow clients")
+        return ("degraded", reasons) if reasons else ("ok", [])
+
     def health(self) -> dict:
         runner = self.runner
         now = runner.clock()
@@ -78,20 +108,10 @@ class Service:
         age = None if runner.last_frame_s is None else now - runner.last_frame_s
         period_s = 1.0 / float(runner.source.rate_hz)
         fresh = age is not None and age <= max(1.0, 5 * period_s)
-        if runner.error:
-            status = "failed"
-        elif runner.finished:
-            status = "finished"
-        elif runner.frames_processed == 0:
-            status = "starting"
-        elif not fresh:
-            status = "stalled"
-        elif any(s["status"] != "ok" for s in sensors):
-            status = "degraded"
-        else:
-            status = "ok"
+        status, reasons = self._status(sensors, fresh)
         return {
             "status": status,
+            "reasons": reasons,
             "live": runner.error is None and (runner.alive or not runner.started_s),
             "ready": status in ("ok", "degraded"),
             "error": runner.error,

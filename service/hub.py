@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import asyncio
 import threading
+from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
@@ -66,6 +67,9 @@ class Client:
         return message.plain
 
 
+DELIVERY_WINDOW = 100
+
+
 class Hub:
     """Thread-safe ``publish`` from any thread; clients live on one asyncio loop."""
 
@@ -75,6 +79,7 @@ class Hub:
         self._lock = threading.Lock()
         self.on_drop = on_drop
         self.on_count = on_count
+        self._deliveries: deque = deque(maxlen=DELIVERY_WINDOW)  # (clients offered, of them replaced)
 
     def bind(self, loop: asyncio.AbstractEventLoop) -> None:
         with self._lock:
@@ -115,9 +120,21 @@ class Hub:
                 pass
 
     def _deliver(self, message: Message) -> None:
-        for client in list(self._clients):
-            if client.offer(message) and self.on_drop is not None:
-                self.on_drop()
+        clients = list(self._clients)
+        replaced = 0
+        for client in clients:
+            if client.offer(message):
+                replaced += 1
+                if self.on_drop is not None:
+                    self.on_drop()
+        if clients:
+            self._deliveries.append((len(clients), replaced))
+
+    def drop_rate(self) -> float:
+        """Share of the messages of the last DELIVERY_WINDOW deliveries replaced before a client took them."""
+        deliveries = list(self._deliveries)
+        offered = sum(n for n, _ in deliveries)
+        return sum(r for _, r in deliveries) / offered if offered else 0.0
 
     def _counted(self) -> None:
         if self.on_count is not None:

@@ -9,6 +9,7 @@ nothing. A change in force whose file could not be written raises ``ParamsNotSav
 
 from __future__ import annotations
 
+import json
 import logging
 import threading
 import time
@@ -17,9 +18,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from pydantic import ValidationError
+from pydantic import BaseModel, ValidationError
 
-from i2v_loc.params import Params, ParamsError, apply_patch, describe_validation_error, save_params
+from i2v_loc.params import MAX_ERRORS_REPORTED, Params, ParamsError, apply_patch, describe_validation_error, save_params
 
 log = logging.getLogger("i2v_loc.service")
 
@@ -83,6 +84,7 @@ class ParamStore:
     def __init__(self, params: Params, path: str | Path | None = None,
                  on_change: Callable[[Version], None] | None = None):
         self._lock = threading.Lock()
+        self._save_lock = threading.Lock()  # one writer of the file at a time (a change, the shutdown)
         self.path = Path(path) if path else None
         self.on_change = on_change
         self._history: list[Version] = [Version(0, time.time(), "start", {}, params)]
@@ -113,20 +115,22 @@ class ParamStore:
         """Validate and apply a JSON merge patch; raises ``PatchRejected`` or ``ParamsNotSaved``."""
         with self._lock:
             _refuse_section_nulls(patch)
+            _refuse_unknown_keys(patch)
             new_params = _validated(self.params, patch)
             return self._commit(new_params, patch, source)
 
-    def rollback(self, version: int) -> Version:
+    def rollback(self, version: int, source: str | None = None) -> Version:
         """A new version whose parameters equal those of ``version``."""
         with self._lock:
             target = self.get(version).params
             patch = merge_patch_diff(self.params.model_dump(mode="json"), target.model_dump(mode="json"))
-            return self._commit(target, patch, f"rollback to {version}")
+            return self._commit(target, patch, f"rollback to {version}" + (f" by {source}" if source else ""))
 
     def save(self) -> None:
         """Write the parameters in force to the file (OSError if it cannot be written)."""
         if self.path is not None:
-            save_params(self.params, self.path)
+            with self._save_lock:
+                save_params(self.params, self.path)
 
     def _commit(self, params: Params, patch: dict, source: str) -> Version:
         entry = Version(self.current.version + 1, time.time(), source, patch, params)
@@ -136,17 +140,42 @@ class ParamStore:
             except ValueError as err:  # ParamsError: a check only the pipeline makes (e.g. grid size)
                 raise PatchRejected(f"{source}: the pipeline refused the parameters: {err}", [
                     {"source": source, "field": "", "value": None, "message": str(err), "allowed": ""}]) from err
+        log.info("parameter version %d (%s): %s", entry.version, source,
+                 describe_changes(self.params.model_dump(mode="json"), params.model_dump(mode="json")))
         self._history.append(entry)
         if len(self._history) > HISTORY_LIMIT:
             del self._history[1:len(self._history) - HISTORY_LIMIT + 1]
         if self.path is not None:
             try:
-                save_params(params, self.path)
+                with self._save_lock:
+                    save_params(params, self.path)
             except OSError as err:
                 failure = ParamsNotSaved(entry, self.path, err)
                 log.error("%s", failure)
                 raise failure from err
         return entry
+
+
+def describe_changes(old: dict, new: dict, limit: int = 20) -> str:
+    """'a.b: 1 -> 2, c: x -> (removed)', from the merge patch of ``old`` to ``new``."""
+    changes: list[str] = []
+
+    def walk(patch: dict, before: Any, prefix: str) -> None:
+        for key, value in patch.items():
+            name, previous = f"{prefix}{key}", before.get(key) if isinstance(before, dict) else None
+            if isinstance(value, dict) and isinstance(previous, dict):
+                walk(value, previous, name + ".")
+            else:
+                changes.append(f"{name}: {_short(previous)} -> {'(removed)' if value is None else _short(value)}")
+
+    walk(merge_patch_diff(old, new), old, "")
+    more = f", and {len(changes) - limit} more" if len(changes) > limit else ""
+    return (", ".join(changes[:limit]) + more) or "no change"
+
+
+def _short(value: Any, width: int = 80) -> str:
+    text = json.dumps(value, separators=(",", ":"), default=str)
+    return text if len(text) <= width else text[: width - 3] + "..."
 
 
 def _refuse_section_nulls(patch: Any) -> None:
@@ -162,6 +191,33 @@ def _refuse_section_nulls(patch: Any) -> None:
                   for name in nulls]
         raise PatchRejected(f"patch: {', '.join(nulls)} = null: a whole section cannot be deleted; "
                             "send the fields to change instead", errors)
+
+
+def _refuse_unknown_keys(patch: Any) -> None:
+    """Unknown sections and unknown fields of the flat sections, found by set arithmetic before
+    the model is validated: a patch of a hundred thousand unknown keys is refused in milliseconds
+    (pydantic would describe every one of them) and never holds the lock for long."""
+    if not isinstance(patch, dict):
+        return
+    unknown = [str(k) for k in patch if k not in Params.model_fields]
+    for section, value in patch.items():
+        field = Params.model_fields.get(section)
+        model = getattr(field, "annotation", None)
+        if isinstance(value, dict) and isinstance(model, type) and issubclass(model, BaseModel):
+            unknown.extend(f"{section}.{k}" for k in value if k not in model.model_fields)
+        limit = next((m.max_length for m in getattr(field, "metadata", ()) if hasattr(m, "max_length")), None)
+        if limit is not None and isinstance(value, (list, dict)) and len(value) > limit:
+            raise PatchRejected(f"patch: {section} holds {len(value)} entries, at most {limit} are allowed", [
+                {"source": "patch", "field": section, "value": None, "allowed": f"at most {limit} entries",
+                 "message": f"{len(value)} entries"}])
+    if not unknown:
+        return
+    shown = unknown[:MAX_ERRORS_REPORTED]  # in the order sent
+    errors = [{"source": "patch", "field": name, "value": None, "allowed": "", "message": "unknown key"}
+              for name in shown]
+    more = f" (and {len(unknown) - len(shown)} more)" if len(unknown) > len(shown) else ""
+    raise PatchRejected(f"patch: {len(unknown)} unknown keys: {', '.join(shown)}{more}; "
+                        "GET /api/v1/params/schema lists the known ones", errors)
 
 
 def _validated(params: Params, patch: Any) -> Params:

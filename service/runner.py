@@ -30,6 +30,7 @@ log = logging.getLogger("i2v_loc.service")
 
 STALE_AFTER_S = 1.0
 RATE_WINDOW_S = 5.0
+OUTCOME_WINDOW = 100  # frames over which the drop rate is measured
 
 
 class SensorStats:
@@ -70,8 +71,8 @@ class SensorStats:
         arrivals = [t for t in self._arrivals[name] if now_s - t <= RATE_WINDOW_S]
         rate = (len(arrivals) - 1) / (arrivals[-1] - arrivals[0]) if len(arrivals) >= 2 and arrivals[-1] > arrivals[0] else 0.0
         last = self._arrivals[name][-1] if self._arrivals[name] else None
-        if last is None:
-            status = "waiting"
+        if last is None:  # never delivered: faulty if the frames so far said why
+            status = f"fault:{self._last_fault[name]}" if self._last_fault[name] else "waiting"
         elif now_s - last > STALE_AFTER_S:
             status = "stale"
         elif self._last_fault[name]:
@@ -180,6 +181,7 @@ class PipelineRunner:
         self._latest: dict | None = None
         self._latest_lock = threading.Lock()
         self._frame_times: deque = deque(maxlen=50)
+        self._outcomes: deque = deque(maxlen=OUTCOME_WINDOW)  # True: processed, False: dropped
         self._updates: queue.SimpleQueue = queue.SimpleQueue()
         # Held while the thread takes the queued versions and processes a frame, and while a new
         # version is handed to the pipeline: a frame's params_version is then always the version
@@ -226,6 +228,11 @@ class PipelineRunner:
     def latest(self) -> dict | None:
         with self._latest_lock:
             return self._latest
+
+    def drop_rate(self) -> float:
+        """Share of the last OUTCOME_WINDOW frames that were dropped (late, unreadable, failed)."""
+        outcomes = list(self._outcomes)
+        return outcomes.count(False) / len(outcomes) if outcomes else 0.0
 
     def frame_rate_hz(self) -> float:
         times = list(self._frame_times)
@@ -289,6 +296,7 @@ class PipelineRunner:
 
     def _drop(self, reason: str, n: int = 1) -> None:
         self.frames_dropped[reason] = self.frames_dropped.get(reason, 0) + n
+        self._outcomes.extend([False] * min(n, OUTCOME_WINDOW))
         self.metrics.frames_dropped.labels(reason).inc(n)
 
     def _step(self, k: int) -> None:
@@ -360,6 +368,7 @@ class PipelineRunner:
         self.frames_processed += 1  # last: a frame that failed above counts as dropped only
         self.last_frame_s = now
         self._frame_times.append(now)
+        self._outcomes.append(True)
         m.frames_processed.inc()
 
     # ------------------------------------------------------------------ summaries
@@ -373,6 +382,7 @@ class PipelineRunner:
             "frames_dropped": dict(self.frames_dropped),
             "last_frame_error": self.last_frame_error,
             "frame_rate_hz": round(self.frame_rate_hz(), 2),
+            "frame_drop_rate": round(self.drop_rate(), 3),
             "vehicles": vehicles,
             "frame": latest.get("frame"),
             "stamp_s": latest.get("stamp_s"),

@@ -91,3 +91,43 @@ def test_dashboard_shows_vehicle_and_edits_parameters(browser, tmp_path):
         page.close()
     assert shot.stat().st_size > 10_000
     assert not errors, errors
+
+
+def _state(frame, vehicles):
+    return {"type": "state", "frame": frame, "stamp_s": frame / 10, "latency_ms": {"total": 1.0}, "faults": {},
+            "dropped": {}, "clusters": [], "vehicles": vehicles}
+
+
+def _vehicle(vid, name, hitch, whole=True):
+    unit = {"track_id": vid * 10, "center": [0.0, 0.0, 1.0], "yaw_deg": 0.0, "dimensions": [4.0, 2.0, 2.0], "points": 50}
+    return {"id": vid, "vehicle": name, "hitch_deg": hitch, "truck": unit, "trailer": unit if whole else None,
+            "tractor_to_trailer": None}
+
+
+def test_dashboard_shows_confirmed_vehicles_only_unconfirmed_greyed_on_request(browser, tmp_path):
+    server, _ = serve(sample_recording())
+    with server:
+        page = browser.new_page()
+        # No live stream: the states below are the only ones the page sees.
+        page.add_init_script("window.WebSocket = class { constructor() {} send() {} close() {} };")
+        page.goto(server.url + "/")
+
+        def shown():
+            return page.eval_on_selector_all("#vehicles .vehicle", "rows => rows.map(r => [r.dataset.id, r.className])")
+
+        for k in range(4):  # a vehicle seen whole in 4 states and a half-seen one (only a truck): neither is shown
+            page.evaluate("s => onState(s)", _state(k, [_vehicle(3, "man_tgx", 12.0), _vehicle(7, "twizy", 100.0, whole=False)]))
+        page.wait_for_timeout(100)
+        assert shown() == []
+        page.evaluate("s => onState(s)", _state(4, [_vehicle(3, "man_tgx", 12.5), _vehicle(7, "twizy", 100.0, whole=False)]))
+        page.wait_for_timeout(100)
+        assert shown() == [["3", "vehicle"]]
+        assert page.evaluate("[...store.hitch.keys()]") == [3]  # the phantom never enters the hitch plot
+        page.check("#show-unconfirmed")
+        page.wait_for_timeout(100)
+        assert shown() == [["3", "vehicle"], ["7", "vehicle unconfirmed"]]
+        page.evaluate("s => onState(s)", _state(5, [_vehicle(7, "twizy", 100.0, whole=False)]))
+        page.uncheck("#show-unconfirmed")
+        page.wait_for_timeout(100)
+        assert shown() == []  # vehicle 3 left: no longer shown
+        page.close()

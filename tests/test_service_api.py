@@ -7,7 +7,9 @@ import asyncio
 import base64
 import json
 import os
+import re
 import socket
+import threading
 import time
 
 import httpx
@@ -58,11 +60,16 @@ def test_health_state_sensors_vehicles(client, live):
     assert STATE_KEYS <= set(state) and state["type"] == "state" and state["params_version"] == 0
     listed = client.get("/api/v1/sensors").json()["sensors"]
     by_name = {s["name"]: s for s in listed}
-    for name in sensors:
-        assert by_name[name]["last_stamp_s"] is not None and by_name[name]["drops"] >= 0
+    for name in sensors:  # the sample recording holds every sensor in every frame
+        assert by_name[name]["last_stamp_s"] is not None and by_name[name]["drops"] == 0
         assert set(by_name[name]["position"]) == {"x_m", "y_m", "z_m", "yaw_deg"}
-    vehicles = client.get("/api/v1/vehicles").json()
-    assert isinstance(vehicles["vehicles"], list)
+    # /vehicles is the vehicles of the latest state (asked until both answers are of one frame)
+    def same_frame():
+        state, vehicles = client.get("/api/v1/state").json(), client.get("/api/v1/vehicles").json()
+        return (state, vehicles) if state["frame"] == vehicles["frame"] else None
+
+    state, vehicles = wait_for(same_frame, what="state and vehicles of one frame")
+    assert vehicles["vehicles"] == state["vehicles"] and vehicles["stamp_s"] == state["stamp_s"]
     missing = client.get("/api/v1/vehicles/987654")
     assert missing.status_code == 404 and "no vehicle with id 987654" in missing.json()["detail"]
 
@@ -413,3 +420,128 @@ def test_unwritable_parameter_file_gives_a_json_507(tmp_path):
     assert service.runner.pipeline.params.tracking.max_age_frames == 9
     service.stop()  # the save at shutdown fails too: kept for the exit message, no exception
     assert service.save_error and str(blocker) in service.save_error
+
+
+# ------------------------------------------------------------------ abuse: size, depth, many errors
+
+
+def test_a_patch_of_many_unknown_keys_is_refused_with_a_short_list(client, live):
+    _, service, _ = live
+    before = service.store.version
+    response = client.patch("/api/v1/params", json={"clustering": {f"k{i}": 1 for i in range(200)}}, headers=AUTH)
+    assert response.status_code == 422
+    errors = response.json()["errors"]
+    assert len(errors) == 20 and {e["message"] for e in errors} == {"unknown key"}
+    assert response.json()["detail"].startswith("patch: 200 unknown keys: clustering.k0, clustering.k1, ")
+    assert service.store.version == before
+
+
+def test_a_deeply_nested_body_is_a_400(client):
+    body = '{"clustering": ' + '{"a": ' * 600 + "1" + "}" * 601
+    response = client.patch("/api/v1/params", content=body, headers={**AUTH, "Content-Type": "application/json"})
+    assert response.status_code == 400 and "nested deeper than 16 levels" in response.json()["detail"]
+    assert client.get("/api/v1/health").json()["live"] is True
+
+
+def test_a_huge_declared_body_is_refused_before_it_is_sent(live):
+    server, _, _ = live
+    with socket.create_connection(("127.0.0.1", server.port), timeout=10) as sock:
+        sock.sendall((f"PATCH /api/v1/params HTTP/1.1\r\nHost: 127.0.0.1\r\nAuthorization: Bearer {TOKEN}\r\n"
+                      "Content-Type: application/json\r\nContent-Length: 400000000\r\n\r\n{").encode())
+        reply = sock.recv(4096)  # the server answers without waiting for the 400 MB
+    assert reply.startswith(b"HTTP/1.1 413 "), reply[:200]
+    assert b"larger than 1000000 bytes" in reply
+
+
+def test_websocket_messages_are_not_compressed(live):
+    server, _, _ = live
+
+    async def extensions():
+        async with _ws(server, points=True) as ws:  # the client offers permessage-deflate
+            await next_state(ws)
+            return ws.response.headers.get("Sec-WebSocket-Extensions")
+
+    assert asyncio.run(extensions()) is None
+
+
+def test_websocket_from_another_site_is_refused(live):
+    server, _, _ = live
+
+    async def attempt(origin):
+        async with websockets.connect(server.ws_url + "/ws/states", origin=origin) as ws:
+            return (await next_state(ws))["type"]
+
+    assert asyncio.run(attempt(f"http://127.0.0.1:{server.port}")) == "state"  # the dashboard itself
+    with pytest.raises(websockets.InvalidStatus) as refused:
+        asyncio.run(attempt("http://evil.example"))
+    assert refused.value.response.status_code == 403
+
+
+def test_allowed_origins_may_open_the_websocket(tmp_path):
+    source_server, _ = serve(sample_recording(), allowed_origins=("https://ops.example.com",))
+    with source_server as server:
+        async def attempt(origin):
+            async with websockets.connect(server.ws_url + "/ws/states", origin=origin) as ws:
+                return (await next_state(ws))["type"]
+
+        assert asyncio.run(attempt("https://ops.example.com")) == "state"
+        with pytest.raises(websockets.InvalidStatus):
+            asyncio.run(attempt("https://other.example.com"))
+
+
+def test_the_server_stops_while_a_change_is_still_in_flight(tmp_path):
+    server, service = serve(sample_recording())
+    release = threading.Event()
+    pipeline = service.runner.pipeline
+    real_update = pipeline.update_params
+    pipeline.update_params = lambda patch: release.wait(60) or real_update(patch)  # a change that hangs
+    try:
+        with server:
+            wait_for(lambda: service.runner.frames_processed >= 1, what="a frame")
+            with httpx.Client(base_url=server.url, timeout=60) as c:
+                sender = threading.Thread(target=lambda: c.patch("/api/v1/params", headers=AUTH,
+                                                                 json={"tracking": {"max_age_frames": 4}}), daemon=True)
+                sender.start()
+                wait_for(lambda: service.store._lock.locked(), what="the change in flight")
+                server.server.should_exit = True
+                server.thread.join(20)
+                stopped = not server.thread.is_alive()
+                assert not release.is_set()
+    finally:
+        release.set()
+    assert stopped  # the server did not wait for the change that hangs
+
+
+# ------------------------------------------------------------------ the API documentation
+
+
+def test_api_docs_need_no_internet(client):
+    for page in ("/docs", "/redoc"):
+        html = client.get(page).text
+        refs = re.findall(r'(?:src|href)="([^"]+)"', html)
+        assert len(refs) >= 2 and [r for r in refs if "//" in r] == [], refs  # nothing from another host
+        for ref in refs:
+            assert client.get(ref).status_code == 200, ref
+    assert "swagger-ui-bundle.js" in client.get("/docs").text
+
+
+def test_openapi_marks_only_guarded_operations_and_types_every_answer(client):
+    spec = client.get("/openapi.json").json()
+    secured = {(path, method) for path, ops in spec["paths"].items() for method, op in ops.items() if op.get("security")}
+    assert secured == {("/api/v1/params", "patch"), ("/api/v1/params/rollback/{version}", "post")}
+    for path, ops in spec["paths"].items():
+        for method, op in ops.items():
+            if path in ("/metrics", "/api/v1/params/schema"):  # Prometheus text; a JSON Schema document
+                continue
+            schema = op["responses"]["200"]["content"]["application/json"]["schema"]
+            assert "$ref" in schema, (method, path, schema)
+    health = spec["components"]["schemas"]["Health"]["properties"]
+    assert {"status", "reasons", "frame_drop_rate", "sensors"} <= set(health)
+
+
+def test_openapi_marks_reads_secured_when_they_need_the_token(tmp_path):
+    server, _ = serve(sample_recording(), require_token_for_reads=True)
+    with server, httpx.Client(base_url=server.url) as c:
+        spec = c.get("/openapi.json").json()
+    assert spec["paths"]["/api/v1/state"]["get"]["security"] == [{"HTTPBearer": []}]
+    assert "401" in spec["paths"]["/api/v1/state"]["get"]["responses"]

@@ -104,6 +104,8 @@ def test_serve_sim_source_generates_once_and_stops_on_sigint(tmp_path):
     (["--source", "sim:nope"], "unknown scenario 'nope' in sim:nope; known: "),
     (["--vehicle", "vw_golf"], "unknown vehicle 'vw_golf' for the simulated yard"),
     (["--method", "fast"], "unknown method 'fast'; known: paper, default"),
+    (["--host", "0.0.0.0"], "pass --require-token-for-reads (with a token) or --allow-open-reads; without TLS"),
+    (["--ssl-keyfile", "/no/key.pem"], "--ssl-keyfile and --ssl-certfile go together"),
 ])
 def test_serve_user_errors(args, message, tmp_path):
     env = {k: v for k, v in os.environ.items() if k != "I2V_LOC_API_TOKEN"}
@@ -112,3 +114,33 @@ def test_serve_user_errors(args, message, tmp_path):
     assert done.returncode == 2 and message in done.stderr, done.stderr
     assert len(done.stderr.strip().splitlines()) == 1, done.stderr  # one line, no usage text
     assert not (tmp_path / "cache").exists()  # no simulator was started
+
+
+def test_access_log_and_parameter_changes_are_logged(tmp_path):
+    serve = ServeProcess("--source", f"replay:{sample_recording()}", "--loop", "--access-log", "--quiet",
+                         env_token="log-secret")
+    try:
+        url = serve.url()
+        with httpx.Client(base_url=url, timeout=10) as c:
+            assert c.get("api/v1/health").status_code == 200
+            changed = c.patch("api/v1/params", json={"tracking": {"max_age_frames": 5}},
+                              headers={"Authorization": "Bearer log-secret"})
+            assert changed.status_code == 200, changed.text
+        wait_for(lambda: "max_age_frames" in serve.text, what="the change in the log")
+    finally:
+        serve.stop(signal.SIGTERM)
+    assert re.search(r'"GET /api/v1/health HTTP/1.1" 200', serve.text), serve.text
+    assert re.search(r'"PATCH /api/v1/params HTTP/1.1" 200', serve.text), serve.text
+    assert re.search(r"parameter version 1 \(token [0-9a-f]{8}\): tracking.max_age_frames: 3 -> 5", serve.text), serve.text
+    assert "log-secret" not in serve.text
+
+
+def test_open_reads_on_all_interfaces_when_asked_for(tmp_path):
+    serve = ServeProcess("--source", f"replay:{sample_recording()}", "--host", "0.0.0.0", "--allow-open-reads", "--quiet")
+    try:
+        url = serve.url()
+        with httpx.Client(base_url=url, timeout=10) as c:
+            assert c.get("api/v1/health").status_code == 200
+    finally:
+        assert serve.stop(signal.SIGTERM) == 0
+    assert "reads are open to the network" in serve.text and "the token travels in clear text" in serve.text

@@ -16,7 +16,7 @@ import uvicorn
 
 from i2v_loc.params import load_params
 from i2v_loc.sources import ReplaySource, SimSpec, simulated_recording
-from service.app import create_app
+from service.app import create_app, server_config
 from service.auth import AuthConfig
 from service.core import build_service
 
@@ -50,7 +50,7 @@ class LiveServer:
         self.port = self.sock.getsockname()[1]
         self.url = f"http://127.0.0.1:{self.port}"
         self.ws_url = f"ws://127.0.0.1:{self.port}"
-        config = uvicorn.Config(app, log_level="warning", lifespan="on", ws_ping_interval=None)
+        config = server_config(app, ws_ping_interval=None)
         self.server = uvicorn.Server(config)
         self.thread = threading.Thread(target=self.server.run, kwargs={"sockets": [self.sock]}, daemon=True)
 
@@ -70,12 +70,13 @@ class LiveServer:
 
 
 def make_service(recording: Path, params_file: Path | None = None, token: str | None = TOKEN,
-                 require_token_for_reads: bool = False, loop: bool = True, **kwargs):
+                 require_token_for_reads: bool = False, loop: bool = True, allowed_origins: tuple = (), **kwargs):
     """A service with the real pipeline replaying ``recording``."""
     source = ReplaySource(recording, loop=loop)
     existing = params_file if params_file is not None and params_file.is_file() else None
     params = load_params(source.sensors_file, existing)
-    return build_service(source, params, params_file, AuthConfig(token, require_token_for_reads), **kwargs)
+    auth = AuthConfig(token, require_token_for_reads, allowed_origins)
+    return build_service(source, params, params_file, auth, **kwargs)
 
 
 def serve(recording: Path, send_buffer_bytes: int | None = None, **kwargs) -> tuple[LiveServer, object]:

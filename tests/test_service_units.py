@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from i2v_loc.commands.serve import format_status
-from i2v_loc.frame import Frame
+from i2v_loc.frame import Frame, SensorScan
 from i2v_loc.params import Params, ParamsError, apply_patch, deep_merge, load_params
 from i2v_loc.recording import SensorScans, write_recording
 from i2v_loc.sources import ReplaySource, SourceError, open_source
@@ -378,3 +378,156 @@ def test_metrics_have_no_created_series():
     metrics.stage_latency.labels("total").observe(0.01)
     text = metrics.render().decode()
     assert "i2v_loc_frames_processed_total 1.0" in text and "_created" not in text
+
+
+# ------------------------------------------------------------------ change log, body limits, origins, health
+
+
+def test_every_change_is_logged_with_source_old_and_new_values(tmp_path, caplog):
+    store = ParamStore(Params(), tmp_path / "p.yaml")
+    token = AuthConfig("s3cret-token")
+    with caplog.at_level("INFO", logger="i2v_loc.service"):
+        store.patch({"clustering": {"tolerance_m": 0.3}}, source=f"token {token.token_id}")
+        store.rollback(0, source=f"token {token.token_id}")
+    lines = [r.getMessage() for r in caplog.records]
+    assert lines == [
+        f"parameter version 1 (token {token.token_id}): clustering.tolerance_m: 0.7 -> 0.3",
+        f"parameter version 2 (rollback to 0 by token {token.token_id}): clustering.tolerance_m: 0.3 -> 0.7",
+    ]
+    assert len(token.token_id) == 8 and "s3cret" not in "".join(lines)
+    assert store.history()[1]["source"] == f"token {token.token_id}"
+
+
+def test_body_reading_stops_at_the_limit():
+    from fastapi import HTTPException
+    from starlette.requests import Request
+
+    from service.app import _read_limited
+
+    sent = []
+
+    async def endless_body():  # a client that never stops sending, with no Content-Length
+        sent.append(1)
+        return {"type": "http.request", "body": b"x" * 65536, "more_body": True}
+
+    request = Request({"type": "http", "method": "PATCH", "headers": []}, endless_body)
+    with pytest.raises(HTTPException) as err:
+        asyncio.run(_read_limited(request, 1_000_000))
+    assert err.value.status_code == 413 and len(sent) == 1_000_000 // 65536 + 1
+
+
+def test_nesting_depth():
+    from service.app import nesting_depth
+
+    assert [nesting_depth(v) for v in (1, {}, {"a": [1, {"b": 2}]}, [[[]]])] == [0, 1, 3, 3]
+    deep: dict = {}
+    node = deep
+    for _ in range(5000):  # no recursion: deeper than Python's stack
+        node["a"] = {}
+        node = node["a"]
+    assert nesting_depth(deep) == 5001
+
+
+def test_websocket_origins():
+    auth = AuthConfig(allowed_origins=("https://ops.example.com/",))
+    assert auth.origin_allowed(None, "yard:8000")  # not a browser
+    assert auth.origin_allowed("http://yard:8000", "yard:8000")
+    assert auth.origin_allowed("https://yard:8000", "yard:8000", "wss")
+    assert not auth.origin_allowed("https://yard:8000", "yard:8000", "ws")
+    assert auth.origin_allowed("https://OPS.example.com", "yard:8000")
+    assert not auth.origin_allowed("http://evil.example", "yard:8000")
+
+
+class _Clock:
+    def __init__(self):
+        self.t = 0.0
+
+    def __call__(self):
+        return self.t
+
+
+def test_health_degrades_with_the_reason_when_frames_or_messages_are_dropped(tmp_path):
+    rec = _tiny_recording(tmp_path / "rec", frames=50)
+    clock = _Clock()
+
+    class Nothing:
+        params = Params()
+        method = "fake"
+
+        def process(self, frame):
+            raise AssertionError("not called")
+
+    service = build_service(ReplaySource(rec, loop=True), Params(), pipeline_factory=lambda p, m: Nothing(), clock=clock)
+    runner = service.runner
+    names = runner.expected_sensors
+
+    def processed(n):
+        for _ in range(n):
+            clock.t += 0.1
+            scans = {name: SensorScan(name, clock.t, np.zeros((1, 3), np.float32), np.zeros(1, np.float32))
+                     for name in names}
+            runner._record(Frame(index=0, scans=scans), {"vehicles": []}, clock.t)
+
+    processed(20)
+    health = service.health()
+    assert (health["status"], health["reasons"]) == ("ok", [])
+    runner._drop("late", 5)  # 5 of the last 25 frames
+    health = service.health()
+    assert health["status"] == "degraded" and health["reasons"] == ["20% of the last frames dropped (late or unreadable)"]
+    processed(40)  # 5 of the last 65: below the threshold
+    assert service.health()["status"] == "ok"
+
+    slow = service.hub.add(want_points=False)  # a client that never takes its messages
+    for k in range(4):
+        service.hub._deliver(Message("state", f'{{"frame":{k}}}'))
+    health = service.health()
+    assert slow.dropped == 3
+    assert health["status"] == "degraded" and health["reasons"] == ["75% of the recent WebSocket messages dropped for slow clients"]
+
+
+def test_unknown_keys_are_refused_before_the_model_is_validated(tmp_path, monkeypatch):
+    store = ParamStore(Params(), tmp_path / "p.yaml")
+    monkeypatch.setattr(params_store, "apply_patch", lambda *a: pytest.fail("the model was validated"))
+    patch = {"clustering": {f"k{i}": 1 for i in range(100_000)}, "nonsense": {}, "tracking": {"min_hits": 2}}
+    with pytest.raises(PatchRejected) as info:
+        store.patch(patch)
+    errors = info.value.errors
+    assert len(errors) == 20 and [e["field"] for e in errors[:3]] == ["nonsense", "clustering.k0", "clustering.k1"]
+    assert str(info.value).startswith("patch: 100001 unknown keys: nonsense, clustering.k0, clustering.k1, ")
+    assert str(info.value).count("(and 99981 more)") == 1
+    assert store.version == 0 and not (tmp_path / "p.yaml").exists()
+
+
+def test_an_oversized_list_or_catalogue_is_refused_before_validation(tmp_path, monkeypatch):
+    store = ParamStore(Params(), tmp_path / "p.yaml")
+    monkeypatch.setattr(params_store, "apply_patch", lambda *a: pytest.fail("the model was validated"))
+    with pytest.raises(PatchRejected, match="sensors holds 20000 entries, at most 64 are allowed"):
+        store.patch({"sensors": [{"name": f"s{i}"} for i in range(20000)]})
+    with pytest.raises(PatchRejected, match="vehicles holds 101 entries, at most 100 are allowed"):
+        store.patch({"vehicles": {f"v{i}": {} for i in range(101)}})
+
+
+def test_health_fails_with_the_reason_when_no_frame_can_be_read(tmp_path):
+    rec = _tiny_recording(tmp_path / "rec", frames=5)
+    service = build_service(ReplaySource(rec, loop=True), Params(), pipeline_factory=lambda p, m: None)
+    runner = service.runner
+    for k in range(19):
+        runner._skip(k, "source_error", OSError("disk gone"))
+    assert service.health()["status"] == "starting"
+    runner._skip(19, "source_error", OSError("disk gone"))
+    health = service.health()
+    assert health["status"] == "failed" and health["ready"] is False
+    assert health["reasons"] == ["no frame processed, 20 skipped; last error: OSError: disk gone"]
+
+
+def test_every_client_gets_the_one_serialised_message():
+    hub = Hub()
+    plain, with_points = hub.add(want_points=False), hub.add(want_points=True)
+    message = Message("state", '{"frame":1}', '{"frame":1,"foreground":{"xy":[1,2]}}')
+    hub._deliver(message)
+
+    async def take(client):
+        return await client.next_text()
+
+    assert asyncio.run(take(plain)) is message.plain
+    assert asyncio.run(take(with_points)) is message.with_points

@@ -10,8 +10,9 @@ import numpy as np
 
 from i2v_loc.cli import UserError
 from i2v_loc.params import DEFAULT_METHOD
+from i2v_loc.resources import sample_recording
 
-DEFAULT_RECORDING = Path(__file__).resolve().parents[2] / "samples" / "man_tgx_docking"
+DEFAULT_RECORDING = sample_recording("man_tgx_docking")
 
 
 def register(sub) -> None:

@@ -12,7 +12,10 @@ from i2v_loc.params import DEFAULT_METHOD
 
 
 def register(sub) -> None:
-    p = sub.add_parser("run", help="run the localization pipeline on a recording, write state lines (JSONL)")
+    p = sub.add_parser("run", help="run the localization pipeline on a recording, write state lines (JSONL)",
+                       description="Exit status: 0, or 1 when damaged sensors were left out (the output holds "
+                                   "every frame, from the sensors that could be read; stderr says what was skipped), "
+                                   "2 for bad input.")
     p.add_argument("recording", metavar="REC", help="recording in any layout of `i2v-loc sources` (docs/formats.md)")
     p.add_argument("--out", required=True, help="output file of state lines (missing parent folders are created)")
     p.add_argument("--format", default="jsonl", choices=["jsonl", "openlabel", "rosbag2", "mcap"],
@@ -71,6 +74,11 @@ def run(args) -> int:
     params = restricted_params(params, sensors, vehicles)
     pipeline = Pipeline(params, method=args.method)
     n_frames = len(recording) if args.frames is None else min(args.frames, len(recording))
+    if n_frames == 0:
+        raise UserError(f"{rec_path}: the recording has no frames")
+    first = recording.frame(0, sensors, skip_damaged=True)
+    if not first.scans:
+        raise UserError(f"{rec_path}: no sensor can be read: " + "; ".join(recording.damaged.values()))
     out = Path(args.out)
     if args.format in ("rosbag2", "mcap") and out.exists() and (not out.is_dir() or any(out.iterdir())):
         raise UserError(f"{out}: exists and is not an empty folder; a bag is written into a new folder")
@@ -80,9 +88,10 @@ def run(args) -> int:
     with out.open("w") if args.format == "jsonl" else contextlib.nullcontext() as f:
         for index in tqdm(range(n_frames), desc=rec_path.name, unit="frame", disable=args.quiet, file=sys.stderr):
             try:
-                line = pipeline.process(recording.frame(index, sensors)).to_json()
+                frame = first if index == 0 else recording.frame(index, sensors, skip_damaged=True)
             except RecordingError as err:  # a file of the recording that is read per frame
                 raise UserError(str(err)) from err
+            line = pipeline.process(frame).to_json()
             if args.format == "jsonl":
                 f.write(json.dumps(line, separators=(",", ":")) + "\n")
             else:
@@ -103,7 +112,9 @@ def run(args) -> int:
     source_counts = {k: v for k, v in getattr(recording, "counters", {}).items() if v and not k.endswith(".packets")}
     if source_counts:  # e.g. lost or foreign packets of an Ouster pcap
         print("source: " + ", ".join(f"{k} {v}" for k, v in sorted(source_counts.items())))
-    return 0
+    for name, reason in recording.damaged.items():
+        print(f"skipped sensor {name}: {reason}", file=sys.stderr)
+    return 1 if recording.damaged else 0
 
 
 class Summary:

@@ -15,6 +15,7 @@ from i2v_loc.cli import UserError
 from i2v_loc.params import DEFAULT_METHOD
 
 DEFAULT_SOURCE = "sim:docking"
+GIL_SWITCH_INTERVAL_S = 0.0005
 
 
 def register(sub) -> None:
@@ -34,6 +35,13 @@ def register(sub) -> None:
     p.add_argument("--token-file", type=Path, metavar="PATH",
                    help="file holding the API token (default: the environment variable I2V_LOC_API_TOKEN)")
     p.add_argument("--require-token-for-reads", action="store_true", help="reads need the token too")
+    p.add_argument("--allow-open-reads", action="store_true",
+                   help="allow reads without a token on an address other than loopback (refused otherwise)")
+    p.add_argument("--allowed-origin", action="append", default=[], metavar="URL",
+                   help="a web page origin (e.g. https://ops.example.com) allowed to open the WebSocket "
+                        "besides the service's own; repeatable")
+    p.add_argument("--ssl-keyfile", type=Path, metavar="FILE", help="TLS private key (with --ssl-certfile: HTTPS)")
+    p.add_argument("--ssl-certfile", type=Path, metavar="FILE", help="TLS certificate chain")
     p.add_argument("--vehicle", default="man_tgx", help="vehicle of the simulated yard (default %(default)s)")
     p.add_argument("--sim-seed", type=int, default=1, help="seed of the simulated yard (default %(default)s)")
     p.add_argument("--sim-duration", type=float, default=30.0, metavar="S",
@@ -65,6 +73,7 @@ def run(args) -> int:
         raise UserError(str(err)) from err
     if args.require_token_for_reads and token is None:
         raise UserError("--require-token-for-reads needs a token: set I2V_LOC_API_TOKEN or pass --token-file PATH")
+    _check_exposure(args)
     sock = _bind(args.host, args.port)
     try:
         source = open_source(args.source, loop=args.loop, vehicle=args.vehicle, seed=args.sim_seed,
@@ -77,7 +86,25 @@ def run(args) -> int:
         raise UserError(f"--params {params_file}: not a file")
     existing = params_file if params_file is not None and params_file.is_file() else None
     params = load_params(source.sensors_file, existing)
-    return _serve(args, sock, source, params, params_file, AuthConfig(token, args.require_token_for_reads))
+    auth = AuthConfig(token, args.require_token_for_reads, tuple(args.allowed_origin))
+    return _serve(args, sock, source, params, params_file, auth)
+
+
+LOOPBACK = ("127.0.0.1", "localhost", "::1")
+
+
+def _check_exposure(args) -> None:
+    """Open reads beyond this machine only when asked for; TLS files come in pairs."""
+    if bool(args.ssl_keyfile) != bool(args.ssl_certfile):
+        raise UserError("--ssl-keyfile and --ssl-certfile go together")
+    for file in (args.ssl_keyfile, args.ssl_certfile):
+        if file is not None and not file.is_file():
+            raise UserError(f"{file}: no such TLS file")
+    if args.host in LOOPBACK or args.require_token_for_reads or args.allow_open_reads:
+        return
+    raise UserError(f"--host {args.host} without --require-token-for-reads opens the yard's data to the network: "
+                    "pass --require-token-for-reads (with a token) or --allow-open-reads; without TLS "
+                    "(--ssl-keyfile/--ssl-certfile or a reverse proxy) tokens travel in clear text")
 
 
 def _bind(host: str, port: int) -> socket.socket:
@@ -102,10 +129,14 @@ def _serve(args, sock, source, params, params_file, auth) -> int:
     import uvicorn
 
     from i2v_loc.params import ParamsError
-    from service.app import create_app
+    from service.app import create_app, server_config
     from service.core import build_service
 
-    logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
+    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+    # The pipeline thread runs much Python code; at the default 5 ms switch interval every
+    # request waited several intervals for the GIL (a convoy: REST p50 300-470 ms with 100
+    # WebSocket clients on 2 busy cores, 16-29 ms at 0.5 ms, and the pipeline kept up better too).
+    sys.setswitchinterval(GIL_SWITCH_INTERVAL_S)
     try:
         service = build_service(source, params, params_file, auth, realtime=not args.no_realtime,
                                 points_cap=args.max_points, method=args.method)
@@ -115,10 +146,11 @@ def _serve(args, sock, source, params, params_file, auth) -> int:
     app = create_app(service)
     host, port = sock.getsockname()[:2]
     shown = f"[{host}]" if ":" in host else host
-    url = f"http://{'127.0.0.1' if host in ('0.0.0.0', '::') else shown}:{port}/"
+    scheme = "https" if args.ssl_keyfile else "http"
+    url = f"{scheme}://{'127.0.0.1' if host in ('0.0.0.0', '::') else shown}:{port}/"
     _announce(args, source, service, params_file, auth, url)
-    config = uvicorn.Config(app, log_level="warning", access_log=args.access_log, lifespan="on",
-                            ws_ping_interval=20.0, ws_ping_timeout=20.0)
+    tls = {"ssl_keyfile": str(args.ssl_keyfile), "ssl_certfile": str(args.ssl_certfile)} if args.ssl_keyfile else {}
+    config = server_config(app, access_log=args.access_log, ws_ping_interval=20.0, ws_ping_timeout=20.0, **tls)
     server = uvicorn.Server(config)
     received: list[int] = []
     # uvicorn shuts down gracefully on SIGINT/SIGTERM, then re-raises the signal to the handler
@@ -155,8 +187,12 @@ def _announce(args, source, service, params_file, auth, url) -> None:
     ]
     if auth.require_token_for_reads:
         lines.append("  reads      need the bearer token")
-    if args.host not in ("127.0.0.1", "localhost", "::1") and not auth.require_token_for_reads:
-        lines.append(f"  warning    listening on {args.host}: reads are open to the network")
+    if args.host not in LOOPBACK:
+        if not auth.require_token_for_reads:
+            lines.append(f"  warning    listening on {args.host}: reads are open to the network (--allow-open-reads)")
+        if not args.ssl_keyfile:
+            lines.append("  warning    no TLS: the token travels in clear text (use --ssl-keyfile/--ssl-certfile "
+                         "or a reverse proxy)")
     print("\n".join(lines), file=sys.stderr, flush=True)
 
 

@@ -4,7 +4,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
-SUITES_DIR = Path(__file__).resolve().parents[2] / "samples" / "suites"
+from i2v_loc.resources import suites_dir
+
+SUITES_DIR = suites_dir()
 
 
 def register(sub) -> None:

@@ -130,6 +130,9 @@ def _run_processes(tasks, func, workers, bar) -> list:
     return results
 
 
+DASK_CONNECT_TIMEOUT = "10s"
+
+
 def _run_dask(tasks, func, workers, address, bar) -> list:
     try:
         from distributed import Client, LocalCluster, as_completed as dask_completed
@@ -137,7 +140,10 @@ def _run_dask(tasks, func, workers, address, bar) -> list:
         raise EvaluationError("the dask executor needs Dask distributed: pip install 'i2v-loc[distributed]'") from err
     cluster = None
     if address:
-        client = Client(address)
+        try:
+            client = Client(address, timeout=DASK_CONNECT_TIMEOUT)
+        except (OSError, ValueError, TypeError) as err:  # unreachable, or not an address
+            raise EvaluationError(f"cannot connect to the Dask scheduler at {address!r}: {err}") from None
     else:
         cluster = LocalCluster(n_workers=max(1, workers), threads_per_worker=1, processes=True)
         client = Client(cluster)

@@ -87,7 +87,10 @@ class PointRecording:
     def sensors_guess_file(self) -> Path:
         return self.folder / "sensors_guess.yaml"
 
-    def frame(self, index: int, sensors: Sequence[str] | None = None) -> Frame:
+    def frame(self, index: int, sensors: Sequence[str] | None = None, skip_damaged: bool = False) -> Frame:
+        """The sweeps of frame ``index``; a sensor without a sweep in it is left out (the pipeline
+        marks it missing). ``skip_damaged`` is accepted for the native layout's interface: decoding
+        errors of these layouts surface when the recording is opened."""
         n = len(self)
         if not -n <= index < n:
             raise IndexError(f"frame {index} out of range: the recording has {n} frames")

@@ -6,6 +6,10 @@ const PLOT_WINDOW_S = 60;
 const COLORS = { truck: "#ffb020", trailer: "#3fd18b", points: "rgba(170,180,190,0.75)", sensor: "#4fa3ff",
                  grid: "#1d242c", axis: "#34404c", text: "#e4e7eb", muted: "#8a939e", bad: "#ff5f56", warn: "#ffcc00" };
 const PLOT_COLORS = ["#4fa3ff", "#ffb020", "#3fd18b", "#ff5fa2", "#b48cff", "#ffe066"];
+const UNCONFIRMED_COLOR = "#6b737c";
+// A vehicle is shown once seen whole (truck and trailer) in this many states in a row, and stays
+// shown while it is reported: a short-lived or half-seen track (a phantom) is not.
+const CONFIRM_STATES = 5;
 
 const ui = {
   yard: document.getElementById("yard"),
@@ -22,6 +26,7 @@ const ui = {
   reset: document.getElementById("reset-params"),
   paramStatus: document.getElementById("param-status"),
   paramErrors: document.getElementById("param-errors"),
+  showUnconfirmed: document.getElementById("show-unconfirmed"),
 };
 
 const store = {
@@ -31,7 +36,9 @@ const store = {
   params: null,         // parameters in force
   version: null,
   schema: null,
-  hitch: new Map(),     // vehicle id -> [[stamp_s, hitch_deg], ...]
+  hitch: new Map(),     // vehicle id -> [[stamp_s, hitch_deg], ...] of confirmed vehicles
+  streak: new Map(),    // vehicle id -> states in a row in which it was seen whole
+  confirmed: new Set(), // ids of the confirmed vehicles
   arrivals: [],         // wall-clock times of the last states, for the frame rate
 };
 
@@ -81,8 +88,9 @@ function onState(state) {
   const now = performance.now() / 1000;
   store.arrivals.push(now);
   while (store.arrivals.length > 20) store.arrivals.shift();
+  updateConfirmed(state.vehicles || []);
   for (const v of state.vehicles || []) {
-    if (typeof v.hitch_deg !== "number") continue;
+    if (typeof v.hitch_deg !== "number" || !store.confirmed.has(v.id)) continue;
     if (!store.hitch.has(v.id)) store.hitch.set(v.id, []);
     store.hitch.get(v.id).push([state.stamp_s, v.hitch_deg]);
   }
@@ -92,6 +100,21 @@ function onState(state) {
   }
   scheduleDraw();
 }
+
+function updateConfirmed(vehicles) {
+  const streak = new Map();
+  for (const v of vehicles) streak.set(v.id, v.truck && v.trailer ? (store.streak.get(v.id) || 0) + 1 : 0);
+  store.streak = streak;
+  for (const id of store.confirmed) if (!streak.has(id)) store.confirmed.delete(id);
+  for (const [id, n] of streak) if (n >= CONFIRM_STATES) store.confirmed.add(id);
+}
+
+function shownVehicles() {
+  const all = (store.state && store.state.vehicles) || [];
+  return all.filter((v) => store.confirmed.has(v.id) || ui.showUnconfirmed.checked);
+}
+
+ui.showUnconfirmed.addEventListener("change", () => scheduleDraw());
 
 function onParams(message) {
   store.version = message.version;
@@ -158,7 +181,7 @@ function drawYard() {
     ctx.strokeStyle = c.status && c.status.startsWith("vehicle") ? COLORS.text : COLORS.muted;
     ctx.beginPath(); ctx.arc(t.px(c.center[0]), t.py(c.center[1]), 3, 0, 2 * Math.PI); ctx.stroke();
   }
-  for (const v of state.vehicles || []) drawVehicle(ctx, t, v);
+  for (const v of shownVehicles()) drawVehicle(ctx, t, v);
 }
 
 function drawGrid(ctx, t) {
@@ -206,11 +229,12 @@ function drawUnit(ctx, t, unit, color) {
 }
 
 function drawVehicle(ctx, t, v) {
-  const trailerAt = drawUnit(ctx, t, v.trailer, COLORS.trailer);
-  const truckAt = drawUnit(ctx, t, v.truck, COLORS.truck);
+  const confirmed = store.confirmed.has(v.id);
+  const trailerAt = drawUnit(ctx, t, v.trailer, confirmed ? COLORS.trailer : UNCONFIRMED_COLOR);
+  const truckAt = drawUnit(ctx, t, v.truck, confirmed ? COLORS.truck : UNCONFIRMED_COLOR);
   const at = truckAt || trailerAt;
   if (!at) return;
-  ctx.fillStyle = COLORS.text; ctx.font = "bold 13px system-ui";
+  ctx.fillStyle = confirmed ? COLORS.text : UNCONFIRMED_COLOR; ctx.font = "bold 13px system-ui";
   ctx.fillText(`#${v.id} ${v.vehicle || ""}  ${formatHitch(v.hitch_deg)}`, at[0] + 12, at[1] - 12);
 }
 
@@ -219,11 +243,12 @@ function formatHitch(deg) {
 }
 
 function drawVehicleList() {
-  const vehicles = (store.state && store.state.vehicles) || [];
+  const vehicles = shownVehicles();
   if (!vehicles.length) { ui.vehicles.innerHTML = '<p class="muted">no vehicle</p>'; return; }
   ui.vehicles.replaceChildren(...vehicles.map((v) => {
     const row = document.createElement("div");
-    row.className = "vehicle"; row.dataset.id = v.id;
+    row.className = store.confirmed.has(v.id) ? "vehicle" : "vehicle unconfirmed"; row.dataset.id = v.id;
+    if (!store.confirmed.has(v.id)) row.title = "not confirmed: not yet seen whole in " + CONFIRM_STATES + " states in a row";
     const name = document.createElement("span");
     name.textContent = `#${v.id} ${v.vehicle || "?"}` + (v.truck && v.truck.yaw_deg != null ? ` · truck ${v.truck.yaw_deg.toFixed(1)}°` : "");
     const hitch = document.createElement("span");
