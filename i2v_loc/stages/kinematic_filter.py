@@ -1,0 +1,163 @@
+"""The articulated estimator's filter: one unscented Kalman filter (filterpy) per vehicle over the
+one-trailer, off-axle-hitch kinematics (docs/pipeline.md, Articulated estimator).
+
+State [x, y, ψ1, v, κ, γ]: tractor rear-axle position, tractor yaw, signed speed (reversing is
+v < 0, never a turned heading), path curvature (yaw rate ω = v κ, so a standing vehicle keeps its
+yaw) and hitch angle γ = ψ2 − ψ1. With the kingpin M behind the rear axle and L2 from the kingpin
+to the trailer's axle, the trailer's yaw rate is ψ2' = (v sin(ψ1 − ψ2) − M ω cos(ψ1 − ψ2)) / L2,
+so γ' = −(v sin γ + M ω cos γ) / L2 − ω. A rigid vehicle keeps γ = 0 (no noise, not measured).
+Measurement: the hinged fit's (x, y, ψ1, γ) with its covariance.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from filterpy.kalman import MerweScaledSigmaPoints, UnscentedKalmanFilter
+
+from i2v_loc.geometry import wrap_rad
+from i2v_loc.params import ArticulatedParams
+
+X, Y, YAW, SPEED, CURVATURE, HITCH = range(6)
+ANGLES_X = [YAW, HITCH]
+INITIAL_SPEED_SIGMA_M_S = 3.0
+INITIAL_CURVATURE_SIGMA_1_M = 0.05
+MAX_STEP_S = 0.05  # the kinematics are integrated in steps no longer than this
+
+
+def hitch_rate(v: float, curvature: float, hitch: float, kingpin_m: float, trailer_axle_m: float):
+    """γ' of the one-trailer kinematics (works on arrays)."""
+    omega = v * curvature
+    return -(v * np.sin(hitch) + kingpin_m * omega * np.cos(hitch)) / trailer_axle_m - omega
+
+
+def propagate(state: np.ndarray, dt_s: float, kingpin_m: float, trailer_axle_m: float, articulated: bool) -> np.ndarray:
+    """The state ``dt_s`` later (midpoint steps)."""
+    s = np.array(state, dtype=float)
+    steps = max(1, int(np.ceil(abs(dt_s) / MAX_STEP_S)))
+    h = dt_s / steps
+    for _ in range(steps):
+        s = s + h * _derivative(s + 0.5 * h * _derivative(s, kingpin_m, trailer_axle_m, articulated), kingpin_m, trailer_axle_m, articulated)
+    s[YAW], s[HITCH] = wrap_rad(s[YAW]), wrap_rad(s[HITCH])
+    return s
+
+
+def _derivative(s: np.ndarray, kingpin_m: float, trailer_axle_m: float, articulated: bool) -> np.ndarray:
+    v, kappa, yaw, hitch = s[SPEED], s[CURVATURE], s[YAW], s[HITCH]
+    d = np.zeros(6)
+    d[X], d[Y], d[YAW] = v * np.cos(yaw), v * np.sin(yaw), v * kappa
+    if articulated:
+        d[HITCH] = hitch_rate(v, kappa, hitch, kingpin_m, trailer_axle_m)
+    return d
+
+
+def _residual_x(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    d = np.subtract(a, b)
+    d[..., ANGLES_X] = wrap_rad(d[..., ANGLES_X])
+    return d
+
+
+def _mean_x(sigmas: np.ndarray, weights: np.ndarray) -> np.ndarray:
+    mean = weights @ sigmas
+    for i in ANGLES_X:
+        mean[i] = np.arctan2(weights @ np.sin(sigmas[:, i]), weights @ np.cos(sigmas[:, i]))
+    return mean
+
+
+def _residual_z(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    d = np.subtract(a, b)
+    d[2:] = wrap_rad(d[2:])
+    return d
+
+
+def _mean_z(sigmas: np.ndarray, weights: np.ndarray) -> np.ndarray:
+    mean = weights @ sigmas
+    for i in range(2, sigmas.shape[1]):
+        mean[i] = np.arctan2(weights @ np.sin(sigmas[:, i]), weights @ np.cos(sigmas[:, i]))
+    return mean
+
+
+@dataclass(frozen=True)
+class FilterState:
+    x_m: float
+    y_m: float
+    yaw_rad: float
+    speed_m_s: float
+    curvature_1_m: float
+    hitch_rad: float
+    covariance: np.ndarray  # (6, 6)
+    hitch_rate_rad_s: float
+    jackknife: bool
+
+    @property
+    def hitch_std_rad(self) -> float:
+        return float(np.sqrt(max(self.covariance[HITCH, HITCH], 0.0)))
+
+
+class KinematicFilter:
+    """One vehicle's UKF. ``predict(stamp)`` then ``update(z, R)``; ``state`` after either."""
+
+    def __init__(self, z: np.ndarray, r: np.ndarray, stamp_s: float, kingpin_m: float, trailer_axle_m: float,
+                 articulated: bool, params: ArticulatedParams, speed_m_s: float = 0.0):
+        self.params = params
+        self.articulated = articulated
+        self.kingpin_m, self.trailer_axle_m = kingpin_m, trailer_axle_m
+        self.stamp_s = stamp_s
+        n_z = 4 if articulated else 3
+        points = MerweScaledSigmaPoints(6, alpha=0.3, beta=2.0, kappa=0.0, subtract=_residual_x)
+        self.ukf = UnscentedKalmanFilter(6, n_z, 0.1, self._hx, self._fx, points, x_mean_fn=_mean_x,
+                                         z_mean_fn=_mean_z, residual_x=_residual_x, residual_z=_residual_z)
+        x = np.zeros(6)
+        x[[X, Y, YAW]] = z[:3]
+        x[SPEED] = speed_m_s
+        x[HITCH] = z[3] if articulated else 0.0
+        p = np.zeros((6, 6))
+        p[:3, :3] = r[:3, :3]
+        p[SPEED, SPEED] = INITIAL_SPEED_SIGMA_M_S ** 2
+        p[CURVATURE, CURVATURE] = INITIAL_CURVATURE_SIGMA_1_M ** 2
+        p[HITCH, HITCH] = r[3, 3] if articulated else 1e-12
+        if articulated:
+            p[:3, HITCH] = p[HITCH, :3] = r[:3, 3]
+        self.ukf.x, self.ukf.P = x, p
+        self.rejected = 0  # measurements outside the innovation gate
+
+    def _fx(self, x: np.ndarray, dt: float) -> np.ndarray:
+        return propagate(x, dt, self.kingpin_m, self.trailer_axle_m, self.articulated)
+
+    def _hx(self, x: np.ndarray) -> np.ndarray:
+        return x[[X, Y, YAW, HITCH]] if self.articulated else x[[X, Y, YAW]]
+
+    def _q(self, dt_s: float) -> np.ndarray:
+        p = self.params
+        dt = max(dt_s, 1e-3)
+        sig = np.array([p.position_sigma_m_s, p.position_sigma_m_s, np.radians(p.yaw_sigma_deg_s), p.accel_sigma_m_s2,
+                        p.curvature_rate_sigma_1_m_s, np.radians(p.hitch_sigma_deg_s) if self.articulated else 0.0])
+        return np.diag(sig ** 2 * dt) + np.eye(6) * 1e-12
+
+    def predict(self, stamp_s: float) -> FilterState:
+        dt = stamp_s - self.stamp_s if np.isfinite(stamp_s) else 0.1
+        if dt > 0:
+            self.ukf.Q = self._q(dt)
+            self.ukf.predict(dt=dt)
+            self.stamp_s = stamp_s
+        return self.state
+
+    def update(self, z: np.ndarray, r: np.ndarray) -> bool:
+        """Fuse one fit; False (state unchanged) when it lies outside the innovation gate."""
+        x, p = self.ukf.x.copy(), self.ukf.P.copy()
+        self.ukf.update(np.asarray(z, dtype=float), R=r)
+        if self.ukf.mahalanobis ** 2 > self.params.innovation_gate:
+            self.ukf.x, self.ukf.P = x, p
+            self.rejected += 1
+            return False
+        self.ukf.x[YAW], self.ukf.x[HITCH] = wrap_rad(self.ukf.x[YAW]), wrap_rad(self.ukf.x[HITCH])
+        return True
+
+    @property
+    def state(self) -> FilterState:
+        x = self.ukf.x
+        rate = float(hitch_rate(x[SPEED], x[CURVATURE], x[HITCH], self.kingpin_m, self.trailer_axle_m)) if self.articulated else 0.0
+        jackknife = self.articulated and (abs(x[HITCH]) > np.radians(self.params.jackknife_hitch_deg)
+                                          or abs(rate) > np.radians(self.params.jackknife_rate_deg_s))
+        return FilterState(*(float(v) for v in x), self.ukf.P.copy(), rate, bool(jackknife))

@@ -1,0 +1,352 @@
+"""The articulated estimator's vehicle tracks: per vehicle gate -> hinged fit -> kinematic UKF;
+unclaimed points seed new vehicles (docs/pipeline.md, Articulated estimator).
+
+A new vehicle starts from a connected component of the right size (length, height) that persists
+for ``start_frames`` frames; its model (catalogue vehicle, or one rigid box of the measured size),
+its direction (tractor ahead) and hitch come from fitting every hypothesis to its points and
+keeping the best explained; the motion decides the direction only when both ends fit alike. A
+vehicle leaves after ``leave_frames`` frames without points. The trailer's length and the units'
+widths are re-estimated from the points seen in each unit's frame (the catalogue is the prior).
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from dataclasses import dataclass, field, replace
+from itertools import count
+
+import numpy as np
+
+from i2v_loc.params import ArticulatedParams, VehicleConfig
+from i2v_loc.stages.hinged_fit import Measurement, Prior, fit
+from i2v_loc.stages.kinematic_filter import FilterState, KinematicFilter
+from i2v_loc.stages.primitives import grid_labels, min_area_rect, split_by_label
+from i2v_loc.stages.vehicle_model import VehicleModel
+
+START_HITCHES_DEG = (-60.0, -30.0, 0.0, 30.0, 60.0)
+START_ITERATIONS = 20
+DIRECTION_COST_RATIO = 0.8  # one end's fit must cost this much less than the other's to decide the direction
+RIGID_COST_RATIO = 0.7  # an articulated model must cost this much less than one rigid box
+MAX_TRAILER_LENGTH_M = 16.5
+LENGTH_CONVERGED_OBSERVATIONS = 5
+SETTLED_SLACK_M = 0.5
+FACE_SEEN_SPAN = 0.6  # an end face is seen when its points span this share of the unit's width
+END_BAND_M = 0.4
+
+
+@dataclass(frozen=True)
+class VehicleReport:
+    """What the tracker says about one vehicle in one frame."""
+
+    id: int
+    model: VehicleModel
+    state: FilterState
+    tractor_points: int
+    trailer_points: int
+    measured: bool  # a fit was fused this frame
+
+
+@dataclass
+class Seed:
+    center_xy: np.ndarray
+    first_xy: np.ndarray
+    frames: int = 1
+    seen: bool = True
+
+
+@dataclass
+class _Extent:
+    """Per-frame observations of one dimension; the estimate is their median (the prior before any)."""
+
+    prior: float
+    window: int
+    values: deque = field(default_factory=deque)
+    lower_bound: float = 0.0
+
+    def add(self, value: float) -> None:
+        self.values.append(value)
+        while len(self.values) > self.window:
+            self.values.popleft()
+
+    @property
+    def estimate(self) -> float:
+        value = float(np.median(self.values)) if self.values else self.prior
+        return max(value, self.lower_bound)
+
+
+@dataclass
+class _Track:
+    id: int
+    model: VehicleModel
+    filter: KinematicFilter
+    catalogue_name: str
+    trailer_length: _Extent | None
+    widths: list[_Extent]
+    missed: int = 0
+    last: Measurement | None = None
+
+
+class VehicleTracker:
+    def __init__(self, params: ArticulatedParams, catalogue: dict[str, VehicleConfig]):
+        self.params = params
+        self.catalogue = {name: VehicleModel.from_config(name, v) for name, v in catalogue.items()}
+        self.tracks: list[_Track] = []
+        self.seeds: list[Seed] = []
+        self._ids = count(1)
+
+    # ----------------------------------------------------------------- per frame
+
+    def process(self, points: np.ndarray, ground_z_m: float, stamp_s: float, allow_start: bool = True) -> list[VehicleReport]:
+        """``points`` (N, 3): the foreground (off the ground and the background) in the yard frame."""
+        priors = [self._prior(t, stamp_s, ground_z_m) for t in self.tracks]
+        owner = self._claim(points, priors)
+        reports = []
+        for i, (track, prior) in enumerate(zip(self.tracks, priors)):
+            reports.append(self._step(track, prior, points[owner == i]))
+        self.tracks = [t for t in self.tracks if t.missed < self.params.leave_frames]
+        reports = [r for r in reports if any(t.id == r.id for t in self.tracks)]
+        if allow_start:
+            reports += self._start(points[owner < 0], ground_z_m, stamp_s)
+        return reports
+
+    def _prior(self, track: _Track, stamp_s: float, ground_z_m: float) -> Prior:
+        s = track.filter.predict(stamp_s)
+        slack = 0.0
+        if track.model.trailer is not None and track.trailer_length is not None:
+            settled = len(track.trailer_length.values) >= LENGTH_CONVERGED_OBSERVATIONS
+            slack = SETTLED_SLACK_M if settled else max(MAX_TRAILER_LENGTH_M - track.model.trailer.length_m, SETTLED_SLACK_M)
+        return Prior(s.x_m, s.y_m, s.yaw_rad, s.hitch_rad, track.model, ground_z_m, slack)
+
+    def _claim(self, points: np.ndarray, priors: list[Prior]) -> np.ndarray:
+        """Index of the track whose predicted boxes (grown by the gate margin) are nearest each point; -1 none."""
+        owner = np.full(len(points), -1, dtype=np.int64)
+        best = np.full(len(points), np.inf)
+        margin = self.params.gate_margin_m
+        for i, prior in enumerate(priors):
+            d = box_distance(points, prior)
+            take = (d <= margin) & (d < best)
+            owner[take], best[take] = i, d[take]
+        return owner
+
+    def _step(self, track: _Track, prior: Prior, points: np.ndarray) -> VehicleReport:
+        m = fit(points, prior, self.params) if len(points) else None
+        measured = False
+        if m is not None:
+            measured = track.filter.update(m.vector, m.covariance)
+        if measured:
+            track.missed, track.last = 0, m
+            if self.params.learn_dimensions:
+                self._learn(track, m)
+        else:
+            track.missed += 1
+        n0 = int(np.sum(m.unit == 0)) if measured else 0
+        n1 = int(np.sum(m.unit == 1)) if measured else 0
+        return VehicleReport(track.id, track.model, track.filter.state, n0, n1, measured)
+
+    # ----------------------------------------------------------------- dimensions
+
+    def _learn(self, track: _Track, m: Measurement) -> None:
+        model = track.model
+        boxes = [model.tractor] + ([model.trailer] if model.trailer is not None else [])
+        local = unit_frames(m.points, m.vector, model)
+        new_boxes = []
+        for u, box in enumerate(boxes):
+            q = local[u][m.unit == u]
+            if len(q) >= 5:
+                span = float(np.ptp(q[:, 1]))
+                if span >= FACE_SEEN_SPAN * box.width_m:  # an end face or both sides: a width seen whole
+                    track.widths[u].add(span)
+            width = track.widths[u].estimate
+            new_boxes.append(replace(box, width_m=width))
+        if model.trailer is not None and track.trailer_length is not None:
+            self._learn_trailer_length(track, m, local[1], new_boxes[1].width_m)
+            new_boxes[1] = replace(new_boxes[1], length_m=track.trailer_length.estimate)
+        track.model = model.with_boxes(new_boxes[0], new_boxes[1] if len(new_boxes) > 1 else None)
+        track.model = replace(track.model, trailer_axle_m=self._trailer_axle(track))
+        track.filter.trailer_axle_m = track.model.trailer_axle_m
+        track.model = replace(track.model, name=self._type_name(track))
+
+    def _learn_trailer_length(self, track: _Track, m: Measurement, q: np.ndarray, width_m: float) -> None:
+        """The rear face: the hindmost points of the trailer's band; a length when they span its width,
+        else a lower bound (the trailer reaches at least that far back)."""
+        trailer = track.model.trailer
+        band = (np.abs(q[:, 1]) <= width_m / 2 + self.params.fit_inlier_m) & (q[:, 0] <= trailer.front_m)
+        if band.sum() < 5:
+            return
+        qb = q[band]
+        rear = float(qb[:, 0].min())
+        end = qb[qb[:, 0] <= rear + END_BAND_M]
+        length = trailer.front_m - rear
+        if len(end) >= 3 and np.ptp(end[:, 1]) >= FACE_SEEN_SPAN * width_m:
+            track.trailer_length.add(length)
+        track.trailer_length.lower_bound = max(track.trailer_length.lower_bound, length - END_BAND_M)
+
+    def _trailer_axle(self, track: _Track) -> float:
+        """L2 scaled with the trailer's length behind the kingpin (the catalogue's proportion)."""
+        prior = self.catalogue.get(track.catalogue_name)
+        if prior is None or prior.trailer is None or track.model.trailer is None:
+            return track.model.trailer_axle_m
+        behind = prior.trailer.length_m - prior.trailer.front_m
+        return prior.trailer_axle_m * (track.model.trailer.length_m - track.model.trailer.front_m) / behind
+
+    def _type_name(self, track: _Track) -> str:
+        model = track.model
+        if model.trailer is None:
+            return "rigid"
+        best, best_err = "unknown", self.params.type_max_error_m
+        for name, c in self.catalogue.items():
+            if c.trailer is None:
+                continue
+            err = max(abs(c.trailer.length_m - model.trailer.length_m), abs(c.trailer.width_m - model.trailer.width_m),
+                      abs(c.tractor.width_m - model.tractor.width_m))
+            if err <= best_err:
+                best, best_err = name, err
+        return best
+
+    # ----------------------------------------------------------------- start
+
+    def _start(self, points: np.ndarray, ground_z_m: float, stamp_s: float) -> list[VehicleReport]:
+        clusters = self._seed_clusters(points, ground_z_m)
+        for seed in self.seeds:
+            seed.seen = False
+        ready = []
+        for cluster in clusters:
+            center = min_area_rect(cluster[:, :2]).center_xy
+            seed = min(self.seeds, key=lambda s: float(np.hypot(*(s.center_xy - center))), default=None)
+            if seed is not None and not seed.seen and np.hypot(*(seed.center_xy - center)) <= self.params.start_max_step_m:
+                seed.center_xy, seed.frames, seed.seen = center, seed.frames + 1, True
+            else:
+                seed = Seed(center, center)
+                self.seeds.append(seed)
+            if seed.frames >= self.params.start_frames:
+                ready.append((seed, cluster))
+        self.seeds = [s for s in self.seeds if s.seen]
+        reports = []
+        for seed, cluster in ready:
+            track = self._new_track(cluster, seed, ground_z_m, stamp_s)
+            self.seeds.remove(seed)
+            if track is not None:
+                self.tracks.append(track)
+                reports.append(VehicleReport(track.id, track.model, track.filter.state, int(np.sum(track.last.unit == 0)),
+                                             int(np.sum(track.last.unit == 1)), True))
+        return reports
+
+    def _seed_clusters(self, points: np.ndarray, ground_z_m: float) -> list[np.ndarray]:
+        if len(points) == 0:
+            return []
+        p = self.params
+        out = []
+        for idx in split_by_label(grid_labels(points, p.start_voxel_m)):
+            if len(idx) < p.fit_min_points:
+                continue
+            cluster = points[idx]
+            if cluster[:, 2].max() - ground_z_m < p.start_min_height_m:
+                continue
+            rect = min_area_rect(cluster[:, :2])
+            if p.start_min_length_m <= rect.length_m <= p.start_max_length_m:
+                out.append(cluster)
+        return out
+
+    def _new_track(self, cluster: np.ndarray, seed: Seed, ground_z_m: float, stamp_s: float) -> _Track | None:
+        hypotheses = self._hypotheses(cluster, ground_z_m)
+        if not hypotheses:
+            return None
+        model, m = self._choose(hypotheses, seed)
+        explained = float(np.mean(m.unit >= 0))
+        if explained < self.params.start_min_explained:
+            return None
+        filt = KinematicFilter(m.vector, m.covariance, stamp_s, model.kingpin_behind_axle_m, model.trailer_axle_m,
+                               model.articulated, self.params)
+        widths = [_Extent(model.tractor.width_m, self.params.dimension_window)]
+        length = None
+        if model.trailer is not None:
+            widths.append(_Extent(model.trailer.width_m, self.params.dimension_window))
+            length = _Extent(model.trailer.length_m, self.params.dimension_window)
+        return _Track(next(self._ids), model, filt, model.name, length, widths, 0, m)
+
+    def _hypotheses(self, cluster: np.ndarray, ground_z_m: float) -> list[tuple[VehicleModel, float, Measurement]]:
+        """(model, direction sign, fit) of every catalogue vehicle in both directions (best start hitch
+        each) and of one rigid box of the cluster's measured size."""
+        rect = min_area_rect(cluster[:, :2])
+        out = []
+        for model in self.catalogue.values():
+            for sign in (1.0, -1.0):
+                best = None
+                for hitch_deg in START_HITCHES_DEG:
+                    prior = _placed(model, rect, sign, np.radians(hitch_deg), ground_z_m)
+                    m = fit(cluster, prior, self.params, iterations=START_ITERATIONS)
+                    if m is not None and (best is None or m.cost < best.cost):
+                        best = m
+                if best is not None:
+                    out.append((model, sign, best))
+        height = float(cluster[:, 2].max() - ground_z_m)
+        rigid = VehicleModel.rigid("rigid", rect.length_m, rect.width_m, height)
+        for sign in (1.0, -1.0):
+            yaw = rect.yaw_rad + (0.0 if sign > 0 else np.pi)
+            m = fit(cluster, Prior(*rect.center_xy, yaw, 0.0, rigid, ground_z_m), self.params, iterations=START_ITERATIONS)
+            if m is not None:
+                out.append((rigid, sign, m))
+        return out
+
+    def _choose(self, hypotheses, seed: Seed) -> tuple[VehicleModel, Measurement]:
+        """The best-explaining model; between its two directions the cheaper fit, or the direction of
+        travel when both cost alike."""
+        articulated = [h for h in hypotheses if h[0].articulated]
+        rigid = [h for h in hypotheses if not h[0].articulated]
+        best_art = min(articulated, key=lambda h: h[2].cost, default=None)
+        best_rigid = min(rigid, key=lambda h: h[2].cost, default=None)
+        if best_art is not None and (best_rigid is None or best_art[2].cost < RIGID_COST_RATIO * best_rigid[2].cost):
+            pool = [h for h in articulated if h[0] is best_art[0]]
+        else:
+            pool = rigid
+        pool.sort(key=lambda h: h[2].cost)
+        chosen = pool[0]
+        if len(pool) > 1 and pool[0][2].cost > DIRECTION_COST_RATIO * pool[1][2].cost:
+            travel = seed.center_xy - seed.first_xy
+            if np.hypot(*travel) > 0.3:
+                heading = [np.array([np.cos(h[2].yaw_rad), np.sin(h[2].yaw_rad)]) @ travel for h in pool[:2]]
+                chosen = pool[int(np.argmax(heading))]
+        return chosen[0], chosen[2]
+
+
+def _placed(model: VehicleModel, rect, sign: float, hitch_rad: float, ground_z_m: float) -> Prior:
+    """A prior putting the model's footprint centre on the rectangle's centre, its mean axis along
+    the rectangle (``sign``: which end the tractor is at)."""
+    axis = rect.yaw_rad + (0.0 if sign > 0 else np.pi)
+    yaw = axis - hitch_rad / 2 if model.articulated else axis
+    tractor_c, trailer_c = model.box_centers(0.0, 0.0, yaw, hitch_rad)
+    front = tractor_c + (model.tractor.length_m / 2) * np.array([np.cos(yaw), np.sin(yaw)])
+    if trailer_c is None:
+        centre = tractor_c
+    else:
+        back = trailer_c - (model.trailer.length_m / 2) * np.array([np.cos(yaw + hitch_rad), np.sin(yaw + hitch_rad)])
+        centre = (front + back) / 2
+    x, y = rect.center_xy - centre
+    return Prior(float(x), float(y), float(yaw), float(hitch_rad), model, ground_z_m)
+
+
+def unit_frames(points: np.ndarray, v: np.ndarray, model: VehicleModel) -> list[np.ndarray]:
+    """(N, 2) coordinates of the points in each unit's frame (tractor: rear axle; trailer: kingpin)."""
+    frames = [(v[:2], v[2])]
+    if model.trailer is not None:
+        frames.append((model.kingpin_xy(v[0], v[1], v[2]), v[2] + v[3]))
+    out = []
+    for origin, yaw in frames:
+        c, s = np.cos(yaw), np.sin(yaw)
+        d = points[:, :2] - origin
+        out.append(np.column_stack([c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1]]))
+    return out
+
+
+def box_distance(points: np.ndarray, prior: Prior) -> np.ndarray:
+    """Planar distance of each point to the nearer of the prior's boxes (0 inside); the trailer's box
+    reaches ``trailer_slack_m`` further back."""
+    model = prior.model
+    v = prior.vector
+    boxes = [(model.tractor, 0.0)] + ([(model.trailer, prior.trailer_slack_m)] if model.trailer is not None else [])
+    best = np.full(len(points), np.inf)
+    for (box, slack), q in zip(boxes, unit_frames(points, v, model)):
+        dx = np.maximum(np.maximum(box.rear_m - slack - q[:, 0], q[:, 0] - box.front_m), 0.0)
+        dy = np.maximum(np.abs(q[:, 1]) - box.width_m / 2, 0.0)
+        best = np.minimum(best, np.hypot(dx, dy))
+    return best
