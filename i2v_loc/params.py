@@ -317,6 +317,7 @@ class ArticulatedParams(Section):
     jackknife_rate_deg_s: float = Field(15.0, gt=0.0, le=360.0, description="or above this |hitch angle rate|")
     start_frames: int = Field(3, ge=1, le=100, description="A new vehicle is reported after its cluster persisted this many frames")
     start_voxel_m: float = Field(0.8, ge=0.1, le=3.0, description="Voxel of the connected components that seed new vehicles (bridges the gap between cab and trailer)")
+    start_join_m: float = Field(2.0, ge=0.0, le=10.0, description="Seed components closer than this are one seed (a cab and its trailer)")
     start_max_step_m: float = Field(1.5, gt=0.0, le=10.0, description="A seed cluster persists when its centre moved at most this since the last frame")
     start_min_length_m: float = Field(3.0, gt=0.0, le=30.0, description="Seed clusters shorter than this are not vehicles")
     start_max_length_m: float = Field(25.0, gt=0.0, le=60.0, description="nor longer than this")

@@ -19,6 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from i2v_loc.geometry import wrap_rad
 from i2v_loc.params import ArticulatedParams
 from i2v_loc.stages.primitives import voxel_centroids
 from i2v_loc.stages.vehicle_model import VehicleModel
@@ -102,7 +103,7 @@ def _face_table(v: np.ndarray, model: VehicleModel, trailer_slack_m: float) -> n
     A point p has perp = N.p - plane offset (signed, positive outside), along = T.p - tangent offset."""
     boxes = [model.tractor] + ([model.trailer] if model.trailer is not None else [])
     n_units = len(boxes)
-    yaw = np.array([v[2], v[2] + v[3]])[:n_units].repeat(4)
+    yaw = np.array([v[2], v[2] + (v[3] if n_units == 2 else 0.0)])[:n_units].repeat(4)
     origin = np.vstack([v[:2]] + ([model.kingpin_xy(v[0], v[1], v[2])] if n_units == 2 else [])).repeat(4, axis=0)
     slack = np.array([0.0, trailer_slack_m])[:n_units].repeat(4) * np.tile(_ALONG_LENGTH, n_units)
     front = np.array([b.front_m for b in boxes]).repeat(4)
@@ -179,8 +180,8 @@ def fit(points: np.ndarray, prior: Prior, params: ArticulatedParams, iterations:
     cost = float(np.mean(np.log1p((at.residual / scale) ** 2))) * scale ** 2 / 2
     covariance = _covariance(at, v0, params)
     unit = np.where(np.abs(at.residual) <= params.fit_inlier_m, at.unit, -1).astype(np.int8)
-    hitch = float(v[3]) if prior.model.articulated else None
-    return Measurement(float(v[0]), float(v[1]), float(v[2]), hitch, covariance, sample, unit, cost)
+    hitch = float(wrap_rad(v[3])) if prior.model.articulated else None
+    return Measurement(float(v[0]), float(v[1]), float(wrap_rad(v[2])), hitch, covariance, sample, unit, cost)
 
 
 def _covariance(at: _Faces, v0: np.ndarray, params: ArticulatedParams) -> np.ndarray:

@@ -12,10 +12,12 @@ widths are re-estimated from the points seen in each unit's frame (the catalogue
 from __future__ import annotations
 
 from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from itertools import count
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 from i2v_loc.params import ArticulatedParams, VehicleConfig
 from i2v_loc.stages.hinged_fit import Measurement, Prior, fit
@@ -44,6 +46,7 @@ class VehicleReport:
     tractor_points: int
     trailer_points: int
     measured: bool  # a fit was fused this frame
+    travel_m: float  # tractor reference point's distance from where the vehicle started
 
 
 @dataclass
@@ -84,6 +87,14 @@ class _Track:
     widths: list[_Extent]
     missed: int = 0
     last: Measurement | None = None
+    first_xy: np.ndarray = field(default_factory=lambda: np.zeros(2))
+
+    def report(self, measured: bool) -> VehicleReport:
+        s = self.filter.state
+        n0 = int(np.sum(self.last.unit == 0)) if measured else 0
+        n1 = int(np.sum(self.last.unit == 1)) if measured else 0
+        travel = float(np.hypot(s.x_m - self.first_xy[0], s.y_m - self.first_xy[1]))
+        return VehicleReport(self.id, self.model, s, n0, n1, measured, travel)
 
 
 class VehicleTracker:
@@ -93,12 +104,15 @@ class VehicleTracker:
         self.tracks: list[_Track] = []
         self.seeds: list[Seed] = []
         self._ids = count(1)
+        self.rejected = 0  # fits outside a filter's innovation gate
 
     # ----------------------------------------------------------------- per frame
 
-    def process(self, points: np.ndarray, ground_z_m: float, stamp_s: float, allow_start: bool = True) -> list[VehicleReport]:
-        """``points`` (N, 3): the foreground (off the ground and the background) in the yard frame."""
-        priors = [self._prior(t, stamp_s, ground_z_m) for t in self.tracks]
+    def process(self, points: np.ndarray, ground: Callable[[float, float], float], stamp_s: float,
+                allow_start: bool = True) -> list[VehicleReport]:
+        """``points`` (N, 3): the foreground (off the ground and the background) in the yard frame;
+        ``ground(x, y)``: the ground's height there."""
+        priors = [self._prior(t, stamp_s, ground) for t in self.tracks]
         owner = self._claim(points, priors)
         reports = []
         for i, (track, prior) in enumerate(zip(self.tracks, priors)):
@@ -106,16 +120,16 @@ class VehicleTracker:
         self.tracks = [t for t in self.tracks if t.missed < self.params.leave_frames]
         reports = [r for r in reports if any(t.id == r.id for t in self.tracks)]
         if allow_start:
-            reports += self._start(points[owner < 0], ground_z_m, stamp_s)
+            reports += self._start(points[owner < 0], ground, stamp_s)
         return reports
 
-    def _prior(self, track: _Track, stamp_s: float, ground_z_m: float) -> Prior:
+    def _prior(self, track: _Track, stamp_s: float, ground) -> Prior:
         s = track.filter.predict(stamp_s)
         slack = 0.0
         if track.model.trailer is not None and track.trailer_length is not None:
             settled = len(track.trailer_length.values) >= LENGTH_CONVERGED_OBSERVATIONS
             slack = SETTLED_SLACK_M if settled else max(MAX_TRAILER_LENGTH_M - track.model.trailer.length_m, SETTLED_SLACK_M)
-        return Prior(s.x_m, s.y_m, s.yaw_rad, s.hitch_rad, track.model, ground_z_m, slack)
+        return Prior(s.x_m, s.y_m, s.yaw_rad, s.hitch_rad, track.model, float(ground(s.x_m, s.y_m)), slack)
 
     def _claim(self, points: np.ndarray, priors: list[Prior]) -> np.ndarray:
         """Index of the track whose predicted boxes (grown by the gate margin) are nearest each point; -1 none."""
@@ -133,15 +147,14 @@ class VehicleTracker:
         measured = False
         if m is not None:
             measured = track.filter.update(m.vector, m.covariance)
+            self.rejected += not measured
         if measured:
             track.missed, track.last = 0, m
             if self.params.learn_dimensions:
                 self._learn(track, m)
         else:
             track.missed += 1
-        n0 = int(np.sum(m.unit == 0)) if measured else 0
-        n1 = int(np.sum(m.unit == 1)) if measured else 0
-        return VehicleReport(track.id, track.model, track.filter.state, n0, n1, measured)
+        return track.report(measured)
 
     # ----------------------------------------------------------------- dimensions
 
@@ -153,7 +166,8 @@ class VehicleTracker:
         for u, box in enumerate(boxes):
             q = local[u][m.unit == u]
             if len(q) >= 5:
-                span = float(np.ptp(q[:, 1]))
+                low, high = np.percentile(q[:, 1], [2.0, 98.0])
+                span = float(high - low)
                 if span >= FACE_SEEN_SPAN * box.width_m:  # an end face or both sides: a width seen whole
                     track.widths[u].add(span)
             width = track.widths[u].estimate
@@ -167,8 +181,9 @@ class VehicleTracker:
         track.model = replace(track.model, name=self._type_name(track))
 
     def _learn_trailer_length(self, track: _Track, m: Measurement, q: np.ndarray, width_m: float) -> None:
-        """The rear face: the hindmost points of the trailer's band; a length when they span its width,
-        else a lower bound (the trailer reaches at least that far back)."""
+        """The rear face: the hindmost points of the trailer's band. A length when points across its
+        middle are seen there (not only the ends of the two sides), else a lower bound (the trailer
+        reaches at least that far back)."""
         trailer = track.model.trailer
         band = (np.abs(q[:, 1]) <= width_m / 2 + self.params.fit_inlier_m) & (q[:, 0] <= trailer.front_m)
         if band.sum() < 5:
@@ -176,10 +191,10 @@ class VehicleTracker:
         qb = q[band]
         rear = float(qb[:, 0].min())
         end = qb[qb[:, 0] <= rear + END_BAND_M]
-        length = trailer.front_m - rear
-        if len(end) >= 3 and np.ptp(end[:, 1]) >= FACE_SEEN_SPAN * width_m:
-            track.trailer_length.add(length)
-        track.trailer_length.lower_bound = max(track.trailer_length.lower_bound, length - END_BAND_M)
+        middle = end[np.abs(end[:, 1]) <= width_m / 4]
+        if len(middle) >= 2 and np.ptp(end[:, 1]) >= FACE_SEEN_SPAN * width_m:
+            track.trailer_length.add(trailer.front_m - float(np.median(middle[:, 0])))
+        track.trailer_length.lower_bound = max(track.trailer_length.lower_bound, trailer.front_m - rear - END_BAND_M)
 
     def _trailer_axle(self, track: _Track) -> float:
         """L2 scaled with the trailer's length behind the kingpin (the catalogue's proportion)."""
@@ -205,8 +220,8 @@ class VehicleTracker:
 
     # ----------------------------------------------------------------- start
 
-    def _start(self, points: np.ndarray, ground_z_m: float, stamp_s: float) -> list[VehicleReport]:
-        clusters = self._seed_clusters(points, ground_z_m)
+    def _start(self, points: np.ndarray, ground, stamp_s: float) -> list[VehicleReport]:
+        clusters = self._seed_clusters(points, ground)
         for seed in self.seeds:
             seed.seen = False
         ready = []
@@ -223,25 +238,25 @@ class VehicleTracker:
         self.seeds = [s for s in self.seeds if s.seen]
         reports = []
         for seed, cluster in ready:
-            track = self._new_track(cluster, seed, ground_z_m, stamp_s)
+            center = seed.center_xy
+            track = self._new_track(cluster, seed, float(ground(center[0], center[1])), stamp_s)
             self.seeds.remove(seed)
             if track is not None:
                 self.tracks.append(track)
-                reports.append(VehicleReport(track.id, track.model, track.filter.state, int(np.sum(track.last.unit == 0)),
-                                             int(np.sum(track.last.unit == 1)), True))
+                reports.append(track.report(True))
         return reports
 
-    def _seed_clusters(self, points: np.ndarray, ground_z_m: float) -> list[np.ndarray]:
+    def _seed_clusters(self, points: np.ndarray, ground) -> list[np.ndarray]:
+        """Connected components tall enough to be a vehicle, those closer than ``start_join_m`` joined
+        (a cab and its trailer are apart by up to about 1.5 m), of a vehicle's length."""
         if len(points) == 0:
             return []
         p = self.params
+        parts = [points[idx] for idx in split_by_label(grid_labels(points, p.start_voxel_m))
+                 if len(idx) >= p.fit_min_points and _height(points[idx], ground) >= p.start_min_height_m]
         out = []
-        for idx in split_by_label(grid_labels(points, p.start_voxel_m)):
-            if len(idx) < p.fit_min_points:
-                continue
-            cluster = points[idx]
-            if cluster[:, 2].max() - ground_z_m < p.start_min_height_m:
-                continue
+        for group in _join_near(parts, p.start_join_m):
+            cluster = np.vstack([parts[i] for i in group])
             rect = min_area_rect(cluster[:, :2])
             if p.start_min_length_m <= rect.length_m <= p.start_max_length_m:
                 out.append(cluster)
@@ -262,7 +277,7 @@ class VehicleTracker:
         if model.trailer is not None:
             widths.append(_Extent(model.trailer.width_m, self.params.dimension_window))
             length = _Extent(model.trailer.length_m, self.params.dimension_window)
-        return _Track(next(self._ids), model, filt, model.name, length, widths, 0, m)
+        return _Track(next(self._ids), model, filt, model.name, length, widths, 0, m, np.array(m.vector[:2]))
 
     def _hypotheses(self, cluster: np.ndarray, ground_z_m: float) -> list[tuple[VehicleModel, float, Measurement]]:
         """(model, direction sign, fit) of every catalogue vehicle in both directions (best start hitch
@@ -307,6 +322,32 @@ class VehicleTracker:
                 heading = [np.array([np.cos(h[2].yaw_rad), np.sin(h[2].yaw_rad)]) @ travel for h in pool[:2]]
                 chosen = pool[int(np.argmax(heading))]
         return chosen[0], chosen[2]
+
+
+def _height(points: np.ndarray, ground) -> float:
+    centre = points[:, :2].mean(axis=0)
+    return float(points[:, 2].max() - ground(centre[0], centre[1]))
+
+
+def _join_near(parts: list[np.ndarray], distance_m: float) -> list[list[int]]:
+    """Groups of indices of ``parts`` linked by point pairs closer than ``distance_m`` (union-find)."""
+    parent = list(range(len(parts)))
+
+    def root(i: int) -> int:
+        while parent[i] != i:
+            parent[i] = parent[parent[i]]
+            i = parent[i]
+        return i
+
+    trees = [cKDTree(part[:, :2]) for part in parts]
+    for i in range(len(parts)):
+        for j in range(i + 1, len(parts)):
+            if root(i) != root(j) and trees[i].sparse_distance_matrix(trees[j], distance_m).nnz:
+                parent[root(j)] = root(i)
+    groups: dict[int, list[int]] = {}
+    for i in range(len(parts)):
+        groups.setdefault(root(i), []).append(i)
+    return list(groups.values())
 
 
 def _placed(model: VehicleModel, rect, sign: float, hitch_rad: float, ground_z_m: float) -> Prior:
