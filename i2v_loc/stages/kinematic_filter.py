@@ -121,6 +121,18 @@ class KinematicFilter:
             p[:3, HITCH] = p[HITCH, :3] = r[:3, 3]
         self.ukf.x, self.ukf.P = x, p
         self.rejected = 0  # measurements outside the innovation gate
+        self._in_a_row = 0
+
+    def _reset(self, z: np.ndarray, r: np.ndarray) -> None:
+        n = len(z)
+        idx = [X, Y, YAW, HITCH][:n]
+        self.ukf.x[idx] = z
+        p = np.diag(np.diag(self.ukf.P)).copy()
+        p[np.ix_(idx, idx)] = r
+        p[SPEED, SPEED] = max(p[SPEED, SPEED], INITIAL_SPEED_SIGMA_M_S ** 2)
+        p[CURVATURE, CURVATURE] = max(p[CURVATURE, CURVATURE], INITIAL_CURVATURE_SIGMA_1_M ** 2)
+        self.ukf.P = p
+        self._in_a_row = 0
 
     def _fx(self, x: np.ndarray, dt: float) -> np.ndarray:
         return propagate(x, dt, self.kingpin_m, self.trailer_axle_m, self.articulated)
@@ -144,13 +156,19 @@ class KinematicFilter:
         return self.state
 
     def update(self, z: np.ndarray, r: np.ndarray) -> bool:
-        """Fuse one fit; False (state unchanged) when it lies outside the innovation gate."""
+        """Fuse one fit; False (state unchanged) when it lies outside the innovation gate. After
+        ``reset_after_rejections`` rejections in a row the fits are right and the prediction is not:
+        the pose and hitch restart from the fit (speed and curvature kept, their variance reset)."""
         x, p = self.ukf.x.copy(), self.ukf.P.copy()
         self.ukf.update(np.asarray(z, dtype=float), R=r)
         if self.ukf.mahalanobis ** 2 > self.params.innovation_gate:
             self.ukf.x, self.ukf.P = x, p
             self.rejected += 1
+            self._in_a_row += 1
+            if self._in_a_row >= self.params.reset_after_rejections:
+                self._reset(z, r)
             return False
+        self._in_a_row = 0
         self.ukf.x[YAW], self.ukf.x[HITCH] = wrap_rad(self.ukf.x[YAW]), wrap_rad(self.ukf.x[HITCH])
         return True
 

@@ -34,6 +34,8 @@ LENGTH_CONVERGED_OBSERVATIONS = 5
 SETTLED_SLACK_M = 0.5
 FACE_SEEN_SPAN = 0.6  # an end face is seen when its points span this share of the unit's width
 END_BAND_M = 0.4
+MAX_BODY_GAP_M = 1.0
+UNIT_SUPPORT = 0.5
 
 
 @dataclass(frozen=True)
@@ -88,6 +90,7 @@ class _Track:
     missed: int = 0
     last: Measurement | None = None
     first_xy: np.ndarray = field(default_factory=lambda: np.zeros(2))
+    ground_z_m: float = 0.0  # under the vehicle, this frame
 
     def report(self, measured: bool) -> VehicleReport:
         s = self.filter.state
@@ -143,6 +146,7 @@ class VehicleTracker:
         return owner
 
     def _step(self, track: _Track, prior: Prior, points: np.ndarray) -> VehicleReport:
+        track.ground_z_m = prior.ground_z_m
         m = fit(points, prior, self.params) if len(points) else None
         measured = False
         if m is not None:
@@ -181,20 +185,26 @@ class VehicleTracker:
         track.model = replace(track.model, name=self._type_name(track))
 
     def _learn_trailer_length(self, track: _Track, m: Measurement, q: np.ndarray, width_m: float) -> None:
-        """The rear face: the hindmost points of the trailer's band. A length when points across its
-        middle are seen there (not only the ends of the two sides), else a lower bound (the trailer
-        reaches at least that far back)."""
+        """The rear face: the hindmost of the trailer body's points (within its width and height band,
+        reached from the front without a gap longer than ``MAX_BODY_GAP_M``). A length when points
+        across the middle of the face are seen there (not only the ends of the two sides), else a
+        lower bound (the trailer reaches at least that far back)."""
         trailer = track.model.trailer
-        band = (np.abs(q[:, 1]) <= width_m / 2 + self.params.fit_inlier_m) & (q[:, 0] <= trailer.front_m)
+        z_rel = m.points[:, 2] - track.ground_z_m
+        band = (np.abs(q[:, 1]) <= width_m / 2 + self.params.fit_inlier_m) & (q[:, 0] <= trailer.front_m + END_BAND_M)
+        band &= (z_rel >= trailer.floor_m - END_BAND_M) & (z_rel <= trailer.top_m + END_BAND_M)
         if band.sum() < 5:
             return
-        qb = q[band]
-        rear = float(qb[:, 0].min())
+        qb = q[band][np.argsort(-q[band][:, 0])]
+        gaps = np.flatnonzero(-np.diff(qb[:, 0]) > MAX_BODY_GAP_M)
+        qb = qb[:gaps[0] + 1] if len(gaps) else qb
+        rear = float(qb[-1, 0])
         end = qb[qb[:, 0] <= rear + END_BAND_M]
         middle = end[np.abs(end[:, 1]) <= width_m / 4]
         if len(middle) >= 2 and np.ptp(end[:, 1]) >= FACE_SEEN_SPAN * width_m:
             track.trailer_length.add(trailer.front_m - float(np.median(middle[:, 0])))
-        track.trailer_length.lower_bound = max(track.trailer_length.lower_bound, trailer.front_m - rear - END_BAND_M)
+        bound = min(trailer.front_m - rear - END_BAND_M, MAX_TRAILER_LENGTH_M)
+        track.trailer_length.lower_bound = max(track.trailer_length.lower_bound, bound)
 
     def _trailer_axle(self, track: _Track) -> float:
         """L2 scaled with the trailer's length behind the kingpin (the catalogue's proportion)."""
@@ -266,9 +276,11 @@ class VehicleTracker:
         hypotheses = self._hypotheses(cluster, ground_z_m)
         if not hypotheses:
             return None
-        model, m = self._choose(hypotheses, seed)
-        explained = float(np.mean(m.unit >= 0))
-        if explained < self.params.start_min_explained:
+        chosen = self._choose(hypotheses, seed)
+        if chosen is None:
+            return None
+        model, m = chosen
+        if float(np.mean(m.unit >= 0)) < self.params.start_min_explained or not _supported(m, model):
             return None
         filt = KinematicFilter(m.vector, m.covariance, stamp_s, model.kingpin_behind_axle_m, model.trailer_axle_m,
                                model.articulated, self.params)
@@ -277,7 +289,7 @@ class VehicleTracker:
         if model.trailer is not None:
             widths.append(_Extent(model.trailer.width_m, self.params.dimension_window))
             length = _Extent(model.trailer.length_m, self.params.dimension_window)
-        return _Track(next(self._ids), model, filt, model.name, length, widths, 0, m, np.array(m.vector[:2]))
+        return _Track(next(self._ids), model, filt, model.name, length, widths, 0, m, np.array(m.vector[:2]), ground_z_m)
 
     def _hypotheses(self, cluster: np.ndarray, ground_z_m: float) -> list[tuple[VehicleModel, float, Measurement]]:
         """(model, direction sign, fit) of every catalogue vehicle in both directions (best start hitch
@@ -303,7 +315,7 @@ class VehicleTracker:
                 out.append((rigid, sign, m))
         return out
 
-    def _choose(self, hypotheses, seed: Seed) -> tuple[VehicleModel, Measurement]:
+    def _choose(self, hypotheses, seed: Seed) -> tuple[VehicleModel, Measurement] | None:
         """The best-explaining model; between its two directions the cheaper fit, or the direction of
         travel when both cost alike."""
         articulated = [h for h in hypotheses if h[0].articulated]
@@ -313,7 +325,9 @@ class VehicleTracker:
         if best_art is not None and (best_rigid is None or best_art[2].cost < RIGID_COST_RATIO * best_rigid[2].cost):
             pool = [h for h in articulated if h[0] is best_art[0]]
         else:
-            pool = rigid
+            pool = [h for h in rigid if h[0].tractor.length_m >= self.params.rigid_min_length_m]
+            if not pool:
+                return None
         pool.sort(key=lambda h: h[2].cost)
         chosen = pool[0]
         if len(pool) > 1 and pool[0][2].cost > DIRECTION_COST_RATIO * pool[1][2].cost:
@@ -322,6 +336,17 @@ class VehicleTracker:
                 heading = [np.array([np.cos(h[2].yaw_rad), np.sin(h[2].yaw_rad)]) @ travel for h in pool[:2]]
                 chosen = pool[int(np.argmax(heading))]
         return chosen[0], chosen[2]
+
+
+def _supported(m: Measurement, model: VehicleModel) -> bool:
+    """Each unit's explained points span at least ``UNIT_SUPPORT`` of its length (a car's side on a
+    trailer's face is no truck)."""
+    boxes = [model.tractor] + ([model.trailer] if model.trailer is not None else [])
+    for u, (box, q) in enumerate(zip(boxes, unit_frames(m.points, m.vector, model))):
+        mine = q[m.unit == u]
+        if len(mine) < 3 or np.ptp(mine[:, 0]) < UNIT_SUPPORT * box.length_m:
+            return False
+    return True
 
 
 def _height(points: np.ndarray, ground) -> float:
