@@ -94,3 +94,21 @@ def test_hidden_trailer_leaves_the_hitch_at_the_prior_and_says_so():
 def test_too_few_points_is_no_measurement():
     model = volvo()
     assert fit(np.zeros((5, 3)), Prior(*TRUTH, 0.0, model), PARAMS.articulated) is None
+
+
+def test_analytic_jacobian_matches_finite_differences():
+    from i2v_loc.stages.hinged_fit import faces
+
+    model = volvo()
+    v = np.array([*TRUTH, 0.6])
+    points = vehicle_points(model, *v, sensors=SENSORS, noise_m=0.05)[::7]
+    z = points[:, 2]
+    at = faces(v, points[:, :2], z, model, 0.25, trailer_slack_m=1.0)
+    eps = 1e-6
+    for k in range(4):
+        step = np.zeros(4)
+        step[k] = eps
+        numeric = (faces(v + step, points[:, :2], z, model, 0.25, 1.0).residual
+                   - faces(v - step, points[:, :2], z, model, 0.25, 1.0).residual) / (2 * eps)
+        same_face = np.abs(numeric) < 1e3  # a point switching faces inside the step has no derivative
+        np.testing.assert_allclose(at.jacobian[same_face, k], numeric[same_face], atol=1e-5)
