@@ -136,7 +136,10 @@ def faces(v: np.ndarray, xy: np.ndarray, z_rel: np.ndarray, model: VehicleModel,
     roof = np.zeros((n, len(tops)), dtype=bool)
     for u, top in enumerate(tops):
         cols = slice(4 * u, 4 * u + 4)
-        roof[:, u] = (np.abs(z_rel - top) <= top_band_m) & (perp[:, cols].max(axis=1) <= 0.0)
+        inside = perp[:, cols].max(axis=1) <= 0.0
+        if u == 1 and trailer_slack_m > 0:  # the roof reaches as far back as the sides may
+            inside = np.maximum(perp[:, [4, 6, 7]].max(axis=1), perp[:, 5] - trailer_slack_m) <= 0.0
+        roof[:, u] = (np.abs(z_rel - top) <= top_band_m) & inside
         dist2[roof[:, u], cols] = 0.0
         dist2[z_rel > top + top_band_m, cols] = np.inf
     pick = np.argmin(dist2, axis=1)

@@ -195,12 +195,16 @@ class VehicleTracker:
         band &= (z_rel >= trailer.floor_m - END_BAND_M) & (z_rel <= trailer.top_m + END_BAND_M)
         if band.sum() < 5:
             return
-        qb = q[band][np.argsort(-q[band][:, 0])]
+        order = np.argsort(-q[band][:, 0])
+        qb, zb = q[band][order], z_rel[band][order]
         gaps = np.flatnonzero(-np.diff(qb[:, 0]) > MAX_BODY_GAP_M)
-        qb = qb[:gaps[0] + 1] if len(gaps) else qb
+        keep = gaps[0] + 1 if len(gaps) else len(qb)
+        qb, zb = qb[:keep], zb[:keep]
         rear = float(qb[-1, 0])
-        end = qb[qb[:, 0] <= rear + END_BAND_M]
-        middle = end[np.abs(end[:, 1]) <= width_m / 4]
+        at_end = qb[:, 0] <= rear + END_BAND_M
+        end = qb[at_end]
+        # the face's middle below the roof (roof points near the edge lie up to END_BAND_M ahead of it)
+        middle = end[(np.abs(end[:, 1]) <= width_m / 4) & (zb[at_end] < trailer.top_m - self.params.fit_top_band_m)]
         if len(middle) >= 2 and np.ptp(end[:, 1]) >= FACE_SEEN_SPAN * width_m:
             track.trailer_length.add(trailer.front_m - float(np.median(middle[:, 0])))
         bound = min(trailer.front_m - rear - END_BAND_M, MAX_TRAILER_LENGTH_M)
@@ -300,7 +304,8 @@ class VehicleTracker:
             for sign in (1.0, -1.0):
                 best = None
                 for hitch_deg in START_HITCHES_DEG:
-                    prior = _placed(model, rect, sign, np.radians(hitch_deg), ground_z_m)
+                    prior = _placed(model, rect, sign, np.radians(hitch_deg), ground_z_m,
+                                    MAX_TRAILER_LENGTH_M - model.trailer.length_m)
                     m = fit(cluster, prior, self.params, iterations=START_ITERATIONS)
                     if m is not None and (best is None or m.cost < best.cost):
                         best = m
@@ -375,7 +380,7 @@ def _join_near(parts: list[np.ndarray], distance_m: float) -> list[list[int]]:
     return list(groups.values())
 
 
-def _placed(model: VehicleModel, rect, sign: float, hitch_rad: float, ground_z_m: float) -> Prior:
+def _placed(model: VehicleModel, rect, sign: float, hitch_rad: float, ground_z_m: float, slack_m: float) -> Prior:
     """A prior putting the model's footprint centre on the rectangle's centre, its mean axis along
     the rectangle (``sign``: which end the tractor is at)."""
     axis = rect.yaw_rad + (0.0 if sign > 0 else np.pi)
@@ -388,7 +393,7 @@ def _placed(model: VehicleModel, rect, sign: float, hitch_rad: float, ground_z_m
         back = trailer_c - (model.trailer.length_m / 2) * np.array([np.cos(yaw + hitch_rad), np.sin(yaw + hitch_rad)])
         centre = (front + back) / 2
     x, y = rect.center_xy - centre
-    return Prior(float(x), float(y), float(yaw), float(hitch_rad), model, ground_z_m)
+    return Prior(float(x), float(y), float(yaw), float(hitch_rad), model, ground_z_m, max(slack_m, 0.0))
 
 
 def unit_frames(points: np.ndarray, v: np.ndarray, model: VehicleModel) -> list[np.ndarray]:
