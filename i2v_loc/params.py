@@ -295,11 +295,10 @@ class BackgroundParams(Section):
 class ArticulatedParams(Section):
     """The articulated estimator (method ``articulated``): hinged-model fit, kinematic UKF, vehicle tracks."""
 
-    fit_voxel_m: float = Field(0.25, ge=0.0, le=2.0, description="A vehicle's points are thinned to voxel centroids of this size before the fit")
-    fit_max_points: int = Field(200, ge=20, le=5000, description="then evenly to at most this many")
+    fit_max_points: int = Field(200, ge=20, le=5000, description="A vehicle's points (voxel centroids of the front end) are thinned evenly to at most this many for the fit")
     fit_min_points: int = Field(15, ge=3, le=1000, description="Fewer thinned points: no measurement this frame")
     fit_loss_scale_m: float = Field(0.1, gt=0.0, le=2.0, description="Scale of the Cauchy loss of the point-to-face distances (range noise plus mirrors and panel gaps)")
-    fit_start_scale_m: float = Field(0.4, gt=0.0, le=5.0, description="The loss scale of the first step, halved at each step down to fit_loss_scale_m")
+    fit_start_scale_m: float = Field(0.2, gt=0.0, le=5.0, description="The loss scale of the first step, halved at each step down to fit_loss_scale_m")
     fit_iterations: int = Field(5, ge=1, le=100, description="At most this many reweighted Gauss-Newton steps per fit (warm-started)")
     fit_top_band_m: float = Field(0.25, ge=0.0, le=2.0, description="Points this close to a unit's roof height inside its footprint are roof points")
     fit_inlier_m: float = Field(0.3, gt=0.0, le=2.0, description="Points this close to a face are explained by the vehicle")

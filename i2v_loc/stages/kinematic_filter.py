@@ -23,7 +23,7 @@ X, Y, YAW, SPEED, CURVATURE, HITCH = range(6)
 ANGLES_X = [YAW, HITCH]
 INITIAL_SPEED_SIGMA_M_S = 3.0
 INITIAL_CURVATURE_SIGMA_1_M = 0.05
-MAX_STEP_S = 0.05  # the kinematics are integrated in steps no longer than this
+MAX_STEP_S = 0.1  # the kinematics are integrated in midpoint steps no longer than this
 
 
 def hitch_rate(v: float, curvature: float, hitch: float, kingpin_m: float, trailer_axle_m: float):
@@ -33,28 +33,68 @@ def hitch_rate(v: float, curvature: float, hitch: float, kingpin_m: float, trail
 
 
 def propagate(state: np.ndarray, dt_s: float, kingpin_m: float, trailer_axle_m: float, articulated: bool) -> np.ndarray:
-    """The state ``dt_s`` later (midpoint steps)."""
+    """The state (6,) or states (k, 6) ``dt_s`` later (midpoint steps)."""
     s = np.array(state, dtype=float)
     steps = max(1, int(np.ceil(abs(dt_s) / MAX_STEP_S)))
     h = dt_s / steps
     for _ in range(steps):
         s = s + h * _derivative(s + 0.5 * h * _derivative(s, kingpin_m, trailer_axle_m, articulated), kingpin_m, trailer_axle_m, articulated)
-    s[YAW], s[HITCH] = wrap_rad(s[YAW]), wrap_rad(s[HITCH])
+    s[..., YAW], s[..., HITCH] = _wrap(s[..., YAW]), _wrap(s[..., HITCH])
     return s
 
 
 def _derivative(s: np.ndarray, kingpin_m: float, trailer_axle_m: float, articulated: bool) -> np.ndarray:
-    v, kappa, yaw, hitch = s[SPEED], s[CURVATURE], s[YAW], s[HITCH]
-    d = np.zeros(6)
-    d[X], d[Y], d[YAW] = v * np.cos(yaw), v * np.sin(yaw), v * kappa
+    v, kappa, yaw, hitch = s[..., SPEED], s[..., CURVATURE], s[..., YAW], s[..., HITCH]
+    d = np.zeros_like(s)
+    d[..., X], d[..., Y], d[..., YAW] = v * np.cos(yaw), v * np.sin(yaw), v * kappa
     if articulated:
-        d[HITCH] = hitch_rate(v, kappa, hitch, kingpin_m, trailer_axle_m)
+        d[..., HITCH] = hitch_rate(v, kappa, hitch, kingpin_m, trailer_axle_m)
     return d
+
+
+def _sqrt(p: np.ndarray) -> np.ndarray:
+    """Upper factor U with U^T U = p; a covariance that lost definiteness to rounding is clipped."""
+    try:
+        return np.linalg.cholesky(p).T
+    except np.linalg.LinAlgError:
+        w, v = np.linalg.eigh((p + p.T) / 2)
+        return (v * np.sqrt(np.clip(w, 1e-12, None))).T
+
+
+def _unscented_transform(sigmas, wm, wc, noise_cov=None, mean_fn=None, residual_fn=None):
+    """filterpy's unscented transform with the residuals taken as one array."""
+    x = mean_fn(sigmas, wm)
+    y = residual_fn(sigmas, x[None, :])
+    p = (y.T * wc) @ y
+    return x, p + noise_cov if noise_cov is not None else p
+
+
+class _BatchUKF(UnscentedKalmanFilter):
+    """filterpy's UKF with whole-array sigma-point propagation, transform and cross variance
+    (filterpy calls them once per sigma point)."""
+
+    def compute_process_sigmas(self, dt, fx=None, **fx_args):
+        self.sigmas_f = (fx or self.fx)(self.points_fn.sigma_points(self.x, self.P), dt)
+
+    def cross_variance(self, x, z, sigmas_f, sigmas_h):
+        dx = self.residual_x(sigmas_f, x[None, :])
+        dz = self.residual_z(np.asarray(sigmas_h), z[None, :])
+        return (dx.T * self.Wc) @ dz
+
+    def predict(self, dt=None, UT=None, fx=None, **fx_args):
+        super().predict(dt, UT or _unscented_transform, fx, **fx_args)
+
+    def update(self, z, R=None, UT=None, hx=None, **hx_args):
+        super().update(z, R, UT or _unscented_transform, hx, **hx_args)
+
+
+def _wrap(angle):
+    return (angle + np.pi) % (2 * np.pi) - np.pi
 
 
 def _residual_x(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     d = np.subtract(a, b)
-    d[..., ANGLES_X] = wrap_rad(d[..., ANGLES_X])
+    d[..., ANGLES_X] = _wrap(d[..., ANGLES_X])
     return d
 
 
@@ -67,7 +107,7 @@ def _mean_x(sigmas: np.ndarray, weights: np.ndarray) -> np.ndarray:
 
 def _residual_z(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     d = np.subtract(a, b)
-    d[2:] = wrap_rad(d[2:])
+    d[..., 2:] = _wrap(d[..., 2:])
     return d
 
 
@@ -105,8 +145,8 @@ class KinematicFilter:
         self.kingpin_m, self.trailer_axle_m = kingpin_m, trailer_axle_m
         self.stamp_s = stamp_s
         n_z = 4 if articulated else 3
-        points = MerweScaledSigmaPoints(6, alpha=0.3, beta=2.0, kappa=0.0, subtract=_residual_x)
-        self.ukf = UnscentedKalmanFilter(6, n_z, 0.1, self._hx, self._fx, points, x_mean_fn=_mean_x,
+        points = MerweScaledSigmaPoints(6, alpha=0.3, beta=2.0, kappa=0.0, sqrt_method=_sqrt)
+        self.ukf = _BatchUKF(6, n_z, 0.1, self._hx, self._fx, points, x_mean_fn=_mean_x,
                                          z_mean_fn=_mean_z, residual_x=_residual_x, residual_z=_residual_z)
         x = np.zeros(6)
         x[[X, Y, YAW]] = z[:3]
@@ -138,7 +178,7 @@ class KinematicFilter:
         return propagate(x, dt, self.kingpin_m, self.trailer_axle_m, self.articulated)
 
     def _hx(self, x: np.ndarray) -> np.ndarray:
-        return x[[X, Y, YAW, HITCH]] if self.articulated else x[[X, Y, YAW]]
+        return x[[X, Y, YAW, HITCH]] if self.articulated else x[:3]
 
     def _q(self, dt_s: float) -> np.ndarray:
         p = self.params
