@@ -321,6 +321,7 @@ class ArticulatedParams(Section):
     start_max_step_m: float = Field(1.5, gt=0.0, le=10.0, description="A seed cluster persists when its centre moved at most this since the last frame")
     start_min_length_m: float = Field(3.0, gt=0.0, le=30.0, description="Seed clusters shorter than this are not vehicles")
     start_max_length_m: float = Field(25.0, gt=0.0, le=60.0, description="nor longer than this")
+    start_min_width_m: float = Field(1.0, ge=0.0, le=5.0, description="nor narrower than this (a wall is a plane; a vehicle starts once an end, its roof or both sides are seen)")
     start_min_height_m: float = Field(1.2, gt=0.0, le=5.0, description="nor lower than this above the ground")
     rigid_min_length_m: float = Field(5.5, gt=0.0, le=30.0, description="A rigid vehicle (bus, rigid truck, van) is at least this long (cars are not reported)")
     start_min_explained: float = Field(0.8, gt=0.0, le=1.0, description="A seed is a vehicle when the best model explains this share of its points")

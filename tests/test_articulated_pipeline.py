@@ -204,3 +204,13 @@ def test_articulated_method_end_to_end():
 @pytest.mark.parametrize("method", ["paper", "default"])
 def test_other_methods_are_unchanged_pipelines(method):
     assert type(Pipeline(Params(), method=method)) is Pipeline
+
+
+def test_wall_car_and_pole_are_no_vehicles():
+    tracker = VehicleTracker(PARAMS.articulated, PARAMS.vehicles)
+    wall = np.column_stack([np.repeat(np.arange(-8.0, 8.0, 0.15), 20), np.full(107 * 20, 10.0),
+                            np.tile(np.linspace(0.2, 3.5, 20), 107)])
+    car = vehicle_points(VehicleModel.rigid("car", 4.5, 1.8, 1.5, 0.1), 0.0, 2.0, 0.3, sensors=SENSORS)
+    pole = np.column_stack([np.full(30, 6.0), np.full(30, -3.0), np.linspace(0.2, 6.0, 30)])
+    for k in range(3 * PARAMS.articulated.start_frames):
+        assert tracker.process(np.vstack([wall, car, pole]), flat, 0.1 * k) == []

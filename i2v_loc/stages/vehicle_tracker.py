@@ -25,7 +25,7 @@ from i2v_loc.stages.kinematic_filter import FilterState, KinematicFilter
 from i2v_loc.stages.primitives import grid_labels, min_area_rect, split_by_label
 from i2v_loc.stages.vehicle_model import VehicleModel
 
-START_HITCHES_DEG = (-60.0, -30.0, 0.0, 30.0, 60.0)
+START_HITCHES_DEG = (-90.0, -60.0, -30.0, 0.0, 30.0, 60.0, 90.0)
 START_ITERATIONS = 20
 DIRECTION_COST_RATIO = 0.8  # one end's fit must cost this much less than the other's to decide the direction
 RIGID_COST_RATIO = 0.7  # an articulated model must cost this much less than one rigid box
@@ -36,6 +36,7 @@ FACE_SEEN_SPAN = 0.6  # an end face is seen when its points span this share of t
 END_BAND_M = 0.4
 MAX_BODY_GAP_M = 1.0
 UNIT_SUPPORT = 0.5
+SEED_RETRY_FRAMES = 20  # a seed that is no vehicle is fitted again after this many frames (the fits cost ~0.1 s)
 
 
 @dataclass(frozen=True)
@@ -51,7 +52,7 @@ class VehicleReport:
     travel_m: float  # tractor reference point's distance from where the vehicle started
 
 
-@dataclass
+@dataclass(eq=False)
 class Seed:
     center_xy: np.ndarray
     first_xy: np.ndarray
@@ -79,7 +80,7 @@ class _Extent:
         return max(value, self.lower_bound)
 
 
-@dataclass
+@dataclass(eq=False)
 class _Track:
     id: int
     model: VehicleModel
@@ -254,15 +255,18 @@ class VehicleTracker:
         for seed, cluster in ready:
             center = seed.center_xy
             track = self._new_track(cluster, seed, float(ground(center[0], center[1])), stamp_s)
+            if track is None:  # no vehicle (a wall, a car, a person): tried again after a while
+                seed.frames = -SEED_RETRY_FRAMES
+                continue
             self.seeds.remove(seed)
-            if track is not None:
-                self.tracks.append(track)
-                reports.append(track.report(True))
+            self.tracks.append(track)
+            reports.append(track.report(True))
         return reports
 
     def _seed_clusters(self, points: np.ndarray, ground) -> list[np.ndarray]:
         """Connected components tall enough to be a vehicle, those closer than ``start_join_m`` joined
-        (a cab and its trailer are apart by up to about 1.5 m), of a vehicle's length."""
+        (a cab and its trailer are apart by up to about 1.5 m), of a vehicle's length and at least
+        ``start_min_width_m`` wide (a wall, or a vehicle seen from one side only, is a plane)."""
         if len(points) == 0:
             return []
         p = self.params
@@ -272,7 +276,7 @@ class VehicleTracker:
         for group in _join_near(parts, p.start_join_m):
             cluster = np.vstack([parts[i] for i in group])
             rect = min_area_rect(cluster[:, :2])
-            if p.start_min_length_m <= rect.length_m <= p.start_max_length_m:
+            if p.start_min_length_m <= rect.length_m <= p.start_max_length_m and rect.width_m >= p.start_min_width_m:
                 out.append(cluster)
         return out
 
