@@ -214,3 +214,15 @@ def test_wall_car_and_pole_are_no_vehicles():
     pole = np.column_stack([np.full(30, 6.0), np.full(30, -3.0), np.linspace(0.2, 6.0, 30)])
     for k in range(3 * PARAMS.articulated.start_frames):
         assert tracker.process(np.vstack([wall, car, pole]), flat, 0.1 * k) == []
+
+
+def test_parameter_patch_reaches_the_tracker_and_keeps_the_vehicles():
+    pipeline = Pipeline(Params(), method="articulated")
+    assert pipeline.params.background.enabled  # the method's preset: the front end of default
+    tracker = pipeline.tracker
+    new = pipeline.update_params({"articulated": {"leave_frames": 4}})
+    assert new.articulated.leave_frames == 4 and pipeline.tracker.params.leave_frames != 4  # at the next frame
+    pipeline.process(Frame(0, {}))
+    assert pipeline.tracker is tracker and pipeline.tracker.params.leave_frames == 4
+    with pytest.raises(ValueError):
+        pipeline.update_params({"articulated": {"leave_frames": 0}})

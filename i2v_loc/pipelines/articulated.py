@@ -16,7 +16,7 @@ from i2v_loc.frame import Frame
 from i2v_loc.geometry import box_poses
 from i2v_loc.params import Params, apply_patch
 from i2v_loc.pipeline import FrameResult, UnitResult, VehicleResult, _check_background, _r, _Timer, method_params
-from i2v_loc.stages.background import BackgroundMap, ProtectedBox
+from i2v_loc.stages.background import BackgroundMap, ProtectedBox, region_box
 from i2v_loc.stages.concatenation import Concatenation, MotionHint
 from i2v_loc.stages.primitives import voxel_centroids
 from i2v_loc.stages.region import Region
@@ -73,8 +73,8 @@ class ArticulatedPipeline:
         self.concatenation = Concatenation(params.concatenation, params.sensors)
         self.region = Region(params.region)
         self.tracker.params = params.articulated  # vehicles survive a parameter change
-        if self.background.params != params.background:
-            self.background = BackgroundMap(params.background, params.region)
+        if self.background.params != params.background or self.background.region_box != region_box(params.region):
+            self.background = BackgroundMap(params.background, params.region)  # else the learned map survives
 
     def _apply_pending(self) -> None:
         with self._lock:
