@@ -41,6 +41,11 @@ class ArticulatedVehicleResult(VehicleResult):
         return out
 
 
+def _turn(rate_rad_s: float, arm_xy: np.ndarray) -> np.ndarray:
+    """Velocity of a point ``arm_xy`` from a centre turning at ``rate_rad_s``."""
+    return rate_rad_s * np.array([-arm_xy[1], arm_xy[0]])
+
+
 class ArticulatedPipeline:
     def __init__(self, params: Params):
         params = method_params(params, "articulated")
@@ -136,23 +141,30 @@ class ArticulatedPipeline:
         return UnitResult(vehicle_id, np.array([center_xy[0], center_xy[1], z]), yaw_deg, box.dims, points)
 
     def _unit_boxes(self):
-        """(centre xy, yaw, box, velocity xy) of every unit of the vehicles of the last frame."""
+        """(centre xy, yaw, box, centre velocity xy, yaw rate, travel) of every unit of the vehicles of the last frame."""
         for r in self._reports:
             s, model = r.state, r.model
             centers = model.box_centers(s.x_m, s.y_m, s.yaw_rad, s.hitch_rad)
-            velocity = s.speed_m_s * np.array([np.cos(s.yaw_rad), np.sin(s.yaw_rad)])
-            yield centers[0], s.yaw_rad, model.tractor, velocity, r.travel_m
+            axle = np.array([s.x_m, s.y_m])
+            axle_velocity = s.speed_m_s * np.array([np.cos(s.yaw_rad), np.sin(s.yaw_rad)])
+            omega = s.speed_m_s * s.curvature_1_m
+            # each box moves with the velocity of its centre (a turning cab's centre moves sideways)
+            yield centers[0], s.yaw_rad, model.tractor, axle_velocity + _turn(omega, centers[0] - axle), omega, r.travel_m
             if model.trailer is not None:
-                yield centers[1], s.yaw_rad + s.hitch_rad, model.trailer, velocity * np.cos(s.hitch_rad), r.travel_m
+                kingpin = model.kingpin_xy(s.x_m, s.y_m, s.yaw_rad)
+                kingpin_velocity = axle_velocity + _turn(omega, kingpin - axle)
+                trailer_rate = omega + s.hitch_rate_rad_s
+                velocity = kingpin_velocity + _turn(trailer_rate, centers[1] - kingpin)
+                yield centers[1], s.yaw_rad + s.hitch_rad, model.trailer, velocity, trailer_rate, r.travel_m
 
     def _protected_boxes(self) -> list[ProtectedBox]:
         min_travel = self._active.background.protect_min_travel_m
         return [ProtectedBox(tuple(c), yaw, box.length_m / 2, box.width_m / 2)
-                for c, yaw, box, _, travel in self._unit_boxes() if travel >= min_travel]
+                for c, yaw, box, _, _, travel in self._unit_boxes() if travel >= min_travel]
 
     def _motion_hints(self) -> list[MotionHint]:
-        return [MotionHint(tuple(c), yaw, box.length_m / 2 + MOTION_MARGIN_M, box.width_m / 2 + MOTION_MARGIN_M, tuple(v))
-                for c, yaw, box, v, _ in self._unit_boxes() if np.hypot(*v) >= MIN_MOTION_SPEED_M_S]
+        return [MotionHint(tuple(c), yaw, box.length_m / 2 + MOTION_MARGIN_M, box.width_m / 2 + MOTION_MARGIN_M, tuple(v), rate)
+                for c, yaw, box, v, rate, _ in self._unit_boxes() if np.hypot(*v) >= MIN_MOTION_SPEED_M_S]
 
     def _count(self, merged, region) -> None:
         self.counters["frames"] += 1
