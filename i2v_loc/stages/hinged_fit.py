@@ -149,9 +149,11 @@ def faces(v: np.ndarray, xy: np.ndarray, z_rel: np.ndarray, model: VehicleModel,
     return _Faces(residual, jac, unit)
 
 
-def fit(points: np.ndarray, prior: Prior, params: ArticulatedParams, iterations: int | None = None) -> Measurement | None:
+def fit(points: np.ndarray, prior: Prior, params: ArticulatedParams, iterations: int | None = None,
+        start_scale_m: float | None = None) -> Measurement | None:
     """The hinged model fitted to ``points`` (N, 3, yard frame) from ``prior`` in at most ``iterations``
-    steps (default ``fit_iterations``); None when fewer than ``fit_min_points`` remain after thinning."""
+    steps (default ``fit_iterations``), the loss scale starting at ``start_scale_m`` (default
+    ``fit_start_scale_m``); None when fewer than ``fit_min_points`` remain after thinning."""
     sample = thin(points, params.fit_max_points)
     if len(sample) < params.fit_min_points:
         return None
@@ -162,7 +164,7 @@ def fit(points: np.ndarray, prior: Prior, params: ArticulatedParams, iterations:
     v = v0.copy()
     for k in range(iterations or params.fit_iterations):
         # graduated: a wide loss first so that faces a prediction misses by decimetres still pull
-        c = max(scale, params.fit_start_scale_m * 0.5 ** k)
+        c = max(scale, (start_scale_m or params.fit_start_scale_m) * 0.5 ** k)
         at = faces(v, xy, z_rel, prior.model, params.fit_top_band_m, prior.trailer_slack_m)
         w = 1.0 / (1.0 + (at.residual / c) ** 2)  # Cauchy weights: iteratively reweighted Gauss-Newton
         jw = at.jacobian * w[:, None]

@@ -26,7 +26,9 @@ from i2v_loc.stages.primitives import grid_labels, min_area_rect, split_by_label
 from i2v_loc.stages.vehicle_model import VehicleModel
 
 START_HITCHES_DEG = (-90.0, -60.0, -30.0, 0.0, 30.0, 60.0, 90.0)
+COARSE_ITERATIONS = 4  # per start hitch; the best is refined with START_ITERATIONS
 START_ITERATIONS = 20
+START_SCALE_M = 0.8  # first loss scale of the start fits (a placed model is off by up to metres)
 DIRECTION_COST_RATIO = 0.8  # one end's fit must cost this much less than the other's to decide the direction
 RIGID_COST_RATIO = 0.7  # an articulated model must cost this much less than one rigid box
 MAX_TRAILER_LENGTH_M = 16.5
@@ -306,20 +308,19 @@ class VehicleTracker:
         out = []
         for model in self.catalogue.values():
             for sign in (1.0, -1.0):
-                best = None
-                for hitch_deg in START_HITCHES_DEG:
-                    prior = _placed(model, rect, sign, np.radians(hitch_deg), ground_z_m,
-                                    MAX_TRAILER_LENGTH_M - model.trailer.length_m)
-                    m = fit(cluster, prior, self.params, iterations=START_ITERATIONS)
-                    if m is not None and (best is None or m.cost < best.cost):
-                        best = m
-                if best is not None:
-                    out.append((model, sign, best))
+                slack = MAX_TRAILER_LENGTH_M - model.trailer.length_m
+                coarse = [fit(cluster, _placed(model, rect, sign, np.radians(h), ground_z_m, slack), self.params,
+                              COARSE_ITERATIONS, START_SCALE_M) for h in START_HITCHES_DEG]
+                coarse = [m for m in coarse if m is not None]
+                if coarse:  # the best start hitch, refined
+                    m = min(coarse, key=lambda m: m.cost)
+                    prior = Prior(m.x_m, m.y_m, m.yaw_rad, m.hitch_rad, model, ground_z_m, slack)
+                    out.append((model, sign, fit(cluster, prior, self.params, START_ITERATIONS, START_SCALE_M)))
         height = float(cluster[:, 2].max() - ground_z_m)
         rigid = VehicleModel.rigid("rigid", rect.length_m, rect.width_m, height)
         for sign in (1.0, -1.0):
             yaw = rect.yaw_rad + (0.0 if sign > 0 else np.pi)
-            m = fit(cluster, Prior(*rect.center_xy, yaw, 0.0, rigid, ground_z_m), self.params, iterations=START_ITERATIONS)
+            m = fit(cluster, Prior(*rect.center_xy, yaw, 0.0, rigid, ground_z_m), self.params, START_ITERATIONS, START_SCALE_M)
             if m is not None:
                 out.append((rigid, sign, m))
         return out
