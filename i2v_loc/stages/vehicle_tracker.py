@@ -28,6 +28,7 @@ from i2v_loc.stages.vehicle_model import VehicleModel
 START_HITCHES_DEG = (-90.0, -60.0, -30.0, 0.0, 30.0, 60.0, 90.0)
 COARSE_ITERATIONS = 4  # per start hitch; the best is refined with START_ITERATIONS
 START_ITERATIONS = 20
+START_SIGMAS = np.array([0.3, 0.3, np.radians(3.0), np.radians(5.0)])  # added to the first fit's covariance
 START_SCALE_M = 0.8  # first loss scale of the start fits (a placed model is off by up to metres)
 DIRECTION_COST_RATIO = 0.8  # one end's fit must cost this much less than the other's to decide the direction
 RIGID_COST_RATIO = 0.7  # an articulated model must cost this much less than one rigid box
@@ -292,7 +293,9 @@ class VehicleTracker:
         model, m = chosen
         if float(np.mean(m.unit >= 0)) < self.params.start_min_explained or not _supported(m, model):
             return None
-        filt = KinematicFilter(m.vector, m.covariance, stamp_s, model.kingpin_behind_axle_m, model.trailer_axle_m,
+        # the seed's points are not de-skewed (no motion known yet): the first pose is a rough one
+        start_cov = m.covariance + np.diag(START_SIGMAS[:len(m.vector)] ** 2)
+        filt = KinematicFilter(m.vector, start_cov, stamp_s, model.kingpin_behind_axle_m, model.trailer_axle_m,
                                model.articulated, self.params)
         widths = [_Extent(model.tractor.width_m, self.params.dimension_window)]
         length = None
