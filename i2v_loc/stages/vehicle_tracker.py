@@ -71,16 +71,17 @@ class _Extent:
     window: int
     values: deque = field(default_factory=deque)
     lower_bound: float = 0.0
+    median: float | None = None
 
     def add(self, value: float) -> None:
         self.values.append(value)
         while len(self.values) > self.window:
             self.values.popleft()
+        self.median = float(np.median(self.values))
 
     @property
     def estimate(self) -> float:
-        value = float(np.median(self.values)) if self.values else self.prior
-        return max(value, self.lower_bound)
+        return max(self.prior if self.median is None else self.median, self.lower_bound)
 
 
 @dataclass(eq=False)
@@ -174,8 +175,8 @@ class VehicleTracker:
         for u, box in enumerate(boxes):
             q = local[u][m.unit == u]
             if len(q) >= 5:
-                low, high = np.percentile(q[:, 1], [2.0, 98.0])
-                span = float(high - low)
+                across = np.sort(q[:, 1])  # 2nd to 98th percentile
+                span = float(across[int(0.98 * (len(q) - 1))] - across[int(0.02 * (len(q) - 1))])
                 if span >= FACE_SEEN_SPAN * box.width_m:  # an end face or both sides: a width seen whole
                     track.widths[u].add(span)
             width = track.widths[u].estimate
