@@ -226,3 +226,23 @@ def test_parameter_patch_reaches_the_tracker_and_keeps_the_vehicles():
     assert pipeline.tracker is tracker and pipeline.tracker.params.leave_frames == 4
     with pytest.raises(ValueError):
         pipeline.update_params({"articulated": {"leave_frames": 0}})
+
+
+def test_without_the_background_map_vehicles_start_at_once():
+    sensor = SensorConfig(name="s1", extrinsics=Extrinsics(x_m=0.0, y_m=-15.0, z_m=4.0))
+    params = Params(sensors=[sensor])
+    pipeline = Pipeline(params, method="articulated")
+    pipeline.update_params({"background": {"enabled": False}})
+    gx, gy = np.meshgrid(np.arange(-30, 30, 0.4), np.arange(-12, 20, 0.4))
+    ground = np.column_stack([gx.ravel(), gy.ravel(), np.zeros(gx.size)])
+    reported = []
+    for t, points, (truth,) in drive([(volvo(), (-8.0, 4.0, 0.0, 0.0))], 0.6, 2.0, 0.0, sensors=((0.0, -15.0, 4.0),)):
+        scan = SensorScan("s1", t, (np.vstack([ground, points]) - [0.0, -15.0, 4.0]).astype(np.float32), None)
+        result = pipeline.process(Frame(int(round(t * 10)), {"s1": scan}))
+        reported.append(len(result.vehicles))
+        assert "background" not in result.latency_ms
+    assert pipeline.background is None
+    assert reported[:PARAMS.articulated.start_frames - 1] == [0] * (PARAMS.articulated.start_frames - 1)
+    assert reported[PARAMS.articulated.start_frames - 1:] == [1] * (len(reported) - PARAMS.articulated.start_frames + 1)
+    with pytest.raises(ValueError):
+        pipeline.save_background("/tmp/never.npz")

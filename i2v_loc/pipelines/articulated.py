@@ -56,7 +56,7 @@ class ArticulatedPipeline:
         self._active = params
         self.counters: Counter = Counter()
         self.tracker = VehicleTracker(params.articulated, params.vehicles)
-        self.background = BackgroundMap(params.background, params.region)
+        self.background: BackgroundMap | None = None
         self._reports: list[VehicleReport] = []
         self._build(params)
 
@@ -78,7 +78,10 @@ class ArticulatedPipeline:
         self.concatenation = Concatenation(params.concatenation, params.sensors)
         self.region = Region(params.region)
         self.tracker.params = params.articulated  # vehicles survive a parameter change
-        if self.background.params != params.background or self.background.region_box != region_box(params.region):
+        if not params.background.enabled:  # the user turned the map off: vehicles start at once
+            self.background = None
+        elif self.background is None or self.background.params != params.background \
+                or self.background.region_box != region_box(params.region):
             self.background = BackgroundMap(params.background, params.region)  # else the learned map survives
 
     def _apply_pending(self) -> None:
@@ -90,10 +93,15 @@ class ArticulatedPipeline:
             self._build(pending)
 
     def save_background(self, path) -> None:
-        self.background.save(path)
+        self._map().save(path)
 
     def load_background(self, path) -> None:
-        self.background.load(path)
+        self._map().load(path)
+
+    def _map(self) -> BackgroundMap:
+        if self.background is None:
+            raise ValueError("the background map is disabled (background.enabled is false)")
+        return self.background
 
     # ----------------------------------------------------------------- processing
 
@@ -103,9 +111,12 @@ class ArticulatedPipeline:
         timer = _Timer()
         merged = self.concatenation.merge(frame.scans)
         timer.lap("concatenation")
-        split = self.background.process(merged.points, self._protected_boxes())
-        timer.lap("background")
-        region = self.region.process(merged.points, split.in_region, split.foreground)
+        if self.background is not None:
+            split = self.background.process(merged.points, self._protected_boxes())
+            timer.lap("background")
+            region = self.region.process(merged.points, split.in_region, split.foreground)
+        else:
+            region = self.region.process(merged.points)
         points = region.points.copy()
         if params.concatenation.motion_interpolation and self._reports:
             self.concatenation.interpolate(points, merged.lag_s[region.index], self._motion_hints())
@@ -114,7 +125,8 @@ class ArticulatedPipeline:
         ground = region.ground.height_at if region.ground else (lambda x, y: 0.0)
         if np.isfinite(merged.stamp_s):
             # no vehicle starts before the background is learned: the yard itself is no vehicle
-            self._reports = self.tracker.process(points, ground, merged.stamp_s, allow_start=self.background.ready)
+            ready = self.background is None or self.background.ready
+            self._reports = self.tracker.process(points, ground, merged.stamp_s, allow_start=ready)
         timer.lap("vehicles")
         vehicles = [self._result(r, ground) for r in self._reports]
         self._count(merged, region)
