@@ -246,3 +246,17 @@ def test_without_the_background_map_vehicles_start_at_once():
     assert reported[PARAMS.articulated.start_frames - 1:] == [1] * (len(reported) - PARAMS.articulated.start_frames + 1)
     with pytest.raises(ValueError):
         pipeline.save_background("/tmp/never.npz")
+
+
+@pytest.mark.parametrize("hitch_deg", [80.0, -85.0])
+def test_vehicle_found_at_a_jackknife_angle(hitch_deg):
+    tracker = VehicleTracker(PARAMS.articulated, PARAMS.vehicles)
+    last = None
+    for t, points, (truth,) in drive([(volvo(), (0.0, 4.0, 0.3, 0.3 + np.radians(hitch_deg)))], 2.0, 0.5, 0.0):
+        reports = tracker.process(points, flat, t)
+        if reports:
+            last = (reports[0], truth)
+    report, truth = last
+    pos, yaw, hitch = errors(report, truth)
+    assert pos < 0.05 and abs(yaw) < 0.5 and abs(hitch) < 0.5
+    assert report.state.jackknife and report.model.name == "volvo_fh"
