@@ -212,6 +212,12 @@ class KinematicFilter:
         self.ukf.x[YAW], self.ukf.x[HITCH] = wrap_rad(self.ukf.x[YAW]), wrap_rad(self.ukf.x[HITCH])
         return True
 
+    def shift_reference(self, forward_m: float) -> None:
+        """Move the reference point ``forward_m`` along the tractor's heading (its model changed)."""
+        yaw = self.ukf.x[YAW]
+        self.ukf.x[X] += forward_m * np.cos(yaw)
+        self.ukf.x[Y] += forward_m * np.sin(yaw)
+
     @property
     def state(self) -> FilterState:
         x = self.ukf.x

@@ -185,9 +185,24 @@ class VehicleTracker:
             self._learn_trailer_length(track, m, local[1], new_boxes[1].width_m)
             new_boxes[1] = replace(new_boxes[1], length_m=track.trailer_length.estimate)
         track.model = model.with_boxes(new_boxes[0], new_boxes[1] if len(new_boxes) > 1 else None)
-        track.model = replace(track.model, trailer_axle_m=self._trailer_axle(track))
+        name = self._type_name(track)
+        if name in self.catalogue and name != track.catalogue_name:
+            self._retype(track, name)
+        track.model = replace(track.model, name=name, trailer_axle_m=self._trailer_axle(track))
         track.filter.trailer_axle_m = track.model.trailer_axle_m
-        track.model = replace(track.model, name=self._type_name(track))
+
+    def _retype(self, track: _Track, name: str) -> None:
+        """The learned sizes match another catalogue vehicle better than the start's: take its
+        figures the points do not measure (tractor front and length, floors, heights, kingpin,
+        trailer front), keep the measured widths and trailer length."""
+        prior = self.catalogue[name]
+        model = track.model
+        tractor = replace(prior.tractor, width_m=model.tractor.width_m)
+        trailer = replace(prior.trailer, width_m=model.trailer.width_m, length_m=model.trailer.length_m)
+        track.model = replace(prior.with_boxes(tractor, trailer), trailer_axle_m=model.trailer_axle_m)
+        track.catalogue_name = name
+        track.filter.kingpin_m = prior.kingpin_behind_axle_m
+        track.filter.shift_reference(model.tractor.front_m - prior.tractor.front_m)  # the cab stays where it is
 
     def _learn_trailer_length(self, track: _Track, m: Measurement, q: np.ndarray, width_m: float) -> None:
         """The rear face: the hindmost of the trailer body's points (within its width and height band,
@@ -292,7 +307,7 @@ class VehicleTracker:
         if chosen is None:
             return None
         model, m = chosen
-        if float(np.mean(m.unit >= 0)) < self.params.start_min_explained or not _supported(m, model):
+        if float(np.mean(m.unit >= 0)) < self.params.start_min_explained or not _supported(m, model, ground_z_m):
             return None
         # the seed's points are not de-skewed (no motion known yet): the first pose is a rough one
         start_cov = m.covariance + np.diag(START_SIGMAS[:len(m.vector)] ** 2)
@@ -352,13 +367,15 @@ class VehicleTracker:
         return chosen[0], chosen[2]
 
 
-def _supported(m: Measurement, model: VehicleModel) -> bool:
-    """Each unit's explained points span at least ``UNIT_SUPPORT`` of its length (a car's side on a
-    trailer's face is no truck)."""
+def _supported(m: Measurement, model: VehicleModel, ground_z_m: float) -> bool:
+    """Each unit's explained points span at least ``UNIT_SUPPORT`` of its length and reach
+    ``UNIT_SUPPORT`` of its height above its floor (a car's side on a trailer's faces is no truck)."""
     boxes = [model.tractor] + ([model.trailer] if model.trailer is not None else [])
+    z_rel = m.points[:, 2] - ground_z_m
     for u, (box, q) in enumerate(zip(boxes, unit_frames(m.points, m.vector, model))):
-        mine = q[m.unit == u]
-        if len(mine) < 3 or np.ptp(mine[:, 0]) < UNIT_SUPPORT * box.length_m:
+        mine = m.unit == u
+        if mine.sum() < 3 or np.ptp(q[mine, 0]) < UNIT_SUPPORT * box.length_m \
+                or z_rel[mine].max() < box.floor_m + UNIT_SUPPORT * box.height_m:
             return False
     return True
 
