@@ -308,6 +308,45 @@ class BackgroundParams(Section):
         return self
 
 
+class ArticulatedParams(Section):
+    """The articulated estimator (method ``articulated``): hinged-model fit, kinematic UKF, vehicle tracks."""
+
+    fit_max_points: int = Field(200, ge=20, le=5000, description="A vehicle's points (voxel centroids of the front end) are thinned evenly to at most this many for the fit")
+    fit_min_points: int = Field(15, ge=3, le=1000, description="Fewer thinned points: no measurement this frame")
+    fit_loss_scale_m: float = Field(0.1, gt=0.0, le=2.0, description="Scale of the Cauchy loss of the point-to-face distances (range noise plus mirrors and panel gaps)")
+    fit_start_scale_m: float = Field(0.2, gt=0.0, le=5.0, description="The loss scale of the first step, halved at each step down to fit_loss_scale_m")
+    fit_iterations: int = Field(5, ge=1, le=100, description="At most this many reweighted Gauss-Newton steps per fit (warm-started)")
+    fit_top_band_m: float = Field(0.25, ge=0.0, le=2.0, description="Points this close to a unit's roof height inside its footprint are roof points")
+    fit_inlier_m: float = Field(0.3, gt=0.0, le=2.0, description="Points this close to a face are explained by the vehicle")
+    fit_noise_floor_m: float = Field(0.02, gt=0.0, le=1.0, description="Lower bound of the point noise in the fit's covariance")
+    fit_position_floor_m: float = Field(0.03, ge=0.0, le=2.0, description="Added to the fit's position sigma (model error, correlated points)")
+    fit_angle_floor_deg: float = Field(0.3, ge=0.0, le=20.0, description="Added to the fit's yaw and hitch sigma")
+    gate_margin_m: float = Field(1.0, gt=0.0, le=5.0, description="Points within this of a vehicle's predicted boxes are its points")
+    innovation_gate: float = Field(25.0, gt=0.0, description="A fit whose Mahalanobis distance squared from the prediction exceeds this is not used")
+    reset_after_rejections: int = Field(3, ge=1, le=100, description="After this many gated-out fits in a row the filter restarts its pose and hitch from the fit")
+    accel_sigma_m_s2: float = Field(0.5, gt=0.0, le=20.0, description="Process noise: longitudinal acceleration")
+    curvature_rate_sigma_1_m_s: float = Field(0.03, gt=0.0, le=5.0, description="Process noise: rate of change of the path curvature")
+    position_sigma_m_s: float = Field(0.05, ge=0.0, le=5.0, description="Process noise: position (slip, model error)")
+    yaw_sigma_deg_s: float = Field(0.2, ge=0.0, le=90.0, description="Process noise: tractor yaw beyond the curvature model")
+    hitch_sigma_deg_s: float = Field(0.5, ge=0.0, le=90.0, description="Process noise: hitch angle beyond the trailer kinematics")
+    jackknife_hitch_deg: float = Field(60.0, gt=0.0, le=180.0, description="Jackknife warning above this |hitch angle|")
+    jackknife_rate_deg_s: float = Field(15.0, gt=0.0, le=360.0, description="or above this |hitch angle rate|")
+    start_frames: int = Field(3, ge=1, le=100, description="A new vehicle is reported after its cluster persisted this many frames")
+    start_voxel_m: float = Field(0.8, ge=0.1, le=3.0, description="Voxel of the connected components that seed new vehicles (bridges the gap between cab and trailer)")
+    start_join_m: float = Field(2.0, ge=0.0, le=10.0, description="Seed components closer than this are one seed (a cab and its trailer)")
+    start_max_step_m: float = Field(1.5, gt=0.0, le=10.0, description="A seed cluster persists when its centre moved at most this since the last frame")
+    start_min_length_m: float = Field(3.0, gt=0.0, le=30.0, description="Seed clusters shorter than this are not vehicles")
+    start_max_length_m: float = Field(25.0, gt=0.0, le=60.0, description="nor longer than this")
+    start_min_width_m: float = Field(1.0, ge=0.0, le=5.0, description="nor narrower than this (a wall is a plane; a vehicle starts once an end, its roof or both sides are seen)")
+    start_min_height_m: float = Field(1.2, gt=0.0, le=5.0, description="nor lower than this above the ground")
+    rigid_min_length_m: float = Field(5.5, gt=0.0, le=30.0, description="A rigid vehicle (bus, rigid truck, van) is at least this long (cars are not reported)")
+    start_min_explained: float = Field(0.8, gt=0.0, le=1.0, description="A seed is a vehicle when the best model explains this share of its points")
+    leave_frames: int = Field(10, ge=1, le=1000, description="A vehicle without points for this many frames has left")
+    learn_dimensions: bool = Field(True, description="Estimate the units' lengths and widths from their points (the catalogue is the prior)")
+    dimension_window: int = Field(50, ge=3, le=1000, description="Per-frame extent observations kept per dimension")
+    type_max_error_m: float = Field(1.0, gt=0.0, le=10.0, description="The type is the catalogue vehicle whose lengths are nearest, if within this; else unknown")
+
+
 class Params(Section):
     """All parameters of i2v-loc."""
 
@@ -322,6 +361,7 @@ class Params(Section):
     centroid: CentroidParams = Field(default_factory=CentroidParams)
     tracking: TrackingParams = Field(default_factory=TrackingParams)
     orientation: OrientationParams = Field(default_factory=OrientationParams)
+    articulated: ArticulatedParams = Field(default_factory=ArticulatedParams)
 
     @model_validator(mode="after")
     def _check_names(self) -> "Params":

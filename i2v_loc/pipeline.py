@@ -36,9 +36,12 @@ from i2v_loc.stages.tracking import Detection, Tracker, Track
 # voxel-grid connected components, the ground refitted once a second, lost tracks re-acquired
 # with their ID and yaw, truck + trailer pairs reported from their first frame.
 # A preset fills only the fields the given parameters leave at the model default (``method_params``).
-METHODS = ("paper", "default")
+# "articulated": the front end of "default", then one hinged-model fit and kinematic UKF per
+# vehicle (i2v_loc/pipelines/articulated.py); ``Pipeline(params, "articulated")`` builds that pipeline.
+METHODS = ("paper", "default", "articulated")
 METHOD_PATCHES = {
     "paper": {},
+    "articulated": {"background": {"enabled": True}, "region": {"ground_refit_frames": 10}},
     "default": {
         "background": {"enabled": True},
         "clustering": {"algorithm": "grid", "hitch_range_deg": 90.0},
@@ -184,6 +187,13 @@ class _Timer:
 
 
 class Pipeline:
+    def __new__(cls, params: Params, method: str = "paper"):
+        if method == "articulated":
+            from i2v_loc.pipelines.articulated import ArticulatedPipeline
+
+            return ArticulatedPipeline(params)
+        return super().__new__(cls)
+
     def __init__(self, params: Params, method: str = "paper"):
         params = method_params(params, method)
         self.method = method

@@ -35,7 +35,8 @@ class MotionHint:
     yaw_rad: float
     half_length_m: float
     half_width_m: float
-    velocity_xy: tuple[float, float]
+    velocity_xy: tuple[float, float]  # of the box centre
+    yaw_rate_rad_s: float = 0.0  # the box also turns about its centre
 
 
 @dataclass
@@ -163,5 +164,8 @@ class Concatenation:
             c, s = np.cos(hint.yaw_rad), np.sin(hint.yaw_rad)
             along, across = d[:, 0] * c + d[:, 1] * s, -d[:, 0] * s + d[:, 1] * c
             inside = (np.abs(along) <= hint.half_length_m) & (np.abs(across) <= hint.half_width_m) & ~moved
-            points[inside, :2] += lag_s[inside, None] * np.asarray(hint.velocity_xy, dtype=np.float32)
+            velocity = np.asarray(hint.velocity_xy, dtype=np.float32)
+            if hint.yaw_rate_rad_s:
+                velocity = velocity + np.float32(hint.yaw_rate_rad_s) * np.column_stack([-d[inside, 1], d[inside, 0]])
+            points[inside, :2] += lag_s[inside, None] * velocity
             moved |= inside

@@ -1,0 +1,1 @@
+"""Pipelines composed from the stages of ``i2v_loc.stages`` (composition only, no stage logic)."""

@@ -1,0 +1,187 @@
+"""The ``articulated`` method: the front end (merge, background, region) then one hinged-model fit
+and one kinematic UKF per vehicle (docs/pipeline.md, Articulated estimator). Same interface and
+state line as ``i2v_loc.pipeline.Pipeline``; each vehicle adds ``kind``, ``hitch_std_deg``,
+``jackknife`` and ``speed_m_s``.
+"""
+
+from __future__ import annotations
+
+import threading
+from collections import Counter
+from dataclasses import dataclass
+
+import numpy as np
+
+from i2v_loc.frame import Frame
+from i2v_loc.geometry import box_poses
+from i2v_loc.params import Params, apply_patch
+from i2v_loc.pipeline import FrameResult, UnitResult, VehicleResult, _check_background, _r, _Timer, method_params
+from i2v_loc.stages.background import BackgroundMap, ProtectedBox, region_box
+from i2v_loc.stages.concatenation import Concatenation, MotionHint
+from i2v_loc.stages.primitives import voxel_centroids
+from i2v_loc.stages.region import Region
+from i2v_loc.stages.vehicle_model import Box
+from i2v_loc.stages.vehicle_tracker import VehicleReport, VehicleTracker
+
+MOTION_MARGIN_M = 0.5
+MIN_MOTION_SPEED_M_S = 0.1
+
+
+@dataclass
+class ArticulatedVehicleResult(VehicleResult):
+    kind: str = "articulated"  # or rigid
+    hitch_std_deg: float | None = None
+    jackknife: bool = False
+    speed_m_s: float = 0.0
+
+    def to_json(self) -> dict:
+        out = super().to_json()
+        out.update({"kind": self.kind, "speed_m_s": _r(self.speed_m_s, 3), "jackknife": self.jackknife,
+                    "hitch_std_deg": None if self.hitch_std_deg is None else _r(self.hitch_std_deg, 3)})
+        return out
+
+
+def _turn(rate_rad_s: float, arm_xy: np.ndarray) -> np.ndarray:
+    """Velocity of a point ``arm_xy`` from a centre turning at ``rate_rad_s``."""
+    return rate_rad_s * np.array([-arm_xy[1], arm_xy[0]])
+
+
+class ArticulatedPipeline:
+    def __init__(self, params: Params):
+        params = method_params(params, "articulated")
+        _check_background(params)
+        self.method = "articulated"
+        self._lock = threading.Lock()
+        self._pending: Params | None = None
+        self._active = params
+        self.counters: Counter = Counter()
+        self.tracker = VehicleTracker(params.articulated, params.vehicles)
+        self.background: BackgroundMap | None = None
+        self._reports: list[VehicleReport] = []
+        self._build(params)
+
+    # ----------------------------------------------------------------- parameters (as Pipeline)
+
+    @property
+    def params(self) -> Params:
+        with self._lock:
+            return self._pending or self._active
+
+    def update_params(self, patch: dict) -> Params:
+        with self._lock:
+            new = apply_patch(self._pending or self._active, patch)
+            _check_background(new)
+            self._pending = new
+        return new
+
+    def _build(self, params: Params) -> None:
+        self.concatenation = Concatenation(params.concatenation, params.sensors)
+        self.region = Region(params.region)
+        self.tracker.params = params.articulated  # vehicles survive a parameter change
+        if not params.background.enabled:  # the user turned the map off: vehicles start at once
+            self.background = None
+        elif self.background is None or self.background.params != params.background \
+                or self.background.region_box != region_box(params.region):
+            self.background = BackgroundMap(params.background, params.region)  # else the learned map survives
+
+    def _apply_pending(self) -> None:
+        with self._lock:
+            pending, self._pending = self._pending, None
+            if pending is not None:
+                self._active = pending
+        if pending is not None:
+            self._build(pending)
+
+    def save_background(self, path) -> None:
+        self._map().save(path)
+
+    def load_background(self, path) -> None:
+        self._map().load(path)
+
+    def _map(self) -> BackgroundMap:
+        if self.background is None:
+            raise ValueError("the background map is disabled (background.enabled is false)")
+        return self.background
+
+    # ----------------------------------------------------------------- processing
+
+    def process(self, frame: Frame) -> FrameResult:
+        self._apply_pending()
+        params = self._active
+        timer = _Timer()
+        merged = self.concatenation.merge(frame.scans)
+        timer.lap("concatenation")
+        if self.background is not None:
+            split = self.background.process(merged.points, self._protected_boxes())
+            timer.lap("background")
+            region = self.region.process(merged.points, split.in_region, split.foreground)
+        else:
+            region = self.region.process(merged.points)
+        points = region.points.copy()
+        if params.concatenation.motion_interpolation and self._reports:
+            self.concatenation.interpolate(points, merged.lag_s[region.index], self._motion_hints())
+        points, _ = voxel_centroids(points, params.concatenation.voxel_size_m)
+        timer.lap("region")
+        ground = region.ground.height_at if region.ground else (lambda x, y: 0.0)
+        if np.isfinite(merged.stamp_s):
+            # no vehicle starts before the background is learned: the yard itself is no vehicle
+            ready = self.background is None or self.background.ready
+            self._reports = self.tracker.process(points, ground, merged.stamp_s, allow_start=ready)
+        timer.lap("vehicles")
+        vehicles = [self._result(r, ground) for r in self._reports]
+        self._count(merged, region)
+        return FrameResult(frame.index, merged.stamp_s, timer.total(), merged.faults,
+                           {k: v for k, v in merged.dropped.items() if k != "missing"},
+                           [], vehicles, region.ground_found, len(merged.points), points)
+
+    def _result(self, report: VehicleReport, ground) -> ArticulatedVehicleResult:
+        s, model = report.state, report.model
+        tractor_xy, trailer_xy = model.box_centers(s.x_m, s.y_m, s.yaw_rad, s.hitch_rad)
+        truck = self._unit(report.id, tractor_xy, s.yaw_rad, model.tractor, report.tractor_points, ground)
+        if model.trailer is None:
+            return ArticulatedVehicleResult(report.id, model.name, truck, None, None, None, "rigid", None, False, s.speed_m_s)
+        trailer = self._unit(report.id, trailer_xy, s.yaw_rad + s.hitch_rad, model.trailer, report.trailer_points, ground)
+        t_truck, t_trailer = box_poses([truck.center, trailer.center], [truck.yaw_deg, trailer.yaw_deg])
+        return ArticulatedVehicleResult(report.id, model.name, truck, trailer, float(np.degrees(s.hitch_rad)),
+                                        np.linalg.inv(t_trailer) @ t_truck, "articulated",
+                                        float(np.degrees(s.hitch_std_rad)), s.jackknife, s.speed_m_s)
+
+    @staticmethod
+    def _unit(vehicle_id: int, center_xy: np.ndarray, yaw_rad: float, box: Box, points: int, ground) -> UnitResult:
+        z = ground(*center_xy) + box.floor_m + box.height_m / 2
+        yaw_deg = float(np.degrees(np.arctan2(np.sin(yaw_rad), np.cos(yaw_rad))))
+        return UnitResult(vehicle_id, np.array([center_xy[0], center_xy[1], z]), yaw_deg, box.dims, points)
+
+    def _unit_boxes(self):
+        """(centre xy, yaw, box, centre velocity xy, yaw rate, travel) of every unit of the vehicles of the last frame."""
+        for r in self._reports:
+            s, model = r.state, r.model
+            centers = model.box_centers(s.x_m, s.y_m, s.yaw_rad, s.hitch_rad)
+            axle = np.array([s.x_m, s.y_m])
+            axle_velocity = s.speed_m_s * np.array([np.cos(s.yaw_rad), np.sin(s.yaw_rad)])
+            omega = s.speed_m_s * s.curvature_1_m
+            # each box moves with the velocity of its centre (a turning cab's centre moves sideways)
+            yield centers[0], s.yaw_rad, model.tractor, axle_velocity + _turn(omega, centers[0] - axle), omega, r.travel_m
+            if model.trailer is not None:
+                kingpin = model.kingpin_xy(s.x_m, s.y_m, s.yaw_rad)
+                kingpin_velocity = axle_velocity + _turn(omega, kingpin - axle)
+                trailer_rate = omega + s.hitch_rate_rad_s
+                velocity = kingpin_velocity + _turn(trailer_rate, centers[1] - kingpin)
+                yield centers[1], s.yaw_rad + s.hitch_rad, model.trailer, velocity, trailer_rate, r.travel_m
+
+    def _protected_boxes(self) -> list[ProtectedBox]:
+        min_travel = self._active.background.protect_min_travel_m
+        return [ProtectedBox(tuple(c), yaw, box.length_m / 2, box.width_m / 2)
+                for c, yaw, box, _, _, travel in self._unit_boxes() if travel >= min_travel]
+
+    def _motion_hints(self) -> list[MotionHint]:
+        return [MotionHint(tuple(c), yaw, box.length_m / 2 + MOTION_MARGIN_M, box.width_m / 2 + MOTION_MARGIN_M, tuple(v), rate)
+                for c, yaw, box, v, rate, _ in self._unit_boxes() if np.hypot(*v) >= MIN_MOTION_SPEED_M_S]
+
+    def _count(self, merged, region) -> None:
+        self.counters["frames"] += 1
+        for reason, n in merged.dropped.items():
+            self.counters[reason] += n
+        if not region.ground_found:
+            self.counters["no_ground"] += 1
+        self.counters["fits_rejected"] = self.tracker.rejected

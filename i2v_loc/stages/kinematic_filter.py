@@ -1,0 +1,227 @@
+"""The articulated estimator's filter: one unscented Kalman filter (filterpy) per vehicle over the
+one-trailer, off-axle-hitch kinematics (docs/pipeline.md, Articulated estimator).
+
+State [x, y, ψ1, v, κ, γ]: tractor rear-axle position, tractor yaw, signed speed (reversing is
+v < 0, never a turned heading), path curvature (yaw rate ω = v κ, so a standing vehicle keeps its
+yaw) and hitch angle γ = ψ2 − ψ1. With the kingpin M behind the rear axle and L2 from the kingpin
+to the trailer's axle, the trailer's yaw rate is ψ2' = (v sin(ψ1 − ψ2) − M ω cos(ψ1 − ψ2)) / L2,
+so γ' = −(v sin γ + M ω cos γ) / L2 − ω. A rigid vehicle keeps γ = 0 (no noise, not measured).
+Measurement: the hinged fit's (x, y, ψ1, γ) with its covariance.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from filterpy.kalman import MerweScaledSigmaPoints, UnscentedKalmanFilter
+
+from i2v_loc.geometry import wrap_rad
+from i2v_loc.params import ArticulatedParams
+
+X, Y, YAW, SPEED, CURVATURE, HITCH = range(6)
+ANGLES_X = [YAW, HITCH]
+INITIAL_SPEED_SIGMA_M_S = 3.0
+INITIAL_CURVATURE_SIGMA_1_M = 0.05
+MAX_STEP_S = 0.1  # the kinematics are integrated in midpoint steps no longer than this
+
+
+def hitch_rate(v: float, curvature: float, hitch: float, kingpin_m: float, trailer_axle_m: float):
+    """γ' of the one-trailer kinematics (works on arrays)."""
+    omega = v * curvature
+    return -(v * np.sin(hitch) + kingpin_m * omega * np.cos(hitch)) / trailer_axle_m - omega
+
+
+def propagate(state: np.ndarray, dt_s: float, kingpin_m: float, trailer_axle_m: float, articulated: bool) -> np.ndarray:
+    """The state (6,) or states (k, 6) ``dt_s`` later (midpoint steps)."""
+    s = np.array(state, dtype=float)
+    steps = max(1, int(np.ceil(abs(dt_s) / MAX_STEP_S)))
+    h = dt_s / steps
+    for _ in range(steps):
+        s = s + h * _derivative(s + 0.5 * h * _derivative(s, kingpin_m, trailer_axle_m, articulated), kingpin_m, trailer_axle_m, articulated)
+    s[..., YAW], s[..., HITCH] = _wrap(s[..., YAW]), _wrap(s[..., HITCH])
+    return s
+
+
+def _derivative(s: np.ndarray, kingpin_m: float, trailer_axle_m: float, articulated: bool) -> np.ndarray:
+    v, kappa, yaw, hitch = s[..., SPEED], s[..., CURVATURE], s[..., YAW], s[..., HITCH]
+    d = np.zeros_like(s)
+    d[..., X], d[..., Y], d[..., YAW] = v * np.cos(yaw), v * np.sin(yaw), v * kappa
+    if articulated:
+        d[..., HITCH] = hitch_rate(v, kappa, hitch, kingpin_m, trailer_axle_m)
+    return d
+
+
+def _sqrt(p: np.ndarray) -> np.ndarray:
+    """Upper factor U with U^T U = p; a covariance that lost definiteness to rounding is clipped."""
+    try:
+        return np.linalg.cholesky(p).T
+    except np.linalg.LinAlgError:
+        w, v = np.linalg.eigh((p + p.T) / 2)
+        return (v * np.sqrt(np.clip(w, 1e-12, None))).T
+
+
+def _unscented_transform(sigmas, wm, wc, noise_cov=None, mean_fn=None, residual_fn=None):
+    """filterpy's unscented transform with the residuals taken as one array."""
+    x = mean_fn(sigmas, wm)
+    y = residual_fn(sigmas, x[None, :])
+    p = (y.T * wc) @ y
+    return x, p + noise_cov if noise_cov is not None else p
+
+
+class _BatchUKF(UnscentedKalmanFilter):
+    """filterpy's UKF with whole-array sigma-point propagation, transform and cross variance
+    (filterpy calls them once per sigma point)."""
+
+    def compute_process_sigmas(self, dt, fx=None, **fx_args):
+        self.sigmas_f = (fx or self.fx)(self.points_fn.sigma_points(self.x, self.P), dt)
+
+    def cross_variance(self, x, z, sigmas_f, sigmas_h):
+        dx = self.residual_x(sigmas_f, x[None, :])
+        dz = self.residual_z(np.asarray(sigmas_h), z[None, :])
+        return (dx.T * self.Wc) @ dz
+
+    def predict(self, dt=None, UT=None, fx=None, **fx_args):
+        super().predict(dt, UT or _unscented_transform, fx, **fx_args)
+
+    def update(self, z, R=None, UT=None, hx=None, **hx_args):
+        super().update(z, R, UT or _unscented_transform, hx, **hx_args)
+
+
+def _wrap(angle):
+    return (angle + np.pi) % (2 * np.pi) - np.pi
+
+
+def _residual_x(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    d = np.subtract(a, b)
+    d[..., ANGLES_X] = _wrap(d[..., ANGLES_X])
+    return d
+
+
+def _mean_x(sigmas: np.ndarray, weights: np.ndarray) -> np.ndarray:
+    mean = weights @ sigmas
+    for i in ANGLES_X:
+        mean[i] = np.arctan2(weights @ np.sin(sigmas[:, i]), weights @ np.cos(sigmas[:, i]))
+    return mean
+
+
+def _residual_z(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    d = np.subtract(a, b)
+    d[..., 2:] = _wrap(d[..., 2:])
+    return d
+
+
+def _mean_z(sigmas: np.ndarray, weights: np.ndarray) -> np.ndarray:
+    mean = weights @ sigmas
+    for i in range(2, sigmas.shape[1]):
+        mean[i] = np.arctan2(weights @ np.sin(sigmas[:, i]), weights @ np.cos(sigmas[:, i]))
+    return mean
+
+
+@dataclass(frozen=True)
+class FilterState:
+    x_m: float
+    y_m: float
+    yaw_rad: float
+    speed_m_s: float
+    curvature_1_m: float
+    hitch_rad: float
+    covariance: np.ndarray  # (6, 6)
+    hitch_rate_rad_s: float
+    jackknife: bool
+
+    @property
+    def hitch_std_rad(self) -> float:
+        return float(np.sqrt(max(self.covariance[HITCH, HITCH], 0.0)))
+
+
+class KinematicFilter:
+    """One vehicle's UKF. ``predict(stamp)`` then ``update(z, R)``; ``state`` after either."""
+
+    def __init__(self, z: np.ndarray, r: np.ndarray, stamp_s: float, kingpin_m: float, trailer_axle_m: float,
+                 articulated: bool, params: ArticulatedParams, speed_m_s: float = 0.0):
+        self.params = params
+        self.articulated = articulated
+        self.kingpin_m, self.trailer_axle_m = kingpin_m, trailer_axle_m
+        self.stamp_s = stamp_s
+        n_z = 4 if articulated else 3
+        points = MerweScaledSigmaPoints(6, alpha=0.3, beta=2.0, kappa=0.0, sqrt_method=_sqrt)
+        self.ukf = _BatchUKF(6, n_z, 0.1, self._hx, self._fx, points, x_mean_fn=_mean_x,
+                                         z_mean_fn=_mean_z, residual_x=_residual_x, residual_z=_residual_z)
+        x = np.zeros(6)
+        x[[X, Y, YAW]] = z[:3]
+        x[SPEED] = speed_m_s
+        x[HITCH] = z[3] if articulated else 0.0
+        p = np.zeros((6, 6))
+        p[:3, :3] = r[:3, :3]
+        p[SPEED, SPEED] = INITIAL_SPEED_SIGMA_M_S ** 2
+        p[CURVATURE, CURVATURE] = INITIAL_CURVATURE_SIGMA_1_M ** 2
+        p[HITCH, HITCH] = r[3, 3] if articulated else 1e-12
+        if articulated:
+            p[:3, HITCH] = p[HITCH, :3] = r[:3, 3]
+        self.ukf.x, self.ukf.P = x, p
+        self.rejected = 0  # measurements outside the innovation gate
+        self._in_a_row = 0
+
+    def _reset(self, z: np.ndarray, r: np.ndarray) -> None:
+        n = len(z)
+        idx = [X, Y, YAW, HITCH][:n]
+        self.ukf.x[idx] = z
+        p = np.diag(np.diag(self.ukf.P)).copy()
+        p[np.ix_(idx, idx)] = r
+        p[SPEED, SPEED] = max(p[SPEED, SPEED], INITIAL_SPEED_SIGMA_M_S ** 2)
+        p[CURVATURE, CURVATURE] = max(p[CURVATURE, CURVATURE], INITIAL_CURVATURE_SIGMA_1_M ** 2)
+        self.ukf.P = p
+        self._in_a_row = 0
+
+    def _fx(self, x: np.ndarray, dt: float) -> np.ndarray:
+        return propagate(x, dt, self.kingpin_m, self.trailer_axle_m, self.articulated)
+
+    def _hx(self, x: np.ndarray) -> np.ndarray:
+        return x[[X, Y, YAW, HITCH]] if self.articulated else x[:3]
+
+    def _q(self, dt_s: float) -> np.ndarray:
+        p = self.params
+        dt = max(dt_s, 1e-3)
+        sig = np.array([p.position_sigma_m_s, p.position_sigma_m_s, np.radians(p.yaw_sigma_deg_s), p.accel_sigma_m_s2,
+                        p.curvature_rate_sigma_1_m_s, np.radians(p.hitch_sigma_deg_s) if self.articulated else 0.0])
+        return np.diag(sig ** 2 * dt) + np.eye(6) * 1e-12
+
+    def predict(self, stamp_s: float) -> FilterState:
+        dt = stamp_s - self.stamp_s if np.isfinite(stamp_s) else 0.1
+        if dt > 0:
+            self.ukf.Q = self._q(dt)
+            self.ukf.predict(dt=dt)
+            self.stamp_s = stamp_s
+        return self.state
+
+    def update(self, z: np.ndarray, r: np.ndarray) -> bool:
+        """Fuse one fit; False (state unchanged) when it lies outside the innovation gate. After
+        ``reset_after_rejections`` rejections in a row the fits are right and the prediction is not:
+        the pose and hitch restart from the fit (speed and curvature kept, their variance reset)."""
+        x, p = self.ukf.x.copy(), self.ukf.P.copy()
+        self.ukf.update(np.asarray(z, dtype=float), R=r)
+        if self.ukf.mahalanobis ** 2 > self.params.innovation_gate:
+            self.ukf.x, self.ukf.P = x, p
+            self.rejected += 1
+            self._in_a_row += 1
+            if self._in_a_row >= self.params.reset_after_rejections:
+                self._reset(z, r)
+            return False
+        self._in_a_row = 0
+        self.ukf.x[YAW], self.ukf.x[HITCH] = wrap_rad(self.ukf.x[YAW]), wrap_rad(self.ukf.x[HITCH])
+        return True
+
+    def shift_reference(self, forward_m: float) -> None:
+        """Move the reference point ``forward_m`` along the tractor's heading (its model changed)."""
+        yaw = self.ukf.x[YAW]
+        self.ukf.x[X] += forward_m * np.cos(yaw)
+        self.ukf.x[Y] += forward_m * np.sin(yaw)
+
+    @property
+    def state(self) -> FilterState:
+        x = self.ukf.x
+        rate = float(hitch_rate(x[SPEED], x[CURVATURE], x[HITCH], self.kingpin_m, self.trailer_axle_m)) if self.articulated else 0.0
+        jackknife = self.articulated and (abs(x[HITCH]) > np.radians(self.params.jackknife_hitch_deg)
+                                          or abs(rate) > np.radians(self.params.jackknife_rate_deg_s))
+        return FilterState(*(float(v) for v in x), self.ukf.P.copy(), rate, bool(jackknife))

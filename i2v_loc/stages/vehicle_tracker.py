@@ -1,0 +1,449 @@
+"""The articulated estimator's vehicle tracks: per vehicle gate -> hinged fit -> kinematic UKF;
+unclaimed points seed new vehicles (docs/pipeline.md, Articulated estimator).
+
+A new vehicle starts from a connected component of the right size (length, height) that persists
+for ``start_frames`` frames; its model (catalogue vehicle, or one rigid box of the measured size),
+its direction (tractor ahead) and hitch come from fitting every hypothesis to its points and
+keeping the best explained; the motion decides the direction only when both ends fit alike. A
+vehicle leaves after ``leave_frames`` frames without points. The trailer's length and the units'
+widths are re-estimated from the points seen in each unit's frame (the catalogue is the prior).
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from collections.abc import Callable
+from dataclasses import dataclass, field, replace
+from itertools import count
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from i2v_loc.params import ArticulatedParams, VehicleConfig
+from i2v_loc.stages.hinged_fit import Measurement, Prior, fit
+from i2v_loc.stages.kinematic_filter import FilterState, KinematicFilter
+from i2v_loc.stages.primitives import grid_labels, min_area_rect, split_by_label
+from i2v_loc.stages.vehicle_model import VehicleModel
+
+START_HITCHES_DEG = (-90.0, -60.0, -30.0, 0.0, 30.0, 60.0, 90.0)
+COARSE_ITERATIONS = 4  # per start hitch; the best is refined with START_ITERATIONS
+START_ITERATIONS = 20
+START_SIGMAS = np.array([0.3, 0.3, np.radians(3.0), np.radians(5.0)])  # added to the first fit's covariance
+START_SCALE_M = 0.8  # first loss scale of the start fits (a placed model is off by up to metres)
+DIRECTION_COST_RATIO = 0.8  # one end's fit must cost this much less than the other's to decide the direction
+RIGID_COST_RATIO = 0.7  # an articulated model must cost this much less than one rigid box
+MAX_TRAILER_LENGTH_M = 16.5
+LENGTH_CONVERGED_OBSERVATIONS = 5
+SETTLED_SLACK_M = 0.5
+FACE_SEEN_SPAN = 0.6  # an end face is seen when its points span this share of the unit's width
+END_BAND_M = 0.4
+MAX_BODY_GAP_M = 1.0
+UNIT_SUPPORT = 0.5
+SEED_RETRY_FRAMES = 20  # a seed that is no vehicle is fitted again after this many frames (the fits cost ~0.1 s)
+
+
+@dataclass(frozen=True)
+class VehicleReport:
+    """What the tracker says about one vehicle in one frame."""
+
+    id: int
+    model: VehicleModel
+    state: FilterState
+    tractor_points: int
+    trailer_points: int
+    measured: bool  # a fit was fused this frame
+    travel_m: float  # tractor reference point's distance from where the vehicle started
+
+
+@dataclass(eq=False)
+class Seed:
+    center_xy: np.ndarray
+    first_xy: np.ndarray
+    frames: int = 1
+    seen: bool = True
+
+
+@dataclass
+class _Extent:
+    """Per-frame observations of one dimension; the estimate is their median (the prior before any)."""
+
+    prior: float
+    window: int
+    values: deque = field(default_factory=deque)
+    lower_bound: float = 0.0
+    median: float | None = None
+
+    def add(self, value: float) -> None:
+        self.values.append(value)
+        while len(self.values) > self.window:
+            self.values.popleft()
+        self.median = float(np.median(self.values))
+
+    @property
+    def estimate(self) -> float:
+        return max(self.prior if self.median is None else self.median, self.lower_bound)
+
+
+@dataclass(eq=False)
+class _Track:
+    id: int
+    model: VehicleModel
+    filter: KinematicFilter
+    catalogue_name: str
+    trailer_length: _Extent | None
+    widths: list[_Extent]
+    missed: int = 0
+    last: Measurement | None = None
+    first_xy: np.ndarray = field(default_factory=lambda: np.zeros(2))
+    ground_z_m: float = 0.0  # under the vehicle, this frame
+
+    def report(self, measured: bool) -> VehicleReport:
+        s = self.filter.state
+        n0 = int(np.sum(self.last.unit == 0)) if measured else 0
+        n1 = int(np.sum(self.last.unit == 1)) if measured else 0
+        travel = float(np.hypot(s.x_m - self.first_xy[0], s.y_m - self.first_xy[1]))
+        return VehicleReport(self.id, self.model, s, n0, n1, measured, travel)
+
+
+class VehicleTracker:
+    def __init__(self, params: ArticulatedParams, catalogue: dict[str, VehicleConfig]):
+        self.params = params
+        self.catalogue = {name: VehicleModel.from_config(name, v) for name, v in catalogue.items()}
+        self.tracks: list[_Track] = []
+        self.seeds: list[Seed] = []
+        self._ids = count(1)
+        self.rejected = 0  # fits outside a filter's innovation gate
+
+    # ----------------------------------------------------------------- per frame
+
+    def process(self, points: np.ndarray, ground: Callable[[float, float], float], stamp_s: float,
+                allow_start: bool = True) -> list[VehicleReport]:
+        """``points`` (N, 3): the foreground (off the ground and the background) in the yard frame;
+        ``ground(x, y)``: the ground's height there."""
+        priors = [self._prior(t, stamp_s, ground) for t in self.tracks]
+        owner = self._claim(points, priors)
+        reports = []
+        for i, (track, prior) in enumerate(zip(self.tracks, priors)):
+            reports.append(self._step(track, prior, points[owner == i]))
+        self.tracks = [t for t in self.tracks if t.missed < self.params.leave_frames]
+        reports = [r for r in reports if any(t.id == r.id for t in self.tracks)]
+        if allow_start:
+            reports += self._start(points[owner < 0], ground, stamp_s)
+        return reports
+
+    def _prior(self, track: _Track, stamp_s: float, ground) -> Prior:
+        s = track.filter.predict(stamp_s)
+        slack = 0.0
+        if track.model.trailer is not None and track.trailer_length is not None:
+            settled = len(track.trailer_length.values) >= LENGTH_CONVERGED_OBSERVATIONS
+            slack = SETTLED_SLACK_M if settled else max(MAX_TRAILER_LENGTH_M - track.model.trailer.length_m, SETTLED_SLACK_M)
+        return Prior(s.x_m, s.y_m, s.yaw_rad, s.hitch_rad, track.model, float(ground(s.x_m, s.y_m)), slack)
+
+    def _claim(self, points: np.ndarray, priors: list[Prior]) -> np.ndarray:
+        """Index of the track whose predicted boxes (grown by the gate margin) are nearest each point; -1 none."""
+        owner = np.full(len(points), -1, dtype=np.int64)
+        best = np.full(len(points), np.inf)
+        margin = self.params.gate_margin_m
+        for i, prior in enumerate(priors):
+            d = box_distance(points, prior)
+            take = (d <= margin) & (d < best)
+            owner[take], best[take] = i, d[take]
+        return owner
+
+    def _step(self, track: _Track, prior: Prior, points: np.ndarray) -> VehicleReport:
+        track.ground_z_m = prior.ground_z_m
+        m = fit(points, prior, self.params) if len(points) else None
+        measured = False
+        if m is not None:
+            measured = track.filter.update(m.vector, m.covariance)
+            self.rejected += not measured
+        if measured:
+            track.missed, track.last = 0, m
+            if self.params.learn_dimensions:
+                self._learn(track, m)
+        else:
+            track.missed += 1
+        return track.report(measured)
+
+    # ----------------------------------------------------------------- dimensions
+
+    def _learn(self, track: _Track, m: Measurement) -> None:
+        model = track.model
+        boxes = [model.tractor] + ([model.trailer] if model.trailer is not None else [])
+        local = unit_frames(m.points, m.vector, model)
+        new_boxes = []
+        for u, box in enumerate(boxes):
+            q = local[u][m.unit == u]
+            if len(q) >= 5:
+                across = np.sort(q[:, 1])  # 2nd to 98th percentile
+                span = float(across[int(0.98 * (len(q) - 1))] - across[int(0.02 * (len(q) - 1))])
+                if span >= FACE_SEEN_SPAN * box.width_m:  # an end face or both sides: a width seen whole
+                    track.widths[u].add(span)
+            width = track.widths[u].estimate
+            new_boxes.append(replace(box, width_m=width))
+        if model.trailer is not None and track.trailer_length is not None:
+            self._learn_trailer_length(track, m, local[1], new_boxes[1].width_m)
+            new_boxes[1] = replace(new_boxes[1], length_m=track.trailer_length.estimate)
+        track.model = model.with_boxes(new_boxes[0], new_boxes[1] if len(new_boxes) > 1 else None)
+        name = self._type_name(track)
+        if name in self.catalogue and name != track.catalogue_name:
+            self._retype(track, name)
+        track.model = replace(track.model, name=name, trailer_axle_m=self._trailer_axle(track))
+        track.filter.trailer_axle_m = track.model.trailer_axle_m
+
+    def _retype(self, track: _Track, name: str) -> None:
+        """The learned sizes match another catalogue vehicle better than the start's: take its
+        figures the points do not measure (tractor front and length, floors, heights, kingpin,
+        trailer front), keep the measured widths and trailer length."""
+        prior = self.catalogue[name]
+        model = track.model
+        tractor = replace(prior.tractor, width_m=model.tractor.width_m)
+        trailer = replace(prior.trailer, width_m=model.trailer.width_m, length_m=model.trailer.length_m)
+        track.model = replace(prior.with_boxes(tractor, trailer), trailer_axle_m=model.trailer_axle_m)
+        track.catalogue_name = name
+        track.filter.kingpin_m = prior.kingpin_behind_axle_m
+        track.filter.shift_reference(model.tractor.front_m - prior.tractor.front_m)  # the cab stays where it is
+
+    def _learn_trailer_length(self, track: _Track, m: Measurement, q: np.ndarray, width_m: float) -> None:
+        """The rear face: the hindmost of the trailer body's points (within its width and height band,
+        reached from the front without a gap longer than ``MAX_BODY_GAP_M``). A length when points
+        across the middle of the face are seen there (not only the ends of the two sides), else a
+        lower bound (the trailer reaches at least that far back)."""
+        trailer = track.model.trailer
+        z_rel = m.points[:, 2] - track.ground_z_m
+        band = (np.abs(q[:, 1]) <= width_m / 2 + self.params.fit_inlier_m) & (q[:, 0] <= trailer.front_m + END_BAND_M)
+        band &= (z_rel >= trailer.floor_m - END_BAND_M) & (z_rel <= trailer.top_m + END_BAND_M)
+        if band.sum() < 5:
+            return
+        order = np.argsort(-q[band][:, 0])
+        qb, zb = q[band][order], z_rel[band][order]
+        gaps = np.flatnonzero(-np.diff(qb[:, 0]) > MAX_BODY_GAP_M)
+        keep = gaps[0] + 1 if len(gaps) else len(qb)
+        qb, zb = qb[:keep], zb[:keep]
+        rear = float(qb[-1, 0])
+        at_end = qb[:, 0] <= rear + END_BAND_M
+        end = qb[at_end]
+        # the face's middle below the roof (roof points near the edge lie up to END_BAND_M ahead of it)
+        middle = end[(np.abs(end[:, 1]) <= width_m / 4) & (zb[at_end] < trailer.top_m - self.params.fit_top_band_m)]
+        if len(middle) >= 2 and np.ptp(end[:, 1]) >= FACE_SEEN_SPAN * width_m:
+            track.trailer_length.add(trailer.front_m - float(np.median(middle[:, 0])))
+        bound = min(trailer.front_m - rear - END_BAND_M, MAX_TRAILER_LENGTH_M)
+        track.trailer_length.lower_bound = max(track.trailer_length.lower_bound, bound)
+
+    def _trailer_axle(self, track: _Track) -> float:
+        """L2 scaled with the trailer's length behind the kingpin (the catalogue's proportion)."""
+        prior = self.catalogue.get(track.catalogue_name)
+        if prior is None or prior.trailer is None or track.model.trailer is None:
+            return track.model.trailer_axle_m
+        behind = prior.trailer.length_m - prior.trailer.front_m
+        return prior.trailer_axle_m * (track.model.trailer.length_m - track.model.trailer.front_m) / behind
+
+    def _type_name(self, track: _Track) -> str:
+        model = track.model
+        if model.trailer is None:
+            return "rigid"
+        best, best_err = "unknown", self.params.type_max_error_m
+        for name, c in self.catalogue.items():
+            if c.trailer is None:
+                continue
+            err = max(abs(c.trailer.length_m - model.trailer.length_m), abs(c.trailer.width_m - model.trailer.width_m),
+                      abs(c.tractor.width_m - model.tractor.width_m))
+            if err <= best_err:
+                best, best_err = name, err
+        return best
+
+    # ----------------------------------------------------------------- start
+
+    def _start(self, points: np.ndarray, ground, stamp_s: float) -> list[VehicleReport]:
+        clusters = self._seed_clusters(points, ground)
+        for seed in self.seeds:
+            seed.seen = False
+        ready = []
+        for cluster in clusters:
+            center = min_area_rect(cluster[:, :2]).center_xy
+            seed = min(self.seeds, key=lambda s: float(np.hypot(*(s.center_xy - center))), default=None)
+            if seed is not None and not seed.seen and np.hypot(*(seed.center_xy - center)) <= self.params.start_max_step_m:
+                seed.center_xy, seed.frames, seed.seen = center, seed.frames + 1, True
+            else:
+                seed = Seed(center, center)
+                self.seeds.append(seed)
+            if seed.frames >= self.params.start_frames:
+                ready.append((seed, cluster))
+        self.seeds = [s for s in self.seeds if s.seen]
+        reports = []
+        for seed, cluster in ready:
+            center = seed.center_xy
+            track = self._new_track(cluster, seed, float(ground(center[0], center[1])), stamp_s)
+            if track is None:  # no vehicle (a wall, a car, a person): tried again after a while
+                seed.frames = -SEED_RETRY_FRAMES
+                continue
+            self.seeds.remove(seed)
+            self.tracks.append(track)
+            reports.append(track.report(True))
+        return reports
+
+    def _seed_clusters(self, points: np.ndarray, ground) -> list[np.ndarray]:
+        """Connected components tall enough to be a vehicle, those closer than ``start_join_m`` joined
+        (a cab and its trailer are apart by up to about 1.5 m), of a vehicle's length and at least
+        ``start_min_width_m`` wide (a wall, or a vehicle seen from one side only, is a plane)."""
+        if len(points) == 0:
+            return []
+        p = self.params
+        parts = [points[idx] for idx in split_by_label(grid_labels(points, p.start_voxel_m))
+                 if len(idx) >= p.fit_min_points and _height(points[idx], ground) >= p.start_min_height_m]
+        out = []
+        for group in _join_near(parts, p.start_join_m):
+            cluster = np.vstack([parts[i] for i in group])
+            rect = min_area_rect(cluster[:, :2])
+            if p.start_min_length_m <= rect.length_m <= p.start_max_length_m and rect.width_m >= p.start_min_width_m:
+                out.append(cluster)
+        return out
+
+    def _new_track(self, cluster: np.ndarray, seed: Seed, ground_z_m: float, stamp_s: float) -> _Track | None:
+        hypotheses = self._hypotheses(cluster, ground_z_m)
+        if not hypotheses:
+            return None
+        chosen = self._choose(hypotheses, seed)
+        if chosen is None:
+            return None
+        model, m = chosen
+        if float(np.mean(m.unit >= 0)) < self.params.start_min_explained or not _supported(m, model, ground_z_m):
+            return None
+        # the seed's points are not de-skewed (no motion known yet): the first pose is a rough one
+        start_cov = m.covariance + np.diag(START_SIGMAS[:len(m.vector)] ** 2)
+        filt = KinematicFilter(m.vector, start_cov, stamp_s, model.kingpin_behind_axle_m, model.trailer_axle_m,
+                               model.articulated, self.params)
+        widths = [_Extent(model.tractor.width_m, self.params.dimension_window)]
+        length = None
+        if model.trailer is not None:
+            widths.append(_Extent(model.trailer.width_m, self.params.dimension_window))
+            length = _Extent(model.trailer.length_m, self.params.dimension_window)
+        return _Track(next(self._ids), model, filt, model.name, length, widths, 0, m, np.array(m.vector[:2]), ground_z_m)
+
+    def _hypotheses(self, cluster: np.ndarray, ground_z_m: float) -> list[tuple[VehicleModel, float, Measurement]]:
+        """(model, direction sign, fit) of every catalogue vehicle in both directions (best start hitch
+        each) and of one rigid box of the cluster's measured size."""
+        rect = min_area_rect(cluster[:, :2])
+        out = []
+        for model in self.catalogue.values():
+            for sign in (1.0, -1.0):
+                slack = MAX_TRAILER_LENGTH_M - model.trailer.length_m
+                coarse = [fit(cluster, _placed(model, rect, sign, np.radians(h), ground_z_m, slack), self.params,
+                              COARSE_ITERATIONS, START_SCALE_M) for h in START_HITCHES_DEG]
+                coarse = [m for m in coarse if m is not None]
+                if coarse:  # the best start hitch, refined
+                    m = min(coarse, key=lambda m: m.cost)
+                    prior = Prior(m.x_m, m.y_m, m.yaw_rad, m.hitch_rad, model, ground_z_m, slack)
+                    out.append((model, sign, fit(cluster, prior, self.params, START_ITERATIONS, START_SCALE_M)))
+        height = float(cluster[:, 2].max() - ground_z_m)
+        rigid = VehicleModel.rigid("rigid", rect.length_m, rect.width_m, height)
+        for sign in (1.0, -1.0):
+            yaw = rect.yaw_rad + (0.0 if sign > 0 else np.pi)
+            m = fit(cluster, Prior(*rect.center_xy, yaw, 0.0, rigid, ground_z_m), self.params, START_ITERATIONS, START_SCALE_M)
+            if m is not None:
+                out.append((rigid, sign, m))
+        return out
+
+    def _choose(self, hypotheses, seed: Seed) -> tuple[VehicleModel, Measurement] | None:
+        """The best-explaining model; between its two directions the cheaper fit, or the direction of
+        travel when both cost alike."""
+        articulated = [h for h in hypotheses if h[0].articulated]
+        rigid = [h for h in hypotheses if not h[0].articulated]
+        best_art = min(articulated, key=lambda h: h[2].cost, default=None)
+        best_rigid = min(rigid, key=lambda h: h[2].cost, default=None)
+        if best_art is not None and (best_rigid is None or best_art[2].cost < RIGID_COST_RATIO * best_rigid[2].cost):
+            pool = [h for h in articulated if h[0] is best_art[0]]
+        else:
+            pool = [h for h in rigid if h[0].tractor.length_m >= self.params.rigid_min_length_m]
+            if not pool:
+                return None
+        pool.sort(key=lambda h: h[2].cost)
+        chosen = pool[0]
+        if len(pool) > 1 and pool[0][2].cost > DIRECTION_COST_RATIO * pool[1][2].cost:
+            travel = seed.center_xy - seed.first_xy
+            if np.hypot(*travel) > 0.3:
+                heading = [np.array([np.cos(h[2].yaw_rad), np.sin(h[2].yaw_rad)]) @ travel for h in pool[:2]]
+                chosen = pool[int(np.argmax(heading))]
+        return chosen[0], chosen[2]
+
+
+def _supported(m: Measurement, model: VehicleModel, ground_z_m: float) -> bool:
+    """Each unit's explained points span at least ``UNIT_SUPPORT`` of its length and reach
+    ``UNIT_SUPPORT`` of its height above its floor (a car's side on a trailer's faces is no truck)."""
+    boxes = [model.tractor] + ([model.trailer] if model.trailer is not None else [])
+    z_rel = m.points[:, 2] - ground_z_m
+    for u, (box, q) in enumerate(zip(boxes, unit_frames(m.points, m.vector, model))):
+        mine = m.unit == u
+        if mine.sum() < 3 or np.ptp(q[mine, 0]) < UNIT_SUPPORT * box.length_m \
+                or z_rel[mine].max() < box.floor_m + UNIT_SUPPORT * box.height_m:
+            return False
+    return True
+
+
+def _height(points: np.ndarray, ground) -> float:
+    centre = points[:, :2].mean(axis=0)
+    return float(points[:, 2].max() - ground(centre[0], centre[1]))
+
+
+def _join_near(parts: list[np.ndarray], distance_m: float) -> list[list[int]]:
+    """Groups of indices of ``parts`` linked by point pairs closer than ``distance_m`` (union-find)."""
+    parent = list(range(len(parts)))
+
+    def root(i: int) -> int:
+        while parent[i] != i:
+            parent[i] = parent[parent[i]]
+            i = parent[i]
+        return i
+
+    trees = [cKDTree(part[:, :2]) for part in parts]
+    for i in range(len(parts)):
+        for j in range(i + 1, len(parts)):
+            if root(i) != root(j) and trees[i].sparse_distance_matrix(trees[j], distance_m).nnz:
+                parent[root(j)] = root(i)
+    groups: dict[int, list[int]] = {}
+    for i in range(len(parts)):
+        groups.setdefault(root(i), []).append(i)
+    return list(groups.values())
+
+
+def _placed(model: VehicleModel, rect, sign: float, hitch_rad: float, ground_z_m: float, slack_m: float) -> Prior:
+    """A prior putting the model's footprint centre on the rectangle's centre, its mean axis along
+    the rectangle (``sign``: which end the tractor is at)."""
+    axis = rect.yaw_rad + (0.0 if sign > 0 else np.pi)
+    yaw = axis - hitch_rad / 2 if model.articulated else axis
+    tractor_c, trailer_c = model.box_centers(0.0, 0.0, yaw, hitch_rad)
+    front = tractor_c + (model.tractor.length_m / 2) * np.array([np.cos(yaw), np.sin(yaw)])
+    if trailer_c is None:
+        centre = tractor_c
+    else:
+        back = trailer_c - (model.trailer.length_m / 2) * np.array([np.cos(yaw + hitch_rad), np.sin(yaw + hitch_rad)])
+        centre = (front + back) / 2
+    x, y = rect.center_xy - centre
+    return Prior(float(x), float(y), float(yaw), float(hitch_rad), model, ground_z_m, max(slack_m, 0.0))
+
+
+def unit_frames(points: np.ndarray, v: np.ndarray, model: VehicleModel) -> list[np.ndarray]:
+    """(N, 2) coordinates of the points in each unit's frame (tractor: rear axle; trailer: kingpin)."""
+    frames = [(v[:2], v[2])]
+    if model.trailer is not None:
+        frames.append((model.kingpin_xy(v[0], v[1], v[2]), v[2] + v[3]))
+    out = []
+    for origin, yaw in frames:
+        c, s = np.cos(yaw), np.sin(yaw)
+        d = points[:, :2] - origin
+        out.append(np.column_stack([c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1]]))
+    return out
+
+
+def box_distance(points: np.ndarray, prior: Prior) -> np.ndarray:
+    """Planar distance of each point to the nearer of the prior's boxes (0 inside); the trailer's box
+    reaches ``trailer_slack_m`` further back."""
+    model = prior.model
+    v = prior.vector
+    boxes = [(model.tractor, 0.0)] + ([(model.trailer, prior.trailer_slack_m)] if model.trailer is not None else [])
+    best = np.full(len(points), np.inf)
+    for (box, slack), q in zip(boxes, unit_frames(points, v, model)):
+        dx = np.maximum(np.maximum(box.rear_m - slack - q[:, 0], q[:, 0] - box.front_m), 0.0)
+        dy = np.maximum(np.abs(q[:, 1]) - box.width_m / 2, 0.0)
+        best = np.minimum(best, np.hypot(dx, dy))
+    return best

@@ -1,0 +1,262 @@
+"""The articulated estimator on constructed scenes: vehicle tracks (start, units, unknown trailer
+length, two vehicles, reversing) and the ``articulated`` method end to end."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from hinged_points import vehicle_points, world_boxes
+from i2v_loc.frame import Frame, SensorScan
+from i2v_loc.params import Extrinsics, Params, SensorConfig, apply_patch
+from i2v_loc.pipeline import Pipeline
+from i2v_loc.sim.kinematics import Articulation, step
+from i2v_loc.stages.vehicle_model import VehicleModel
+from i2v_loc.stages.vehicle_tracker import VehicleTracker
+
+PARAMS = Params()
+SENSORS = ((0.0, -15.0, 4.0), (-22.0, 22.0, 4.0), (22.0, 22.0, 4.0))
+FLAT = staticmethod(lambda x, y: 0.0)
+
+
+def flat(x, y):
+    return 0.0
+
+
+def volvo() -> VehicleModel:
+    return VehicleModel.from_config("volvo_fh", PARAMS.vehicles["volvo_fh"])
+
+
+def articulation(model: VehicleModel) -> Articulation:
+    wheelbase = PARAMS.vehicles["volvo_fh"].truck.wheelbase_m
+    return Articulation(wheelbase, model.kingpin_behind_axle_m, model.trailer_axle_m)
+
+
+def drive(vehicles, seconds: float, speed, steer, sensors=SENSORS):
+    """Frames of constructed points of ``vehicles`` ((model, state x, y, ψ1, ψ2)) moving with the
+    simulator's kinematics; yields (stamp, points, truths)."""
+    states = [np.array(s, dtype=float) for _, s in vehicles]
+    arts = [articulation(m) for m, _ in vehicles]
+    for k in range(int(seconds * 10)):
+        t = k * 0.1
+        clouds = []
+        for i, (model, _) in enumerate(vehicles):
+            s = states[i]
+            others = [b for j, (m, _) in enumerate(vehicles) if j != i
+                      for b in world_boxes(m, states[j][0], states[j][1], states[j][2], states[j][3] - states[j][2])]
+            clouds.append(vehicle_points(model, s[0], s[1], s[2], s[3] - s[2], sensors=sensors, spacing=0.15,
+                                         others=others, seed=k * 10 + i))
+        yield t, np.vstack(clouds), [s.copy() for s in states]
+        for i in range(len(states)):
+            states[i] = step(states[i], speed(t) if callable(speed) else speed, steer(t) if callable(steer) else steer, arts[i], 0.1)
+
+
+def angle_deg(a: float) -> float:
+    return float(np.degrees(np.arctan2(np.sin(a), np.cos(a))))
+
+
+def errors(report, truth) -> tuple[float, float, float]:
+    s = report.state
+    return (float(np.hypot(s.x_m - truth[0], s.y_m - truth[1])), angle_deg(s.yaw_rad - truth[2]),
+            angle_deg(s.hitch_rad - (truth[3] - truth[2])))
+
+
+def test_turning_vehicle_is_started_named_and_tracked():
+    tracker = VehicleTracker(PARAMS.articulated, PARAMS.vehicles)
+    rows = []
+    for t, points, (truth,) in drive([(volvo(), (-12.0, 4.0, 0.0, 0.0))], 8.0, 2.5, lambda t: float(np.clip(0.4 * (t - 2.0), 0.0, 0.5))):
+        reports = tracker.process(points, flat, t)
+        if t < 0.15:
+            assert reports == []  # not before start_frames
+        if reports:
+            assert len(reports) == 1 and reports[0].id == 1 and reports[0].model.name == "volvo_fh"
+            rows.append(errors(reports[0], truth) + (truth[3] - truth[2],))
+    rows = np.array(rows)
+    assert len(rows) >= 75
+    assert np.degrees(np.abs(rows[:, 3]).max()) > 30  # the hitch angle did grow
+    assert rows[:, 0].max() < 0.05
+    assert np.sqrt(np.mean(rows[:, 1] ** 2)) < 0.3 and np.abs(rows[:, 1]).max() < 1.0
+    assert np.sqrt(np.mean(rows[:, 2] ** 2)) < 0.4 and np.abs(rows[:, 2]).max() < 1.0
+
+
+def test_reversing_vehicle_keeps_its_heading():
+    tracker = VehicleTracker(PARAMS.articulated, PARAMS.vehicles)
+    last = None
+    for t, points, (truth,) in drive([(volvo(), (8.0, 4.0, 0.0, np.radians(5.0)))], 6.0, -1.2, 0.02):
+        reports = tracker.process(points, flat, t)
+        if reports and t > 1.5:
+            pos, yaw, hitch = errors(reports[0], truth)
+            assert pos < 0.05 and abs(yaw) < 1.0 and abs(hitch) < 1.0
+            last = reports[0]
+    assert last is not None and last.state.speed_m_s < -1.0
+
+
+def test_vehicle_at_standstill_keeps_its_yaw():
+    tracker = VehicleTracker(PARAMS.articulated, PARAMS.vehicles)
+    yaws = []
+    for t, points, (truth,) in drive([(volvo(), (0.0, 4.0, 0.4, 0.4 + np.radians(25.0)))], 6.0, 0.0, 0.0):
+        reports = tracker.process(points, flat, t)
+        if reports:
+            yaws.append(angle_deg(reports[0].state.yaw_rad - truth[2]))
+            assert abs(reports[0].state.speed_m_s) < 0.2
+    assert len(yaws) > 50 and max(np.abs(yaws)) < 0.3
+
+
+def test_unknown_trailer_length_converges():
+    model = volvo()
+    l2 = model.trailer_axle_m * (10.5 - model.trailer.front_m) / (model.trailer.length_m - model.trailer.front_m)
+    long_trailer = replace(model, name="truth", trailer=replace(model.trailer, length_m=10.5), trailer_axle_m=l2)
+    tracker = VehicleTracker(PARAMS.articulated, PARAMS.vehicles)  # the catalogue has 6.30 and 13.68 m trailers
+    hitch_err = []
+    for t, points, (truth,) in drive([(long_trailer, (-14.0, 3.0, 0.0, 0.0))], 12.0, 2.0,
+                                     lambda t: 0.2 * np.sin(t / 2.0)):
+        reports = tracker.process(points, flat, t)
+        if reports and t >= 10.0:
+            assert abs(reports[0].model.trailer.length_m - 10.5) < 0.3
+            assert reports[0].model.name == "unknown"
+            hitch_err.append(errors(reports[0], truth)[2])
+    assert len(hitch_err) >= 15 and np.sqrt(np.mean(np.square(hitch_err))) < 0.5
+
+
+def test_two_vehicles_side_by_side_keep_their_units():
+    pair = [(volvo(), (-12.0, 0.0, 0.0, 0.0)), (volvo(), (-14.0, 5.5, 0.0, 0.0))]
+    tracker = VehicleTracker(PARAMS.articulated, PARAMS.vehicles)
+    owner = {}
+    frames = 0
+    for t, points, truths in drive(pair, 6.0, 2.0, lambda t: 0.1 if t > 2 else 0.0):
+        reports = tracker.process(points, flat, t)
+        if t < 0.35:
+            continue
+        assert len(reports) == 2
+        frames += 1
+        for r in reports:
+            nearest = int(np.argmin([np.hypot(r.state.x_m - s[0], r.state.y_m - s[1]) for s in truths]))
+            assert owner.setdefault(r.id, nearest) == nearest  # an id never changes vehicle
+            pos, yaw, hitch = errors(r, truths[nearest])
+            assert pos < 0.05 and abs(yaw) < 1.0 and abs(hitch) < 1.0
+    assert frames > 50 and sorted(owner.values()) == [0, 1]
+
+
+def test_vehicle_leaves_when_its_points_do():
+    tracker = VehicleTracker(PARAMS.articulated, PARAMS.vehicles)
+    for t, points, _ in drive([(volvo(), (-12.0, 4.0, 0.0, 0.0))], 1.0, 2.0, 0.0):
+        tracker.process(points, flat, t)
+    assert len(tracker.tracks) == 1
+    for k in range(PARAMS.articulated.leave_frames):
+        reports = tracker.process(np.zeros((0, 3)), flat, 1.0 + 0.1 * k)
+    assert reports == [] and tracker.tracks == []
+
+
+def test_bus_is_one_rigid_unit():
+    bus = VehicleModel.rigid("rigid", 11.6, 2.55, 3.1, 0.3)
+    tracker = VehicleTracker(PARAMS.articulated, PARAMS.vehicles)
+    reports = []
+    for k in range(5):
+        points = vehicle_points(bus, -5.0 + 0.2 * k, 4.0, 0.1, sensors=SENSORS, seed=k)
+        reports = tracker.process(points, flat, 0.1 * k)
+    assert len(reports) == 1
+    r = reports[0]
+    assert r.model.trailer is None and r.model.name == "rigid"
+    assert abs(r.model.tractor.length_m - 11.6) < 0.3
+    assert np.hypot(r.state.x_m - (-5.0 + 0.8), r.state.y_m - 4.0) < 0.1
+
+
+def test_articulated_method_end_to_end():
+    """Through the front end: one sensor, a ground plane, a wall; the vehicle drives in after the
+    background warm-up. The state line is the pipeline's, plus hitch sigma and jackknife."""
+    sensor = SensorConfig(name="s1", extrinsics=Extrinsics(x_m=0.0, y_m=-15.0, z_m=4.0))
+    params = apply_patch(Params(sensors=[sensor]), {"background": {"min_samples": 3, "window_frames": 10,
+                                                                    "learn_every_frames": 1}})
+    pipeline = Pipeline(params, method="articulated")
+    assert pipeline.method == "articulated" and type(pipeline).__name__ == "ArticulatedPipeline"
+    gx, gy = np.meshgrid(np.arange(-30, 30, 0.4), np.arange(-12, 20, 0.4))
+    ground = np.column_stack([gx.ravel(), gy.ravel(), np.zeros(gx.size)])
+    wall = np.column_stack([np.repeat(np.arange(-20, 20, 0.2), 15), np.full(200 * 15, 18.0),
+                            np.tile(np.linspace(0.2, 3.0, 15), 200)])
+    model = volvo()
+    lines = []
+    truth_rows = []
+    for t, points, (truth,) in drive([(model, (-25.0, 4.0, 0.0, 0.0))], 9.0, 2.5, lambda t: 0.2 if t > 5 else 0.0,
+                                     sensors=((0.0, -15.0, 4.0),)):
+        scene = np.vstack([ground, wall, points if t >= 1.0 else np.zeros((0, 3))])
+        scan = SensorScan("s1", t, (scene - [0.0, -15.0, 4.0]).astype(np.float32), None)
+        line = pipeline.process(Frame(int(round(t * 10)), {"s1": scan})).to_json()
+        lines.append(line)
+        truth_rows.append((t, truth))
+    reported = [(line, truth) for line, (_, truth) in zip(lines, truth_rows) if line["vehicles"]]
+    assert all(len(line["vehicles"]) == 1 for line, _ in reported)  # no wall, no ground vehicle
+    assert len(reported) > 60
+    for line, truth in reported[-30:]:
+        v = line["vehicles"][0]
+        assert v["vehicle"] == "volvo_fh" and v["kind"] == "articulated"
+        center = model.box_centers(truth[0], truth[1], truth[2], truth[3] - truth[2])
+        assert np.hypot(v["truck"]["center"][0] - center[0][0], v["truck"]["center"][1] - center[0][1]) < 0.1
+        assert np.hypot(v["trailer"]["center"][0] - center[1][0], v["trailer"]["center"][1] - center[1][1]) < 0.1
+        assert abs(v["hitch_deg"] - angle_deg(truth[3] - truth[2])) < 1.0
+        assert abs(v["trailer"]["yaw_deg"] - angle_deg(truth[3])) < 1.0
+        assert 0.0 < v["hitch_std_deg"] < 1.0 and v["jackknife"] is False
+        transform = np.array(v["tractor_to_trailer"])
+        assert transform.shape == (4, 4) and abs(np.degrees(np.arctan2(transform[1, 0], transform[0, 0])) + v["hitch_deg"]) < 1e-2
+
+
+@pytest.mark.parametrize("method", ["paper", "default"])
+def test_other_methods_are_unchanged_pipelines(method):
+    assert type(Pipeline(Params(), method=method)) is Pipeline
+
+
+def test_wall_car_and_pole_are_no_vehicles():
+    tracker = VehicleTracker(PARAMS.articulated, PARAMS.vehicles)
+    wall = np.column_stack([np.repeat(np.arange(-8.0, 8.0, 0.15), 20), np.full(107 * 20, 10.0),
+                            np.tile(np.linspace(0.2, 3.5, 20), 107)])
+    car = vehicle_points(VehicleModel.rigid("car", 4.5, 1.8, 1.5, 0.1), 0.0, 2.0, 0.3, sensors=SENSORS)
+    pole = np.column_stack([np.full(30, 6.0), np.full(30, -3.0), np.linspace(0.2, 6.0, 30)])
+    for k in range(3 * PARAMS.articulated.start_frames):
+        assert tracker.process(np.vstack([wall, car, pole]), flat, 0.1 * k) == []
+
+
+def test_parameter_patch_reaches_the_tracker_and_keeps_the_vehicles():
+    pipeline = Pipeline(Params(), method="articulated")
+    assert pipeline.params.background.enabled  # the method's preset: the front end of default
+    tracker = pipeline.tracker
+    new = pipeline.update_params({"articulated": {"leave_frames": 4}})
+    assert new.articulated.leave_frames == 4 and pipeline.tracker.params.leave_frames != 4  # at the next frame
+    pipeline.process(Frame(0, {}))
+    assert pipeline.tracker is tracker and pipeline.tracker.params.leave_frames == 4
+    with pytest.raises(ValueError):
+        pipeline.update_params({"articulated": {"leave_frames": 0}})
+
+
+def test_without_the_background_map_vehicles_start_at_once():
+    sensor = SensorConfig(name="s1", extrinsics=Extrinsics(x_m=0.0, y_m=-15.0, z_m=4.0))
+    params = Params(sensors=[sensor])
+    pipeline = Pipeline(params, method="articulated")
+    pipeline.update_params({"background": {"enabled": False}})
+    gx, gy = np.meshgrid(np.arange(-30, 30, 0.4), np.arange(-12, 20, 0.4))
+    ground = np.column_stack([gx.ravel(), gy.ravel(), np.zeros(gx.size)])
+    reported = []
+    for t, points, (truth,) in drive([(volvo(), (-8.0, 4.0, 0.0, 0.0))], 0.6, 2.0, 0.0, sensors=((0.0, -15.0, 4.0),)):
+        scan = SensorScan("s1", t, (np.vstack([ground, points]) - [0.0, -15.0, 4.0]).astype(np.float32), None)
+        result = pipeline.process(Frame(int(round(t * 10)), {"s1": scan}))
+        reported.append(len(result.vehicles))
+        assert "background" not in result.latency_ms
+    assert pipeline.background is None
+    assert reported[:PARAMS.articulated.start_frames - 1] == [0] * (PARAMS.articulated.start_frames - 1)
+    assert reported[PARAMS.articulated.start_frames - 1:] == [1] * (len(reported) - PARAMS.articulated.start_frames + 1)
+    with pytest.raises(ValueError):
+        pipeline.save_background("/tmp/never.npz")
+
+
+@pytest.mark.parametrize("hitch_deg", [80.0, -85.0])
+def test_vehicle_found_at_a_jackknife_angle(hitch_deg):
+    tracker = VehicleTracker(PARAMS.articulated, PARAMS.vehicles)
+    last = None
+    for t, points, (truth,) in drive([(volvo(), (0.0, 4.0, 0.3, 0.3 + np.radians(hitch_deg)))], 2.0, 0.5, 0.0):
+        reports = tracker.process(points, flat, t)
+        if reports:
+            last = (reports[0], truth)
+    report, truth = last
+    pos, yaw, hitch = errors(report, truth)
+    assert pos < 0.05 and abs(yaw) < 0.5 and abs(hitch) < 0.5
+    assert report.state.jackknife and report.model.name == "volvo_fh"

@@ -1,0 +1,114 @@
+"""The hinged two-box fit on constructed points: known pose and hitch recovered."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from hinged_points import vehicle_points
+from i2v_loc.params import Params
+from i2v_loc.stages.hinged_fit import Prior, fit
+from i2v_loc.stages.vehicle_model import VehicleModel
+
+PARAMS = Params()
+SENSORS = ((0.0, -15.0, 4.0), (-22.0, 18.0, 4.0))
+TRUTH = (2.0, 3.0, np.radians(20.0))  # tractor rear axle x, y, yaw
+PRIOR_OFFSET = (0.3, -0.2, np.radians(2.0), np.radians(3.0))  # a poor prediction
+
+
+def volvo() -> VehicleModel:
+    return VehicleModel.from_config("volvo_fh", PARAMS.vehicles["volvo_fh"])
+
+
+def no_gap() -> VehicleModel:
+    """The Volvo with the trailer's front face on the cab's back face (at hitch 0)."""
+    m = volvo()
+    cab_back_from_kingpin = m.tractor.rear_m + m.kingpin_behind_axle_m
+    return replace(m, trailer=replace(m.trailer, front_m=cab_back_from_kingpin))
+
+
+def check(model: VehicleModel, hitch_deg: float, drop=(), sensors=SENSORS, hitch_tol_deg: float = 0.3) -> None:
+    hitch = np.radians(hitch_deg)
+    points = vehicle_points(model, *TRUTH, hitch, sensors=sensors, drop=drop, seed=int(hitch_deg) + 100)
+    dx, dy, dyaw, dhitch = PRIOR_OFFSET
+    prior = Prior(TRUTH[0] + dx, TRUTH[1] + dy, TRUTH[2] + dyaw, hitch + dhitch, model)
+    m = fit(points, prior, PARAMS.articulated, iterations=20)
+    assert m is not None
+    assert np.hypot(m.x_m - TRUTH[0], m.y_m - TRUTH[1]) < 0.03
+    assert abs(np.degrees(m.yaw_rad - TRUTH[2])) < 0.2
+    assert abs(np.degrees(m.hitch_rad - hitch)) < hitch_tol_deg
+    assert np.mean(m.explained) > 0.95
+    sigma_hitch_deg = np.degrees(np.sqrt(m.covariance[3, 3]))
+    assert 0.05 < sigma_hitch_deg < 1.0
+
+
+@pytest.mark.parametrize("hitch_deg", [0.0, 45.0, 80.0, -80.0])
+def test_fit_recovers_pose_and_hitch_with_a_gap(hitch_deg):
+    assert volvo().trailer.front_m + volvo().kingpin_behind_axle_m < volvo().tractor.rear_m - 1.0  # a gap > 1 m
+    check(volvo(), hitch_deg)
+
+
+@pytest.mark.parametrize("hitch_deg", [0.0, 15.0])
+def test_fit_recovers_pose_and_hitch_without_a_gap(hitch_deg):
+    check(no_gap(), hitch_deg)
+
+
+@pytest.mark.parametrize("hitch_deg, face", [(45.0, (1, "left")), (0.0, (1, "rear")), (80.0, (0, "front"))])
+def test_fit_with_one_face_occluded(hitch_deg, face):
+    check(volvo(), hitch_deg, drop=(face,))
+
+
+@pytest.mark.parametrize("name, hitch_tol_deg", [("man_tgx", 0.3), ("twizy", 0.5)])  # the Twizy's trailer is 2.5 m long
+def test_semitrailer_and_drawbar_trailer_at_45_deg(name, hitch_tol_deg):
+    check(VehicleModel.from_config(name, PARAMS.vehicles[name]), 45.0, hitch_tol_deg=hitch_tol_deg)
+
+
+def test_rigid_vehicle_fit():
+    bus = VehicleModel.rigid("rigid", 11.6, 2.55, 3.1)
+    points = vehicle_points(bus, 1.0, 2.0, 0.4, sensors=SENSORS)
+    m = fit(points, Prior(1.3, 1.8, 0.43, 0.0, bus), PARAMS.articulated, iterations=20)
+    assert m.hitch_rad is None and m.covariance.shape == (3, 3)
+    assert np.hypot(m.x_m - 1.0, m.y_m - 2.0) < 0.03 and abs(np.degrees(m.yaw_rad - 0.4)) < 0.2
+
+
+def test_foreign_points_are_not_explained_and_do_not_move_the_fit():
+    model = volvo()
+    points = vehicle_points(model, *TRUTH, 0.5, sensors=SENSORS)
+    pole = np.column_stack([np.full(40, 4.0), np.full(40, 7.5), np.linspace(0.2, 3.0, 40)])  # 1.5 m beside the cab
+    m = fit(np.vstack([points, pole]), Prior(*TRUTH, 0.5, model), PARAMS.articulated)
+    near_pole = np.hypot(m.points[:, 0] - 4.0, m.points[:, 1] - 7.5) < 0.2
+    assert near_pole.any() and not m.explained[near_pole].any()
+    assert np.hypot(m.x_m - TRUTH[0], m.y_m - TRUTH[1]) < 0.03 and abs(np.degrees(m.hitch_rad - 0.5)) < 0.3
+
+
+def test_hidden_trailer_leaves_the_hitch_at_the_prior_and_says_so():
+    model = volvo()
+    points = vehicle_points(model, *TRUTH, 0.3, sensors=SENSORS, drop=tuple((1, f) for f in ("front", "rear", "left", "right", "roof")))
+    m = fit(points, Prior(*TRUTH, 0.2, model), PARAMS.articulated)
+    assert abs(m.hitch_rad - 0.2) < np.radians(1.0)  # not measured: kept at the prior
+    assert np.degrees(np.sqrt(m.covariance[3, 3])) > 10.0  # and its sigma says so
+
+
+def test_too_few_points_is_no_measurement():
+    model = volvo()
+    assert fit(np.zeros((5, 3)), Prior(*TRUTH, 0.0, model), PARAMS.articulated) is None
+
+
+def test_analytic_jacobian_matches_finite_differences():
+    from i2v_loc.stages.hinged_fit import faces
+
+    model = volvo()
+    v = np.array([*TRUTH, 0.6])
+    points = vehicle_points(model, *v, sensors=SENSORS, noise_m=0.05)[::7]
+    z = points[:, 2]
+    at = faces(v, points[:, :2], z, model, 0.25, trailer_slack_m=1.0)
+    eps = 1e-6
+    for k in range(4):
+        step = np.zeros(4)
+        step[k] = eps
+        numeric = (faces(v + step, points[:, :2], z, model, 0.25, 1.0).residual
+                   - faces(v - step, points[:, :2], z, model, 0.25, 1.0).residual) / (2 * eps)
+        same_face = np.abs(numeric) < 1e3  # a point switching faces inside the step has no derivative
+        np.testing.assert_allclose(at.jacobian[same_face, k], numeric[same_face], atol=1e-5)

@@ -1,0 +1,124 @@
+"""The one-trailer kinematic UKF: its model against the simulator's, reversing, standstill,
+jackknife warning, innovation gate."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from i2v_loc.params import Params
+from i2v_loc.sim.kinematics import Articulation, step
+from i2v_loc.stages.kinematic_filter import CURVATURE, HITCH, SPEED, KinematicFilter, propagate
+
+PARAMS = Params()
+VOLVO = PARAMS.vehicles["volvo_fh"]
+ART = Articulation.from_vehicle(VOLVO)
+R = np.diag([0.03, 0.03, np.radians(0.3), np.radians(0.3)]) ** 2
+
+
+def new_filter(truth: np.ndarray, speed: float = 0.0) -> KinematicFilter:
+    z = np.array([truth[0], truth[1], truth[2], truth[3] - truth[2]])
+    return KinematicFilter(z, R, 0.0, ART.hitch_behind_axle_m, ART.trailer_hitch_to_axle_m, True, PARAMS.articulated, speed)
+
+
+def run(speed: float, steer: float, seconds: float, seed: int = 0):
+    """Simulated truth (x, y, ψ1, ψ2) and the filter fed noisy measurements at 10 Hz; per frame
+    (truth, filter state)."""
+    rng = np.random.default_rng(seed)
+    truth = np.array([0.0, 0.0, 0.3, 0.3 + np.radians(10.0)])
+    f = new_filter(truth)
+    out = []
+    for k in range(1, int(seconds * 10) + 1):
+        truth = step(truth, speed, steer, ART, 0.1)
+        f.predict(k * 0.1)
+        z = np.array([truth[0], truth[1], truth[2], truth[3] - truth[2]]) + rng.normal(0, np.sqrt(np.diag(R)))
+        f.update(z, R)
+        out.append((truth.copy(), f.state))
+    return out
+
+
+def angle_deg(a: float) -> float:
+    return float(np.degrees(np.arctan2(np.sin(a), np.cos(a))))
+
+
+def test_propagation_matches_the_simulator_kinematics():
+    truth = np.array([1.0, 2.0, 0.2, 0.5])
+    speed, steer = 2.5, 0.25
+    state = np.array([1.0, 2.0, 0.2, speed, np.tan(steer) / ART.wheelbase_m, 0.3])
+    for _ in range(50):
+        truth = step(truth, speed, steer, ART, 0.1)
+        state = propagate(state, 0.1, ART.hitch_behind_axle_m, ART.trailer_hitch_to_axle_m, True)
+    assert np.hypot(*(state[:2] - truth[:2])) < 1e-3
+    assert abs(angle_deg(state[2] - truth[2])) < 1e-3
+    assert abs(angle_deg(state[HITCH] - (truth[3] - truth[2]))) < 1e-2
+    assert abs(angle_deg(truth[3] - truth[2]) - np.degrees(0.3)) > 5  # the hitch did change
+
+
+def rms(values) -> float:
+    return float(np.sqrt(np.mean(np.square(values))))
+
+
+def test_reversing_vehicle_keeps_its_heading_and_negative_speed():
+    frames = run(speed=-1.5, steer=0.03, seconds=8)[10:]
+    yaw_err = [angle_deg(s.yaw_rad - t[2]) for t, s in frames]
+    hitch_err = [angle_deg(s.hitch_rad - (t[3] - t[2])) for t, s in frames]
+    assert max(np.abs(yaw_err)) < 1.0 and rms(yaw_err) < 0.3  # never turned round
+    assert max(np.abs(hitch_err)) < 1.0 and rms(hitch_err) < 0.4
+    assert all(s.speed_m_s < -1.0 for _, s in frames)
+    assert abs(np.mean([s.speed_m_s for _, s in frames]) + 1.5) < 0.1
+
+
+def test_standstill_keeps_its_yaw():
+    frames = run(speed=0.0, steer=0.0, seconds=10, seed=3)[10:]
+    truth = frames[0][0]
+    yaw_err = [angle_deg(s.yaw_rad - truth[2]) for _, s in frames]
+    assert max(np.abs(yaw_err)) < 0.5 and rms(yaw_err) < 0.2
+    speeds = np.array([s.speed_m_s for _, s in frames])
+    assert np.abs(speeds).max() < 0.3 and abs(speeds.mean()) < 0.05
+
+
+def test_turning_vehicle_estimates_curvature_and_hitch():
+    frames = run(speed=3.0, steer=0.2, seconds=8, seed=1)
+    errors = [angle_deg(s.hitch_rad - (t[3] - t[2])) for t, s in frames[20:]]
+    assert np.sqrt(np.mean(np.square(errors))) < 0.3
+    assert abs(frames[-1][1].curvature_1_m - np.tan(0.2) / ART.wheelbase_m) < 0.015  # 0.054 1/m
+    assert 0.0 < frames[-1][1].hitch_std_rad < np.radians(0.5)
+
+
+def test_jackknife_warning_from_angle():
+    small = new_filter(np.array([0.0, 0.0, 0.0, np.radians(20.0)]))
+    large = new_filter(np.array([0.0, 0.0, 0.0, np.radians(70.0)]))
+    assert not small.state.jackknife
+    assert large.state.jackknife
+
+
+def test_jackknife_warning_from_rate_when_reversing():
+    f = new_filter(np.array([0.0, 0.0, 0.0, np.radians(40.0)]), speed=-3.0)
+    assert abs(np.degrees(f.state.hitch_rate_rad_s)) > PARAMS.articulated.jackknife_rate_deg_s
+    assert f.state.jackknife
+    f.ukf.x[SPEED] = 0.0
+    assert not f.state.jackknife
+
+
+def test_far_measurement_is_gated_then_taken_after_repeats():
+    truth = np.array([0.0, 0.0, 0.0, 0.0])
+    f = new_filter(truth)
+    f.predict(0.1)
+    before = f.ukf.x.copy()
+    wrong = np.array([3.0, 0.0, 0.0, 0.0])
+    assert not f.update(wrong, R)
+    np.testing.assert_array_equal(f.ukf.x, before)
+    for _ in range(PARAMS.articulated.reset_after_rejections - 1):
+        f.update(wrong, R)
+    assert abs(f.state.x_m - 3.0) < 1e-9  # the fits were right: restarted from them
+    assert f.ukf.P[CURVATURE, CURVATURE] > 0
+
+
+def test_rigid_vehicle_has_no_hitch():
+    f = KinematicFilter(np.array([1.0, 2.0, 0.5]), R[:3, :3], 0.0, 0.0, 1.0, False, PARAMS.articulated, 2.0)
+    for k in range(1, 11):
+        f.predict(k * 0.1)
+        x = 1.0 + 2.0 * k * 0.1 * np.cos(0.5)
+        y = 2.0 + 2.0 * k * 0.1 * np.sin(0.5)
+        assert f.update(np.array([x, y, 0.5]), R[:3, :3])
+    assert f.state.hitch_rad == 0.0 and not f.state.jackknife
+    assert abs(f.state.speed_m_s - 2.0) < 0.1
