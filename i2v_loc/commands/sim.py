@@ -109,7 +109,7 @@ def _run_suite(args, params) -> int:
     if not suite_file.is_file():
         suite_file = SUITES_DIR / f"{args.suite}.yaml"
     if not suite_file.is_file():
-        known = sorted(p.stem for p in SUITES_DIR.glob("*.yaml"))
+        known = sorted(p.stem for p in SUITES_DIR.glob("*.yaml") if "\nrecordings:" in "\n" + p.read_text())
         raise UserError(f"no suite {args.suite!r} (a YAML file or one of: {', '.join(known)})")
     suite = yaml.safe_load(suite_file.read_text()) or {}
     entries = suite.get("recordings")

@@ -38,6 +38,7 @@ class PointRecording:
         self.meta: dict = {"layout": self.layout, "rate_hz": self._rate_hz, "n_frames": self._n_frames,
                            "sensors": [{"name": n} for n in self.sensor_names]}
         self.counters: dict[str, int] = {}
+        self.damaged: dict[str, str] = {}  # as the native layout's: decoding errors stop the opening instead
         self._ground_truth: list[dict] | None = None
 
     # ------------------------------------------------------------------ for subclasses
