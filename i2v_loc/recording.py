@@ -168,8 +168,38 @@ def _plain(obj):
 # --------------------------------------------------------------------------- reading
 
 
-class Recording:
+class RecordingFiles:
+    """What every recording layout shares: frames in order and the ground-truth side files of
+    ``folder`` (a subclass sets ``_ground_truth = None`` and has ``frame()`` and ``len()``)."""
+
+    folder: Path
+
+    def frames(self, sensors: Sequence[str] | None = None) -> Iterator[Frame]:
+        for i in range(len(self)):
+            yield self.frame(i, sensors)
+
+    def ground_truth(self) -> list[dict]:
+        if self._ground_truth is None:
+            file = self.folder / "ground_truth.jsonl"
+            if not file.is_file():
+                raise RecordingError(f"{file}: missing")
+            lines = [json.loads(line) for line in file.read_text().splitlines() if line.strip()]
+            if len(lines) != len(self):
+                raise RecordingError(f"{file}: {len(lines)} lines but the recording has {len(self)} frames")
+            self._ground_truth = lines
+        return self._ground_truth
+
+    def openlabel(self) -> dict | None:
+        file = self.folder / "ground_truth.openlabel.json"
+        return json.loads(file.read_text()) if file.is_file() else None
+
+
+class Recording(RecordingFiles):
     """Read access to a recording directory (scans are loaded lazily, once per sensor)."""
+
+    @property
+    def folder(self) -> Path:
+        return self.path
 
     def __init__(self, path: str | Path):
         self.path = Path(path)
@@ -279,21 +309,3 @@ class Recording:
             return None
         return scans
 
-    def frames(self, sensors: Sequence[str] | None = None) -> Iterator[Frame]:
-        for i in range(len(self)):
-            yield self.frame(i, sensors)
-
-    def ground_truth(self) -> list[dict]:
-        if self._ground_truth is None:
-            file = self.path / "ground_truth.jsonl"
-            if not file.is_file():
-                raise RecordingError(f"{file}: missing")
-            lines = [json.loads(line) for line in file.read_text().splitlines() if line.strip()]
-            if len(lines) != len(self):
-                raise RecordingError(f"{file}: {len(lines)} lines but meta.yaml says {len(self)} frames")
-            self._ground_truth = lines
-        return self._ground_truth
-
-    def openlabel(self) -> dict | None:
-        file = self.path / "ground_truth.openlabel.json"
-        return json.loads(file.read_text()) if file.is_file() else None

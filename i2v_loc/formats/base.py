@@ -9,22 +9,21 @@ Files that the simulator writes next to the data (``sensors.yaml``, ``sensors_gu
 from __future__ import annotations
 
 import hashlib
-import json
 import tempfile
-from collections.abc import Iterator, Sequence
+from collections.abc import Sequence
 from pathlib import Path
 
 import yaml
 
 from i2v_loc.frame import Frame, SensorScan
-from i2v_loc.recording import RecordingError
+from i2v_loc.recording import RecordingError, RecordingFiles
 
 
 class FormatError(RecordingError):
     """A file of a known layout cannot be read (one line: the file and what is wrong with it)."""
 
 
-class PointRecording:
+class PointRecording(RecordingFiles):
     """Base of the layout readers: ``len()``, ``.frame(i, sensors)``, ``.frames()``, ``.rate_hz``,
     ``.sensor_names``, ``.meta``, ``.sensors_file``, ``.ground_truth()``, ``.openlabel()``."""
 
@@ -106,25 +105,6 @@ class PointRecording:
             if scan is not None:
                 frame.scans[name] = scan
         return frame
-
-    def frames(self, sensors: Sequence[str] | None = None) -> Iterator[Frame]:
-        for i in range(len(self)):
-            yield self.frame(i, sensors)
-
-    def ground_truth(self) -> list[dict]:
-        if self._ground_truth is None:
-            file = self.folder / "ground_truth.jsonl"
-            if not file.is_file():
-                raise RecordingError(f"{file}: missing")
-            lines = [json.loads(line) for line in file.read_text().splitlines() if line.strip()]
-            if len(lines) != len(self):
-                raise RecordingError(f"{file}: {len(lines)} lines but the {self.layout} data has {len(self)} frames")
-            self._ground_truth = lines
-        return self._ground_truth
-
-    def openlabel(self) -> dict | None:
-        file = self.folder / "ground_truth.openlabel.json"
-        return json.loads(file.read_text()) if file.is_file() else None
 
 
 SIDE_FILES = ("sensors.yaml", "sensors_guess.yaml", "ground_truth.jsonl", "ground_truth.openlabel.json")
