@@ -8,7 +8,6 @@ another thread.
 
 from __future__ import annotations
 
-import threading
 import time
 from collections import Counter
 from dataclasses import dataclass, field
@@ -17,9 +16,10 @@ import numpy as np
 
 from i2v_loc.frame import Frame
 from i2v_loc.geometry import box_poses
-from i2v_loc.params import Params, ParamsError, VehicleConfig, apply_patch
+from i2v_loc.params import Params, VehicleConfig, apply_patch
+from i2v_loc.pipelines.handoff import ParameterHandoff
 from i2v_loc.stages.articulation import centre_to_hitch_m
-from i2v_loc.stages.background import BackgroundMap, ProtectedBox, check_grid, region_box
+from i2v_loc.stages.background import BackgroundMap, ProtectedBox, region_box
 from i2v_loc.stages.centroid import CentroidCorrector, CorrectedUnit
 from i2v_loc.stages.classification import TruckTrailerClassifier
 from i2v_loc.stages.clustering import Cluster, Clustering
@@ -83,14 +83,6 @@ def _unset_only(preset: dict, given: dict, defaults: dict) -> dict:
         elif given.get(key) == defaults.get(key):
             out[key] = value
     return out
-
-
-def _check_background(params: Params) -> None:
-    if params.background.enabled:
-        try:
-            check_grid(params.background, params.region)
-        except ValueError as err:
-            raise ParamsError(f"background: {err}") from err
 
 
 def _r(value: float, digits: int = 4) -> float:
@@ -186,7 +178,7 @@ class _Timer:
         return self.latency_ms
 
 
-class Pipeline:
+class Pipeline(ParameterHandoff):
     def __new__(cls, params: Params, method: str = "paper"):
         if method == "articulated":
             from i2v_loc.pipelines.articulated import ArticulatedPipeline
@@ -197,40 +189,13 @@ class Pipeline:
     def __init__(self, params: Params, method: str = "paper"):
         params = method_params(params, method)
         self.method = method
-        _check_background(params)
-        self._lock = threading.Lock()
-        self._pending: Params | None = None
-        self._active = params  # written under the lock only once the pipeline is shared
+        self._init_params(params)
         self.counters: Counter = Counter()
         self.tracker = Tracker(params.tracking)
         self.orientation = OrientationEstimator(params.orientation)
         self.background: BackgroundMap | None = None
         self._build(params)
         self._motion: list[MotionHint] = []
-
-    # ----------------------------------------------------------------- parameters
-
-    @property
-    def params(self) -> Params:
-        """The latest accepted parameters (a pending patch takes effect at the next frame)."""
-        with self._lock:
-            return self._pending or self._active
-
-    def update_params(self, patch: dict) -> Params:
-        with self._lock:
-            new = apply_patch(self._pending or self._active, patch)
-            _check_background(new)
-            self._pending = new
-        return new
-
-    def _apply_pending(self) -> None:
-        # _active changes under the lock: a patch arriving meanwhile builds on the new parameters
-        with self._lock:
-            pending, self._pending = self._pending, None
-            if pending is not None:
-                self._active = pending
-        if pending is not None:
-            self._build(pending)
 
     def _build(self, params: Params) -> None:
         """Stages for ``params`` (already in ``_active``)."""

@@ -6,7 +6,6 @@ state line as ``i2v_loc.pipeline.Pipeline``; each vehicle adds ``kind``, ``hitch
 
 from __future__ import annotations
 
-import threading
 from collections import Counter
 from dataclasses import dataclass
 
@@ -14,8 +13,9 @@ import numpy as np
 
 from i2v_loc.frame import Frame
 from i2v_loc.geometry import box_poses
-from i2v_loc.params import Params, apply_patch
-from i2v_loc.pipeline import FrameResult, UnitResult, VehicleResult, _check_background, _r, _Timer, method_params
+from i2v_loc.params import Params
+from i2v_loc.pipeline import FrameResult, UnitResult, VehicleResult, _r, _Timer, method_params
+from i2v_loc.pipelines.handoff import ParameterHandoff
 from i2v_loc.stages.background import BackgroundMap, ProtectedBox, region_box
 from i2v_loc.stages.concatenation import Concatenation, MotionHint
 from i2v_loc.stages.primitives import voxel_centroids
@@ -46,33 +46,16 @@ def _turn(rate_rad_s: float, arm_xy: np.ndarray) -> np.ndarray:
     return rate_rad_s * np.array([-arm_xy[1], arm_xy[0]])
 
 
-class ArticulatedPipeline:
+class ArticulatedPipeline(ParameterHandoff):
     def __init__(self, params: Params):
         params = method_params(params, "articulated")
-        _check_background(params)
         self.method = "articulated"
-        self._lock = threading.Lock()
-        self._pending: Params | None = None
-        self._active = params
+        self._init_params(params)
         self.counters: Counter = Counter()
         self.tracker = VehicleTracker(params.articulated, params.vehicles)
         self.background: BackgroundMap | None = None
         self._reports: list[VehicleReport] = []
         self._build(params)
-
-    # ----------------------------------------------------------------- parameters (as Pipeline)
-
-    @property
-    def params(self) -> Params:
-        with self._lock:
-            return self._pending or self._active
-
-    def update_params(self, patch: dict) -> Params:
-        with self._lock:
-            new = apply_patch(self._pending or self._active, patch)
-            _check_background(new)
-            self._pending = new
-        return new
 
     def _build(self, params: Params) -> None:
         self.concatenation = Concatenation(params.concatenation, params.sensors)
@@ -83,14 +66,6 @@ class ArticulatedPipeline:
         elif self.background is None or self.background.params != params.background \
                 or self.background.region_box != region_box(params.region):
             self.background = BackgroundMap(params.background, params.region)  # else the learned map survives
-
-    def _apply_pending(self) -> None:
-        with self._lock:
-            pending, self._pending = self._pending, None
-            if pending is not None:
-                self._active = pending
-        if pending is not None:
-            self._build(pending)
 
     def save_background(self, path) -> None:
         self._map().save(path)
