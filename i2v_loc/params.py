@@ -322,7 +322,7 @@ class ArticulatedParams(Section):
     fit_position_floor_m: float = Field(0.03, ge=0.0, le=2.0, description="Added to the fit's position sigma (model error, correlated points)")
     fit_angle_floor_deg: float = Field(0.3, ge=0.0, le=20.0, description="Added to the fit's yaw and hitch sigma")
     gate_margin_m: float = Field(1.0, gt=0.0, le=5.0, description="Points within this of a vehicle's predicted boxes are its points")
-    innovation_gate: float = Field(25.0, gt=0.0, description="A fit whose Mahalanobis distance squared from the prediction exceeds this is not used")
+    innovation_gate: float = Field(25.0, gt=0.0, le=1e4, description="A fit whose Mahalanobis distance squared from the prediction exceeds this is not used")
     reset_after_rejections: int = Field(3, ge=1, le=100, description="After this many gated-out fits in a row the filter restarts its pose and hitch from the fit")
     accel_sigma_m_s2: float = Field(0.5, gt=0.0, le=20.0, description="Process noise: longitudinal acceleration")
     curvature_rate_sigma_1_m_s: float = Field(0.03, gt=0.0, le=5.0, description="Process noise: rate of change of the path curvature")

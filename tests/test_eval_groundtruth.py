@@ -166,3 +166,27 @@ def test_bad_label_files_give_clear_errors(tmp_path):
         gtm.load_labelcloud(tmp_path / "y.json")
     with pytest.raises(gtm.GroundTruthError, match="no such"):
         gtm.load_jsonl(tmp_path / "missing.jsonl")
+
+
+def test_openlabel_relations_pair_units_instead_of_distance(tmp_path):
+    """A trailer whose front is 1 m from a truck is its trailer by distance; the file's isTowing
+    relations say it belongs to the other truck, 30 m away, and the relations win."""
+    def cuboid(x, y, length):
+        return {"object_data": {"cuboid": {"name": "shape3D", "val": [x, y, 1.5, 0, 0, 0, 1, length, 2.5, 3.0]}}}
+
+    objects = {"1": {"name": "TRUCK_1", "type": "TRUCK"}, "2": {"name": "TRAILER_2", "type": "TRAILER"},
+               "3": {"name": "TRUCK_3", "type": "TRUCK"}}
+    frame = {"objects": {"1": cuboid(0.0, 0.0, 3.0), "2": cuboid(-7.0, 0.0, 14.0), "3": cuboid(30.0, 0.0, 3.0)}}
+    relations = {"r": {"name": "towing", "type": "isTowing", "rdf_subjects": [{"uid": "3", "type": "object"}],
+                       "rdf_objects": [{"uid": "2", "type": "object"}]}}
+    file = tmp_path / "labels.json"
+    file.write_text(json.dumps({"openlabel": {"objects": objects, "frames": {"0": {**frame, "relations": {"r": {}}}},
+                                              "relations": relations}}))
+    (line,) = gtm.load_openlabel(file)
+    pairs = sorted((v["truck"] and v["truck"]["center"][0], v["trailer"] and v["trailer"]["center"][0]) for v in line["vehicles"]
+                   if v["truck"] is not None)
+    assert pairs == [(0.0, None), (30.0, -7.0)]
+    file.write_text(json.dumps({"openlabel": {"objects": objects, "frames": {"0": frame}}}))
+    (line,) = gtm.load_openlabel(file)  # no relations in the file: by distance
+    assert sorted((v["truck"] and v["truck"]["center"][0], v["trailer"] and v["trailer"]["center"][0])
+                  for v in line["vehicles"] if v["truck"] is not None) == [(0.0, -7.0), (30.0, None)]

@@ -145,12 +145,27 @@ def pair_units(trucks: list[dict], trailers: list[dict], gate_m: float = 8.0) ->
     return out
 
 
-def _vehicle_line(units: list[dict], frame: int, stamp_s: float, ids: dict, gate_m: float) -> dict:
-    """One GT line from labelled units (dicts with kind, key, center, dimensions, yaw_deg, ...)."""
+def pair_linked(trucks: list[dict], trailers: list[dict], links: list[tuple[str, str]]) -> list[tuple[dict | None, dict | None]]:
+    """Group units by the file's own (truck key, trailer key) links; the others stay alone."""
+    by_key = {u["key"]: u for u in trucks + trailers}
+    pairs = [(by_key[t], by_key[r]) for t, r in links if t in by_key and r in by_key]
+    linked = {id(u) for pair in pairs for u in pair}
+    return pairs + [(t, None) for t in trucks if id(t) not in linked] + [(None, r) for r in trailers if id(r) not in linked]
+
+
+def _vehicle_line(units: list[dict], frame: int, stamp_s: float, ids: dict, gate_m: float,
+                  links: list[tuple[str, str]] | None = None) -> dict:
+    """One GT line from labelled units (dicts with kind, key, center, dimensions, yaw_deg, ...),
+    paired by ``links`` (truck key, trailer key) when the labels have them, else by distance."""
     trucks = [u for u in units if u["kind"] == "truck"]
     trailers = [u for u in units if u["kind"] == "trailer"]
     vehicles = []
-    for truck, trailer in pair_units(trucks, trailers, gate_m):
+    if links is not None:  # in the file's order
+        position = {id(u): i for i, u in enumerate(units)}
+        pairs = sorted(pair_linked(trucks, trailers, links), key=lambda p: min(position[id(u)] for u in p if u is not None))
+    else:
+        pairs = pair_units(trucks, trailers, gate_m)
+    for truck, trailer in pairs:
         lead = truck if truck is not None else trailer
         vid = ids.setdefault(lead["key"], len(ids) + 1)
         v = {
@@ -208,7 +223,7 @@ def load_openlabel(path: str | Path, rate_hz: float = 10.0, transform=None, stam
     files = sorted(path.glob("*.json")) if path.is_dir() else [path]
     if not files:
         raise GroundTruthError(f"{path}: no OpenLABEL .json files")
-    frames: list[tuple[int, float | None, list[dict]]] = []
+    frames: list[tuple[int, float | None, list[dict], list | None]] = []
     label_files = 0
     for file in files:
         data = _read_json(file)
@@ -224,17 +239,33 @@ def load_openlabel(path: str | Path, rate_hz: float = 10.0, transform=None, stam
                 raise GroundTruthError(f"{file}: frame key {key!r} is not an integer") from err
             stamp = (frame.get("frame_properties") or {}).get("timestamp")
             static = data["openlabel"].get("objects") or {}
-            frames.append((number, stamp, _openlabel_units(frame, static, file, transform)))
+            links = _towing_links(frame, data["openlabel"].get("relations"))
+            frames.append((number, stamp, _openlabel_units(frame, static, file, transform), links))
     if not label_files:
         raise GroundTruthError(f"{path}: no OpenLABEL files (none has a top-level 'openlabel' key)")
     frames.sort(key=lambda f: f[0])
-    stamps = [s for _, s, _ in frames if s is not None]
+    stamps = [s for _, s, _, _ in frames if s is not None]
     origin = stamp_origin_s if stamp_origin_s is not None else (min(stamps) if stamps else 0.0)
     ids: dict = {}
     return [
-        _vehicle_line(units, number, (float(stamp) - origin) if stamp is not None else number / rate_hz, ids, pair_gate_m)
-        for number, stamp, units in frames
+        _vehicle_line(units, number, (float(stamp) - origin) if stamp is not None else number / rate_hz, ids, pair_gate_m,
+                      links)
+        for number, stamp, units, links in frames
     ]
+
+
+def _towing_links(frame: dict, relations: dict | None) -> list[tuple[str, str]] | None:
+    """(truck, trailer) object keys of the frame's relations (``isTowing``: subject tows object);
+    None when the file has no relations (units are then paired by distance)."""
+    if not relations:
+        return None
+    links = []
+    for rid in frame.get("relations") or {}:
+        rel = relations.get(rid) or {}
+        subjects, objects = rel.get("rdf_subjects") or [], rel.get("rdf_objects") or []
+        if subjects and objects:
+            links.append((str(subjects[0]["uid"]), str(objects[0]["uid"])))
+    return links
 
 
 def _openlabel_units(frame: dict, static: dict, file: Path, transform) -> list[dict]:
