@@ -7,6 +7,8 @@ from setuptools import find_namespace_packages, setup
 setup(
     packages=[*find_namespace_packages(include=["i2v_loc*", "service*"]), "i2v_loc.samples"],
     package_dir={"i2v_loc.samples": "samples"},
-    package_data={"service": ["static/*"], "i2v_loc.samples": ["**/*.yaml", "**/*.jsonl", "**/*.json", "**/*.npz",
-                                                                "**/*.md"]},
+    package_data={
+        "service": ["static/*"],
+        "i2v_loc.samples": ["**/*.yaml", "**/*.jsonl", "**/*.json", "**/*.npz", "**/*.md"],
+    },
 )

@@ -47,8 +47,10 @@ def _read_kitti_bin(path: Path) -> np.ndarray:
     if size == 0:
         raise CloudError(f"{path}: empty file, no points")
     if size % POINT_BYTES_KITTI:
-        raise CloudError(f"{path}: {size} bytes is not a multiple of {POINT_BYTES_KITTI} "
-                         "(KITTI points are 4 float32: x, y, z, intensity)")
+        raise CloudError(
+            f"{path}: {size} bytes is not a multiple of {POINT_BYTES_KITTI} "
+            "(KITTI points are 4 float32: x, y, z, intensity)"
+        )
     return np.fromfile(path, dtype=np.float32).reshape(-1, 4)[:, :3].copy()
 
 
@@ -76,14 +78,15 @@ def _check_pcd_complete(path: Path) -> None:
         if kind == "ascii":
             found = sum(1 for line in fh if line.strip())
         elif kind == "binary":
-            point_bytes = sum(int(size) * int(count) for size, count in
-                              zip(header.get("SIZE", []), header.get("COUNT", ["1"] * len(header.get("SIZE", [])))))
+            point_bytes = sum(
+                int(size) * int(count)
+                for size, count in zip(header.get("SIZE", []), header.get("COUNT", ["1"] * len(header.get("SIZE", []))))
+            )
             found = (path.stat().st_size - data_start) // point_bytes if point_bytes else 0
         else:  # binary_compressed: open3d checks the compressed size itself
             return
     if found < declared:
-        raise CloudError(f"{path}: the file holds {found} of the {declared} points its header declares "
-                         "(cut short?)")
+        raise CloudError(f"{path}: the file holds {found} of the {declared} points its header declares (cut short?)")
 
 
 def _read_open3d(path: Path) -> np.ndarray:

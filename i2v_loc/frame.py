@@ -37,4 +37,3 @@ class Frame:
 
     index: int
     scans: dict[str, SensorScan] = field(default_factory=dict)
-

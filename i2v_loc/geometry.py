@@ -82,9 +82,14 @@ BOX_CORNER_SIGNS = np.array([[1.0, 1.0], [1.0, -1.0], [-1.0, -1.0], [-1.0, 1.0]]
 def box_corners(center_xy, length_m, width_m, yaw_rad) -> np.ndarray:
     """Ground-plane corners (..., 4, 2) of boxes: front-left, front-right, rear-right, rear-left.
     ``center_xy`` is (..., 2) (a z column, if any, is ignored); the rest broadcast to (...)."""
-    half = np.stack(np.broadcast_arrays(np.asarray(length_m, dtype=float) / 2.0, np.asarray(width_m, dtype=float) / 2.0), -1)
+    half = np.stack(
+        np.broadcast_arrays(np.asarray(length_m, dtype=float) / 2.0, np.asarray(width_m, dtype=float) / 2.0), -1
+    )
     local = BOX_CORNER_SIGNS * half[..., None, :]
-    return rotate_xy(local, np.asarray(yaw_rad, dtype=float)[..., None]) + np.asarray(center_xy, dtype=float)[..., None, :2]
+    return (
+        rotate_xy(local, np.asarray(yaw_rad, dtype=float)[..., None])
+        + np.asarray(center_xy, dtype=float)[..., None, :2]
+    )
 
 
 def rotation_angle_rad(r_a, r_b):

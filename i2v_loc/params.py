@@ -57,12 +57,16 @@ class SensorConfig(Section):
     rate_hz: Literal[10, 20] = 10
     min_range_m: float = Field(0.5, ge=0.0, le=10.0)
     max_range_m: float = Field(120.0, gt=1.0, le=300.0)
-    time_offset_s: float = Field(0.0, ge=-1.0, le=1.0, description="Known offset added to this sensor's stamps to bring it onto the common clock")
+    time_offset_s: float = Field(
+        0.0, ge=-1.0, le=1.0, description="Known offset added to this sensor's stamps to bring it onto the common clock"
+    )
     beam_config: Literal["uniform", "gradient", "below_horizon", "above_horizon"] = Field(
         "uniform", description="Which of the OS1's 128 channels a 32/64-beam model reads (Ouster's beam configurations)"
     )
     metadata: str | None = Field(
-        None, max_length=4096, description="Ouster sensor metadata JSON (as ouster-cli records it); its beam table overrides the model's"
+        None,
+        max_length=4096,
+        description="Ouster sensor metadata JSON (as ouster-cli records it); its beam table overrides the model's",
     )
     extrinsics: Extrinsics = Field(default_factory=Extrinsics)
 
@@ -113,16 +117,24 @@ class TruckGeometry(UnitDimensions):
     wheelbase_m: float = Field(..., gt=0.5, le=8.0)
     front_overhang_m: float = Field(..., ge=0.0, le=3.0, description="Front axle to front face")
     hitch_behind_rear_axle_m: float = Field(
-        ..., ge=-2.0, le=3.0, description="Hitch (fifth wheel or drawbar coupling) behind the rear axle; negative when ahead of it"
+        ...,
+        ge=-2.0,
+        le=3.0,
+        description="Hitch (fifth wheel or drawbar coupling) behind the rear axle; negative when ahead of it",
     )
 
 
 class TrailerGeometry(UnitDimensions):
     """The towed unit. Its reference point is the (effective) axle centre on the ground."""
 
-    hitch_to_axle_m: float = Field(..., gt=0.5, le=15.0, description="Kingpin or drawbar eye to the trailer's effective axle")
+    hitch_to_axle_m: float = Field(
+        ..., gt=0.5, le=15.0, description="Kingpin or drawbar eye to the trailer's effective axle"
+    )
     hitch_to_front_m: float = Field(
-        ..., ge=-3.0, le=3.0, description="Kingpin to the trailer's front face, positive when the face is ahead of the kingpin"
+        ...,
+        ge=-3.0,
+        le=3.0,
+        description="Kingpin to the trailer's front face, positive when the face is ahead of the kingpin",
     )
 
 
@@ -130,8 +142,12 @@ class VehicleConfig(Section):
     description: str = ""
     truck: TruckGeometry
     trailer: TrailerGeometry
-    vehicle_volume_tolerance_m3: float = Field(..., gt=0.0, le=MAX_VOLUME_TOLERANCE_M3, description="δV of the whole-vehicle volume gate (paper Eq. 5)")
-    trailer_volume_tolerance_m3: float = Field(..., gt=0.0, le=MAX_VOLUME_TOLERANCE_M3, description="δV of the trailer volume gate (paper section 3.4)")
+    vehicle_volume_tolerance_m3: float = Field(
+        ..., gt=0.0, le=MAX_VOLUME_TOLERANCE_M3, description="δV of the whole-vehicle volume gate (paper Eq. 5)"
+    )
+    trailer_volume_tolerance_m3: float = Field(
+        ..., gt=0.0, le=MAX_VOLUME_TOLERANCE_M3, description="δV of the trailer volume gate (paper section 3.4)"
+    )
 
     @property
     def vehicle_volume_m3(self) -> float:
@@ -152,28 +168,52 @@ def _paper_vehicles() -> dict[str, VehicleConfig]:
     return {
         "twizy": VehicleConfig(
             description="Renault Twizy with a box trailer on a drawbar",
-            truck=TruckGeometry(length_m=2.00, width_m=1.57, height_m=1.50, floor_m=0.10,
-                                wheelbase_m=1.69, front_overhang_m=0.25, hitch_behind_rear_axle_m=0.45),
-            trailer=TrailerGeometry(length_m=2.50, width_m=1.75, height_m=2.50, floor_m=0.35,
-                                    hitch_to_axle_m=2.40, hitch_to_front_m=-0.60),
+            truck=TruckGeometry(
+                length_m=2.00,
+                width_m=1.57,
+                height_m=1.50,
+                floor_m=0.10,
+                wheelbase_m=1.69,
+                front_overhang_m=0.25,
+                hitch_behind_rear_axle_m=0.45,
+            ),
+            trailer=TrailerGeometry(
+                length_m=2.50, width_m=1.75, height_m=2.50, floor_m=0.35, hitch_to_axle_m=2.40, hitch_to_front_m=-0.60
+            ),
             vehicle_volume_tolerance_m3=20.0,
             trailer_volume_tolerance_m3=7.0,
         ),
         "man_tgx": VehicleConfig(
             description="MAN TGX 4x2 tractor with a 13.68 m semitrailer",
-            truck=TruckGeometry(length_m=2.77, width_m=2.77, height_m=2.86, floor_m=0.45,
-                                wheelbase_m=3.60, front_overhang_m=1.40, hitch_behind_rear_axle_m=-0.35),
-            trailer=TrailerGeometry(length_m=13.68, width_m=2.77, height_m=2.55, floor_m=1.20,
-                                    hitch_to_axle_m=7.90, hitch_to_front_m=1.20),
+            truck=TruckGeometry(
+                length_m=2.77,
+                width_m=2.77,
+                height_m=2.86,
+                floor_m=0.45,
+                wheelbase_m=3.60,
+                front_overhang_m=1.40,
+                hitch_behind_rear_axle_m=-0.35,
+            ),
+            trailer=TrailerGeometry(
+                length_m=13.68, width_m=2.77, height_m=2.55, floor_m=1.20, hitch_to_axle_m=7.90, hitch_to_front_m=1.20
+            ),
             vehicle_volume_tolerance_m3=300.0,
             trailer_volume_tolerance_m3=70.0,
         ),
         "volvo_fh": VehicleConfig(
             description="Volvo FH 4x2 tractor with a 6.30 m semitrailer",
-            truck=TruckGeometry(length_m=2.55, width_m=2.50, height_m=2.50, floor_m=0.50,
-                                wheelbase_m=3.70, front_overhang_m=1.40, hitch_behind_rear_axle_m=-0.30),
-            trailer=TrailerGeometry(length_m=6.30, width_m=2.50, height_m=2.50, floor_m=1.20,
-                                    hitch_to_axle_m=4.20, hitch_to_front_m=0.90),
+            truck=TruckGeometry(
+                length_m=2.55,
+                width_m=2.50,
+                height_m=2.50,
+                floor_m=0.50,
+                wheelbase_m=3.70,
+                front_overhang_m=1.40,
+                hitch_behind_rear_axle_m=-0.30,
+            ),
+            trailer=TrailerGeometry(
+                length_m=6.30, width_m=2.50, height_m=2.50, floor_m=1.20, hitch_to_axle_m=4.20, hitch_to_front_m=0.90
+            ),
             vehicle_volume_tolerance_m3=100.0,
             trailer_volume_tolerance_m3=30.0,
         ),
@@ -184,22 +224,52 @@ def _paper_vehicles() -> dict[str, VehicleConfig]:
 
 
 class CalibrationParams(Section):
-    reference_sensor: str | None = Field(None, description="Sensor whose extrinsics are kept fixed; none: the first sensor")
+    reference_sensor: str | None = Field(
+        None, description="Sensor whose extrinsics are kept fixed; none: the first sensor"
+    )
     method: Literal["gicp", "point_to_plane"] = "gicp"
     frames: int = Field(5, ge=1, le=100, description="Frames of the static scene accumulated per sensor")
-    voxel_size_m: float = Field(0.1, gt=0.01, le=2.0, description="Voxel of the registered clouds; 0.2 m leaves 6 cm errors with a slow vehicle in view")
-    normal_radius_m: float = Field(2.0, ge=0.5, le=10.0, description="Normals from >= 2 m: 1 m diverges on sparse 32-beam rings")
+    voxel_size_m: float = Field(
+        0.1,
+        gt=0.01,
+        le=2.0,
+        description="Voxel of the registered clouds; 0.2 m leaves 6 cm errors with a slow vehicle in view",
+    )
+    normal_radius_m: float = Field(
+        2.0, ge=0.5, le=10.0, description="Normals from >= 2 m: 1 m diverges on sparse 32-beam rings"
+    )
     max_correspondence_m: float = Field(1.0, gt=0.01, le=10.0)
     max_iterations: int = Field(60, ge=1, le=1000)
-    fitness_distance_m: float = Field(0.3, gt=0.0, le=2.0, description="Fitness: share of the sensor's overlapping structure (walls, not the ground) with a registered neighbour this close")
-    min_fitness: float = Field(0.4, ge=0.0, le=1.0, description="Results below this fitness are refused (sample yard: correct 0.45-0.75, a guess off by 3 m / 20 deg 0.25-0.35)")
-    min_overlap_points: int = Field(500, ge=10, le=MAX_POINTS_PER_FRAME, description="Overlap needed to register two sensors directly")
+    fitness_distance_m: float = Field(
+        0.3,
+        gt=0.0,
+        le=2.0,
+        description="Fitness: share of the sensor's overlapping structure (walls, not the ground) with a registered neighbour this close",
+    )
+    min_fitness: float = Field(
+        0.4,
+        ge=0.0,
+        le=1.0,
+        description="Results below this fitness are refused (sample yard: correct 0.45-0.75, a guess off by 3 m / 20 deg 0.25-0.35)",
+    )
+    min_overlap_points: int = Field(
+        500, ge=10, le=MAX_POINTS_PER_FRAME, description="Overlap needed to register two sensors directly"
+    )
 
 
 class ConcatenationParams(Section):
-    voxel_size_m: float = Field(0.1, ge=0.0, le=2.0, description="Voxel edge of the centroid grid (Eq. 1-2); 0 disables it")
-    sync_tolerance_s: float = Field(0.1, gt=0.0, le=1.0, description="Sensor frames further than this from the reference time are dropped; one sweep period, as sensor phases are unsynchronised")
-    reference: Literal["earliest", "latest", "mean"] = Field("earliest", description="Which sensor stamp is the frame's reference time")
+    voxel_size_m: float = Field(
+        0.1, ge=0.0, le=2.0, description="Voxel edge of the centroid grid (Eq. 1-2); 0 disables it"
+    )
+    sync_tolerance_s: float = Field(
+        0.1,
+        gt=0.0,
+        le=1.0,
+        description="Sensor frames further than this from the reference time are dropped; one sweep period, as sensor phases are unsynchronised",
+    )
+    reference: Literal["earliest", "latest", "mean"] = Field(
+        "earliest", description="Which sensor stamp is the frame's reference time"
+    )
     motion_interpolation: bool = Field(True, description="Interpolate each point to the reference time (Eq. 3)")
 
 
@@ -212,13 +282,24 @@ class RegionParams(Section):
     z_max_m: float = Field(5.0, ge=-MAST_HEIGHT_M, le=MAST_HEIGHT_M)
     ground_distance_threshold_m: float = Field(0.15, gt=0.0, le=2.0)
     ransac_iterations: int = Field(100, ge=1, le=10000)
-    ransac_sample_voxel_m: float = Field(0.5, ge=0.0, le=5.0, description="Voxel size of the cloud RANSAC samples from; 0 uses every point")
-    max_ground_tilt_deg: float = Field(10.0, ge=0.0, le=45.0, description="Planes tilted more than this from horizontal are not ground")
-    min_ground_fraction: float = Field(0.1, ge=0.0, le=1.0, description="A plane supported by fewer sampled points than this fraction is not ground")
-    ground_refit_frames: int = Field(1, ge=1, le=1000, description="Fit the ground plane every this many frames and keep it in between (1 = every frame; the ground is static)")
+    ransac_sample_voxel_m: float = Field(
+        0.5, ge=0.0, le=5.0, description="Voxel size of the cloud RANSAC samples from; 0 uses every point"
+    )
+    max_ground_tilt_deg: float = Field(
+        10.0, ge=0.0, le=45.0, description="Planes tilted more than this from horizontal are not ground"
+    )
+    min_ground_fraction: float = Field(
+        0.1, ge=0.0, le=1.0, description="A plane supported by fewer sampled points than this fraction is not ground"
+    )
+    ground_refit_frames: int = Field(
+        1,
+        ge=1,
+        le=1000,
+        description="Fit the ground plane every this many frames and keep it in between (1 = every frame; the ground is static)",
+    )
 
     @model_validator(mode="after")
-    def _check_bounds(self) -> "RegionParams":
+    def _check_bounds(self) -> RegionParams:
         for axis in "xyz":
             low, high = getattr(self, f"{axis}_min_m"), getattr(self, f"{axis}_max_m")
             if not low < high:
@@ -228,59 +309,144 @@ class RegionParams(Section):
 
 class ClusteringParams(Section):
     tolerance_m: float = Field(0.7, gt=0.0, le=5.0, description="ε of Eq. 4")
-    algorithm: Literal["kdtree", "grid"] = Field("kdtree", description="kdtree: Eq. 4 on voxel centroids; grid: 26-connected components of a voxel occupancy grid of grid_voxel_m")
-    voxel_size_m: float = Field(0.2, ge=0.0, le=2.0, description="Neighbour search on voxel centroids of this size (0 = every point)")
-    grid_voxel_m: float = Field(0.5, ge=0.1, le=2.0, description="Voxel of the grid algorithm (0.3 m splits a vehicle: 32-beam rings are 0.5 m apart at 20 m)")
+    algorithm: Literal["kdtree", "grid"] = Field(
+        "kdtree",
+        description="kdtree: Eq. 4 on voxel centroids; grid: 26-connected components of a voxel occupancy grid of grid_voxel_m",
+    )
+    voxel_size_m: float = Field(
+        0.2, ge=0.0, le=2.0, description="Neighbour search on voxel centroids of this size (0 = every point)"
+    )
+    grid_voxel_m: float = Field(
+        0.5,
+        ge=0.1,
+        le=2.0,
+        description="Voxel of the grid algorithm (0.3 m splits a vehicle: 32-beam rings are 0.5 m apart at 20 m)",
+    )
     min_points: int = Field(10, ge=1, le=MAX_POINTS_PER_FRAME)
     max_points: int = Field(200000, ge=1, le=MAX_POINTS_PER_FRAME)
-    hitch_range_deg: float = Field(0.0, ge=0.0, le=90.0, description="The whole-vehicle gate also admits the vehicle's oriented box at any hitch angle up to this, from its kinematic figures (0 = Eq. 5 alone)")
+    hitch_range_deg: float = Field(
+        0.0,
+        ge=0.0,
+        le=90.0,
+        description="The whole-vehicle gate also admits the vehicle's oriented box at any hitch angle up to this, from its kinematic figures (0 = Eq. 5 alone)",
+    )
 
     @model_validator(mode="after")
-    def _check_points(self) -> "ClusteringParams":
+    def _check_points(self) -> ClusteringParams:
         if self.min_points > self.max_points:
             raise ValueError(f"min_points ({self.min_points}) must not exceed max_points ({self.max_points})")
         return self
 
 
 class ClassificationParams(Section):
-    trailer_tolerance_m: float = Field(0.35, gt=0.0, le=5.0, description="ε of the second clustering inside a vehicle cluster")
+    trailer_tolerance_m: float = Field(
+        0.35, gt=0.0, le=5.0, description="ε of the second clustering inside a vehicle cluster"
+    )
     min_trailer_points: int = Field(30, ge=1, le=MAX_POINTS_PER_FRAME)
-    min_truck_points: int = Field(10, ge=1, le=MAX_POINTS_PER_FRAME, description="Fewer points left after removing the trailer: the truck is not seen")
-    max_length_excess_m: float = Field(1.0, ge=0.0, le=20.0, description="A trailer candidate longer than the trailer plus this is rejected")
-    floor_margin_m: float = Field(0.1, ge=-1.0, le=2.0, description="The second clustering uses points higher than the trailer floor plus this above the ground")
-    xy_grid_m: float = Field(0.05, gt=0.0, le=0.3, description="The xy projection is thinned to one point per cell of this size before the second clustering (neighbour pairs fall with its square)")
-    truck_one_end: bool = Field(False, description="The truck is the rest of the cluster at one end of the trailer only (the end holding most of it)")
-    min_height_fraction: float = Field(0.0, ge=0.0, le=1.0, description="A trailer candidate whose top (95th percentile above the ground) is below the trailer's floor plus this share of its height is rejected (0 = no check; a car's body fits the Twizy trailer's volume gate but is 1 m lower)")
-    complete_width: bool = Field(False, description="A trailer found narrower than its width (its far wall a sub-cluster of its own or joined to the cab) takes in the points up to its width on the side holding more of them")
-    max_hitch_gap_m: float = Field(0.0, ge=0.0, le=20.0, description="A truck whose corrected centre is further than this from where the trailer's hitch point puts it (the truck's centre-to-hitch distance from it) is dropped (0 = no check)")
+    min_truck_points: int = Field(
+        10,
+        ge=1,
+        le=MAX_POINTS_PER_FRAME,
+        description="Fewer points left after removing the trailer: the truck is not seen",
+    )
+    max_length_excess_m: float = Field(
+        1.0, ge=0.0, le=20.0, description="A trailer candidate longer than the trailer plus this is rejected"
+    )
+    floor_margin_m: float = Field(
+        0.1,
+        ge=-1.0,
+        le=2.0,
+        description="The second clustering uses points higher than the trailer floor plus this above the ground",
+    )
+    xy_grid_m: float = Field(
+        0.05,
+        gt=0.0,
+        le=0.3,
+        description="The xy projection is thinned to one point per cell of this size before the second clustering (neighbour pairs fall with its square)",
+    )
+    truck_one_end: bool = Field(
+        False,
+        description="The truck is the rest of the cluster at one end of the trailer only (the end holding most of it)",
+    )
+    min_height_fraction: float = Field(
+        0.0,
+        ge=0.0,
+        le=1.0,
+        description="A trailer candidate whose top (95th percentile above the ground) is below the trailer's floor plus this share of its height is rejected (0 = no check; a car's body fits the Twizy trailer's volume gate but is 1 m lower)",
+    )
+    complete_width: bool = Field(
+        False,
+        description="A trailer found narrower than its width (its far wall a sub-cluster of its own or joined to the cab) takes in the points up to its width on the side holding more of them",
+    )
+    max_hitch_gap_m: float = Field(
+        0.0,
+        ge=0.0,
+        le=20.0,
+        description="A truck whose corrected centre is further than this from where the trailer's hitch point puts it (the truck's centre-to-hitch distance from it) is dropped (0 = no check)",
+    )
 
 
 class CentroidParams(Section):
     enabled: bool = True
-    truck_front_anchor: bool = Field(False, description="A truck with a known heading whose points reach further back than its length (chassis rails, fifth wheel) is centred half its length behind its front end")
+    truck_front_anchor: bool = Field(
+        False,
+        description="A truck with a known heading whose points reach further back than its length (chassis rails, fifth wheel) is centred half its length behind its front end",
+    )
 
 
 class TrackingParams(Section):
     max_distance_m: float = Field(1.0, gt=0.0, le=20.0, description="Association gate (paper: 1 m)")
     max_age_frames: int = Field(3, ge=1, le=100)
     min_hits: int = Field(3, ge=1, le=100)
-    process_noise: float = Field(1.0, ge=1e-4, le=1e4, description="Variance of the white-noise acceleration of the Kalman filter")
-    measurement_noise_m: float = Field(0.15, ge=0.001, le=10.0, description="Standard deviation of a measured unit centre")
-    confirm_paired: bool = Field(False, description="A unit found together with its partner unit (truck and trailer of one classified cluster) is confirmed at once")
-    reacquire_distance_m: float = Field(0.0, ge=0.0, le=20.0, description="A new unit this close to the last position of a lost track of its kind continues it (ID, yaw); 0 = never")
+    process_noise: float = Field(
+        1.0, ge=1e-4, le=1e4, description="Variance of the white-noise acceleration of the Kalman filter"
+    )
+    measurement_noise_m: float = Field(
+        0.15, ge=0.001, le=10.0, description="Standard deviation of a measured unit centre"
+    )
+    confirm_paired: bool = Field(
+        False,
+        description="A unit found together with its partner unit (truck and trailer of one classified cluster) is confirmed at once",
+    )
+    reacquire_distance_m: float = Field(
+        0.0,
+        ge=0.0,
+        le=20.0,
+        description="A new unit this close to the last position of a lost track of its kind continues it (ID, yaw); 0 = never",
+    )
     reacquire_max_age_s: float = Field(5.0, ge=0.0, le=600.0, description="Lost tracks can be continued for this long")
 
 
 class OrientationParams(Section):
     history_frames: int = Field(10, ge=2, le=200, description="Corrected centroids in the PCA history (Eq. 11-12)")
     min_travel_m: float = Field(0.3, ge=0.0, le=20.0, description="Below this travel over the history the yaw is held")
-    max_yaw_rate_deg_s: float = Field(22.5, gt=0.0, le=720.0, description="Bound on the smoothed yaw's change per second (22.5: the bound in force before it was applied after the smoothing, 45 x 0.5)")
+    max_yaw_rate_deg_s: float = Field(
+        22.5,
+        gt=0.0,
+        le=720.0,
+        description="Bound on the smoothed yaw's change per second (22.5: the bound in force before it was applied after the smoothing, 45 x 0.5)",
+    )
     smoothing: float = Field(0.5, ge=0.0, lt=1.0, description="Weight of the previous yaw in the smoothed yaw")
-    shape_weight: float = Field(0.0, ge=0.0, le=1.0, description="Blend of the unit's shape axis into the PCA axis (0 = pure PCA, the paper)")
-    history_gap_s: float = Field(1.0, gt=0.0, le=60.0, description="A unit unseen for longer restarts its centroid history (its yaw is kept)")
-    prefer_continuity: bool = Field(False, description="A unit seen in the previous frames keeps its direction; the trailer-to-truck direction decides only for new or re-acquired units")
-    flip_confirm_frames: int = Field(0, ge=0, le=100, description="A yaw measured more than 90 deg from the unit's yaw is ignored until measured this many frames in a row, then taken at once (0 = no check: the rate bound turns the yaw over)")
-    hitch_forward: bool = Field(False, description="The truck's forward direction runs from the trailer's hitch point to the truck (its heading at any hitch angle), not from the trailer's centre")
+    shape_weight: float = Field(
+        0.0, ge=0.0, le=1.0, description="Blend of the unit's shape axis into the PCA axis (0 = pure PCA, the paper)"
+    )
+    history_gap_s: float = Field(
+        1.0, gt=0.0, le=60.0, description="A unit unseen for longer restarts its centroid history (its yaw is kept)"
+    )
+    prefer_continuity: bool = Field(
+        False,
+        description="A unit seen in the previous frames keeps its direction; the trailer-to-truck direction decides only for new or re-acquired units",
+    )
+    flip_confirm_frames: int = Field(
+        0,
+        ge=0,
+        le=100,
+        description="A yaw measured more than 90 deg from the unit's yaw is ignored until measured this many frames in a row, then taken at once (0 = no check: the rate bound turns the yaw over)",
+    )
+    hitch_forward: bool = Field(
+        False,
+        description="The truck's forward direction runs from the trailer's hitch point to the truck (its heading at any hitch angle), not from the trailer's centre",
+    )
 
 
 class BackgroundParams(Section):
@@ -291,67 +457,181 @@ class BackgroundParams(Section):
     dilation_voxels: int = Field(1, ge=0, le=3, description="Background grown by this many voxels (range noise)")
     window_frames: int = Field(30, ge=2, le=255, description="Learning samples in the sliding window (N)")
     learn_every_frames: int = Field(2, ge=1, le=100, description="One learning sample every this many frames")
-    occupied_fraction: float = Field(0.8, gt=0.0, le=1.0, description="A voxel occupied in at least this share of the window's samples is background")
-    forget_fraction: float = Field(0.0, ge=0.0, lt=1.0, description="A background voxel occupied in at most this share of the window's samples is background no more")
-    min_samples: int = Field(25, ge=1, le=255, description="Learning samples before the map is used (the frames before fall back to no background); a vehicle standing still from the start longer than this becomes background")
-    protect_margin_m: float = Field(1.0, ge=0.0, le=10.0, description="Voxels within this of a protected track's box are never learned")
-    keep_margin_m: float = Field(0.3, ge=0.0, le=5.0, description="Points within this of a protected track's box are never background (small: a docked trailer's rear is 0.3 m from the wall)")
-    protect_min_travel_m: float = Field(2.0, ge=0.0, le=100.0, description="A confirmed track is protected once its filtered position has moved this far from its first one (0: every confirmed track), so a parked object becomes background but a vehicle that stops does not")
-    max_voxels: int = Field(20_000_000, ge=1000, le=200_000_000, description="Refuse a region / voxel size giving a larger grid")
+    occupied_fraction: float = Field(
+        0.8, gt=0.0, le=1.0, description="A voxel occupied in at least this share of the window's samples is background"
+    )
+    forget_fraction: float = Field(
+        0.0,
+        ge=0.0,
+        lt=1.0,
+        description="A background voxel occupied in at most this share of the window's samples is background no more",
+    )
+    min_samples: int = Field(
+        25,
+        ge=1,
+        le=255,
+        description="Learning samples before the map is used (the frames before fall back to no background); a vehicle standing still from the start longer than this becomes background",
+    )
+    protect_margin_m: float = Field(
+        1.0, ge=0.0, le=10.0, description="Voxels within this of a protected track's box are never learned"
+    )
+    keep_margin_m: float = Field(
+        0.3,
+        ge=0.0,
+        le=5.0,
+        description="Points within this of a protected track's box are never background (small: a docked trailer's rear is 0.3 m from the wall)",
+    )
+    protect_min_travel_m: float = Field(
+        2.0,
+        ge=0.0,
+        le=100.0,
+        description="A confirmed track is protected once its filtered position has moved this far from its first one (0: every confirmed track), so a parked object becomes background but a vehicle that stops does not",
+    )
+    max_voxels: int = Field(
+        20_000_000, ge=1000, le=200_000_000, description="Refuse a region / voxel size giving a larger grid"
+    )
 
     @model_validator(mode="after")
-    def _check_samples(self) -> "BackgroundParams":
+    def _check_samples(self) -> BackgroundParams:
         if self.min_samples > self.window_frames:
             raise ValueError(f"min_samples ({self.min_samples}) must not exceed window_frames ({self.window_frames})")
         if self.forget_fraction >= self.occupied_fraction:
-            raise ValueError(f"forget_fraction ({self.forget_fraction}) must be below occupied_fraction ({self.occupied_fraction})")
+            raise ValueError(
+                f"forget_fraction ({self.forget_fraction}) must be below occupied_fraction ({self.occupied_fraction})"
+            )
         return self
 
 
 class ArticulatedParams(Section):
     """The articulated estimator (method ``articulated``): hinged-model fit, kinematic UKF, vehicle tracks."""
 
-    fit_max_points: int = Field(200, ge=20, le=5000, description="A vehicle's points (voxel centroids of the front end) are thinned evenly to at most this many for the fit")
+    fit_max_points: int = Field(
+        200,
+        ge=20,
+        le=5000,
+        description="A vehicle's points (voxel centroids of the front end) are thinned evenly to at most this many for the fit",
+    )
     fit_min_points: int = Field(15, ge=3, le=1000, description="Fewer thinned points: no measurement this frame")
-    fit_loss_scale_m: float = Field(0.1, gt=0.0, le=2.0, description="Scale of the Cauchy loss of the point-to-face distances (range noise plus mirrors and panel gaps)")
-    fit_start_scale_m: float = Field(0.2, gt=0.0, le=5.0, description="The loss scale of the first step, halved at each step down to fit_loss_scale_m")
-    fit_iterations: int = Field(5, ge=1, le=100, description="At most this many reweighted Gauss-Newton steps per fit (warm-started)")
-    fit_top_band_m: float = Field(0.25, ge=0.0, le=2.0, description="Points this close to a unit's roof height inside its footprint are roof points")
-    fit_inlier_m: float = Field(0.3, gt=0.0, le=2.0, description="Points this close to a face are explained by the vehicle")
-    fit_noise_floor_m: float = Field(0.02, gt=0.0, le=1.0, description="Lower bound of the point noise in the fit's covariance")
-    fit_position_floor_m: float = Field(0.03, ge=0.0, le=2.0, description="Added to the fit's position sigma (model error, correlated points)")
+    fit_loss_scale_m: float = Field(
+        0.1,
+        gt=0.0,
+        le=2.0,
+        description="Scale of the Cauchy loss of the point-to-face distances (range noise plus mirrors and panel gaps)",
+    )
+    fit_start_scale_m: float = Field(
+        0.2,
+        gt=0.0,
+        le=5.0,
+        description="The loss scale of the first step, halved at each step down to fit_loss_scale_m",
+    )
+    fit_iterations: int = Field(
+        5, ge=1, le=100, description="At most this many reweighted Gauss-Newton steps per fit (warm-started)"
+    )
+    fit_top_band_m: float = Field(
+        0.25,
+        ge=0.0,
+        le=2.0,
+        description="Points this close to a unit's roof height inside its footprint are roof points",
+    )
+    fit_inlier_m: float = Field(
+        0.3, gt=0.0, le=2.0, description="Points this close to a face are explained by the vehicle"
+    )
+    fit_noise_floor_m: float = Field(
+        0.02, gt=0.0, le=1.0, description="Lower bound of the point noise in the fit's covariance"
+    )
+    fit_position_floor_m: float = Field(
+        0.03, ge=0.0, le=2.0, description="Added to the fit's position sigma (model error, correlated points)"
+    )
     fit_angle_floor_deg: float = Field(0.3, ge=0.0, le=20.0, description="Added to the fit's yaw and hitch sigma")
-    gate_margin_m: float = Field(1.0, gt=0.0, le=5.0, description="Points within this of a vehicle's predicted boxes are its points")
-    innovation_gate: float = Field(25.0, gt=0.0, le=1e4, description="A fit whose Mahalanobis distance squared from the prediction exceeds this is not used")
-    reset_after_rejections: int = Field(3, ge=1, le=100, description="After this many gated-out fits in a row the filter restarts its pose and hitch from the fit")
+    gate_margin_m: float = Field(
+        1.0, gt=0.0, le=5.0, description="Points within this of a vehicle's predicted boxes are its points"
+    )
+    innovation_gate: float = Field(
+        25.0,
+        gt=0.0,
+        le=1e4,
+        description="A fit whose Mahalanobis distance squared from the prediction exceeds this is not used",
+    )
+    reset_after_rejections: int = Field(
+        3,
+        ge=1,
+        le=100,
+        description="After this many gated-out fits in a row the filter restarts its pose and hitch from the fit",
+    )
     accel_sigma_m_s2: float = Field(0.5, gt=0.0, le=20.0, description="Process noise: longitudinal acceleration")
-    curvature_rate_sigma_1_m_s: float = Field(0.03, gt=0.0, le=5.0, description="Process noise: rate of change of the path curvature")
+    curvature_rate_sigma_1_m_s: float = Field(
+        0.03, gt=0.0, le=5.0, description="Process noise: rate of change of the path curvature"
+    )
     position_sigma_m_s: float = Field(0.05, ge=0.0, le=5.0, description="Process noise: position (slip, model error)")
-    yaw_sigma_deg_s: float = Field(0.2, ge=0.0, le=90.0, description="Process noise: tractor yaw beyond the curvature model")
-    hitch_sigma_deg_s: float = Field(0.5, ge=0.0, le=90.0, description="Process noise: hitch angle beyond the trailer kinematics")
+    yaw_sigma_deg_s: float = Field(
+        0.2, ge=0.0, le=90.0, description="Process noise: tractor yaw beyond the curvature model"
+    )
+    hitch_sigma_deg_s: float = Field(
+        0.5, ge=0.0, le=90.0, description="Process noise: hitch angle beyond the trailer kinematics"
+    )
     jackknife_hitch_deg: float = Field(60.0, gt=0.0, le=180.0, description="Jackknife warning above this |hitch angle|")
     jackknife_rate_deg_s: float = Field(15.0, gt=0.0, le=360.0, description="or above this |hitch angle rate|")
-    start_frames: int = Field(3, ge=1, le=100, description="A new vehicle is reported after its cluster persisted this many frames")
-    start_voxel_m: float = Field(0.8, ge=0.1, le=3.0, description="Voxel of the connected components that seed new vehicles (bridges the gap between cab and trailer)")
-    start_join_m: float = Field(2.0, ge=0.0, le=10.0, description="Seed components closer than this are one seed (a cab and its trailer)")
-    start_max_step_m: float = Field(1.5, gt=0.0, le=10.0, description="A seed cluster persists when its centre moved at most this since the last frame")
-    start_min_length_m: float = Field(3.0, gt=0.0, le=30.0, description="Seed clusters shorter than this are not vehicles")
+    start_frames: int = Field(
+        3, ge=1, le=100, description="A new vehicle is reported after its cluster persisted this many frames"
+    )
+    start_voxel_m: float = Field(
+        0.8,
+        ge=0.1,
+        le=3.0,
+        description="Voxel of the connected components that seed new vehicles (bridges the gap between cab and trailer)",
+    )
+    start_join_m: float = Field(
+        2.0, ge=0.0, le=10.0, description="Seed components closer than this are one seed (a cab and its trailer)"
+    )
+    start_max_step_m: float = Field(
+        1.5,
+        gt=0.0,
+        le=10.0,
+        description="A seed cluster persists when its centre moved at most this since the last frame",
+    )
+    start_min_length_m: float = Field(
+        3.0, gt=0.0, le=30.0, description="Seed clusters shorter than this are not vehicles"
+    )
     start_max_length_m: float = Field(25.0, gt=0.0, le=60.0, description="nor longer than this")
-    start_min_width_m: float = Field(1.0, ge=0.0, le=5.0, description="nor narrower than this (a wall is a plane; a vehicle starts once an end, its roof or both sides are seen)")
+    start_min_width_m: float = Field(
+        1.0,
+        ge=0.0,
+        le=5.0,
+        description="nor narrower than this (a wall is a plane; a vehicle starts once an end, its roof or both sides are seen)",
+    )
     start_min_height_m: float = Field(1.2, gt=0.0, le=5.0, description="nor lower than this above the ground")
-    rigid_min_length_m: float = Field(5.5, gt=0.0, le=30.0, description="A rigid vehicle (bus, rigid truck, van) is at least this long (cars are not reported)")
-    start_min_explained: float = Field(0.8, gt=0.0, le=1.0, description="A seed is a vehicle when the best model explains this share of its points")
+    rigid_min_length_m: float = Field(
+        5.5,
+        gt=0.0,
+        le=30.0,
+        description="A rigid vehicle (bus, rigid truck, van) is at least this long (cars are not reported)",
+    )
+    start_min_explained: float = Field(
+        0.8, gt=0.0, le=1.0, description="A seed is a vehicle when the best model explains this share of its points"
+    )
     leave_frames: int = Field(10, ge=1, le=1000, description="A vehicle without points for this many frames has left")
-    learn_dimensions: bool = Field(True, description="Estimate the units' lengths and widths from their points (the catalogue is the prior)")
+    learn_dimensions: bool = Field(
+        True, description="Estimate the units' lengths and widths from their points (the catalogue is the prior)"
+    )
     dimension_window: int = Field(50, ge=3, le=1000, description="Per-frame extent observations kept per dimension")
-    type_max_error_m: float = Field(1.0, gt=0.0, le=10.0, description="The type is the catalogue vehicle whose lengths are nearest, if within this; else unknown")
+    type_max_error_m: float = Field(
+        1.0,
+        gt=0.0,
+        le=10.0,
+        description="The type is the catalogue vehicle whose lengths are nearest, if within this; else unknown",
+    )
 
 
 class Params(Section):
     """All parameters of i2v-loc."""
 
     sensors: list[SensorConfig] = Field(default_factory=_paper_field_sensors, min_length=1, max_length=MAX_SENSORS)
-    vehicles: dict[str, VehicleConfig] = Field(default_factory=_paper_vehicles, min_length=1, max_length=MAX_VEHICLES, description="The vehicle catalogue: at least one vehicle, or nothing is ever detected")
+    vehicles: dict[str, VehicleConfig] = Field(
+        default_factory=_paper_vehicles,
+        min_length=1,
+        max_length=MAX_VEHICLES,
+        description="The vehicle catalogue: at least one vehicle, or nothing is ever detected",
+    )
     calibration: CalibrationParams = Field(default_factory=CalibrationParams)
     concatenation: ConcatenationParams = Field(default_factory=ConcatenationParams)
     region: RegionParams = Field(default_factory=RegionParams)
@@ -364,7 +644,7 @@ class Params(Section):
     articulated: ArticulatedParams = Field(default_factory=ArticulatedParams)
 
     @model_validator(mode="after")
-    def _check_names(self) -> "Params":
+    def _check_names(self) -> Params:
         names = [s.name for s in self.sensors]
         if len(set(names)) != len(names):
             raise ValueError(f"sensor names must be unique, got {', '.join(names)}")
@@ -448,8 +728,15 @@ def describe_validation_error(err: ValidationError, source: str = "parameters") 
     errors = err.errors(include_url=False)
     if len(errors) > MAX_ERRORS_REPORTED:
         more = len(errors) - MAX_ERRORS_REPORTED
-        out.append({"source": source, "field": "", "value": None, "allowed": "",
-                    "message": f"{len(errors)} errors; the first {MAX_ERRORS_REPORTED} follow, {more} more not listed"})
+        out.append(
+            {
+                "source": source,
+                "field": "",
+                "value": None,
+                "allowed": "",
+                "message": f"{len(errors)} errors; the first {MAX_ERRORS_REPORTED} follow, {more} more not listed",
+            }
+        )
         errors = errors[:MAX_ERRORS_REPORTED]
     for e in errors:
         loc = tuple(e["loc"])
@@ -515,15 +802,17 @@ def _check_complete(path: Path, text: str, data: dict | None) -> None:
     first = text.split("\n", 1)[0].strip()
     if not first.startswith(HEADER_PREFIX):
         return
-    listed = [name.strip() for name in first[len(HEADER_PREFIX):].split(",") if name.strip()]
+    listed = [name.strip() for name in first[len(HEADER_PREFIX) :].split(",") if name.strip()]
     lost = [name for name in listed if data is not None and name not in data]
     ended = text.rstrip().endswith(END_MARK)
     if lost or not ended:
         what = f"sections lost: {', '.join(lost)}" if lost else "the last section is cut short"
         previous = path.with_name(path.name + PREVIOUS_SUFFIX)
         hint = f"; the previous version is {previous}" if previous.is_file() else ""
-        raise ParamsError(f"{path}: the file is incomplete (it does not end with '{END_MARK}'; {what}); "
-                          f"refusing to start from it{hint}")
+        raise ParamsError(
+            f"{path}: the file is incomplete (it does not end with '{END_MARK}'; {what}); "
+            f"refusing to start from it{hint}"
+        )
 
 
 def load_params(*paths: str | Path | None) -> Params:

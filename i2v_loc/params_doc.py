@@ -30,11 +30,20 @@ def render() -> str:
         ref, shape = _container(prop)
         out.append(f"## `{section}`\n")
         described = prop.get("description", "").rstrip(".")
-        sizes = [f"{word} {prop[key]}" for key, word in (("minItems", "at least"), ("maxItems", "at most"),
-                                                         ("minProperties", "at least"), ("maxProperties", "at most"))
-                 if key in prop]
+        sizes = [
+            f"{word} {prop[key]}"
+            for key, word in (
+                ("minItems", "at least"),
+                ("maxItems", "at most"),
+                ("minProperties", "at least"),
+                ("maxProperties", "at most"),
+            )
+            if key in prop
+        ]
         size = f" ({', '.join(sizes)} entries)" if sizes else ""
-        text = " ".join(filter(None, [described and described + ".", shape and f"A {shape} of the fields below{size}."]))
+        text = " ".join(
+            filter(None, [described and described + ".", shape and f"A {shape} of the fields below{size}."])
+        )
         if text:
             out.append(text + "\n")
         out.extend(_tables(defs, ref, section))
@@ -61,7 +70,9 @@ def _tables(defs: dict, model: str, path: str) -> list[str]:
             continue
         required = field in node.get("required", [])
         default = "required" if required else _cell(json.dumps(prop.get("default")))
-        rows.append(f"| `{field}` | {_type(prop)} | {default} | {_allowed(prop)} | {_cell(prop.get('description', ''))} |")
+        rows.append(
+            f"| `{field}` | {_type(prop)} | {default} | {_allowed(prop)} | {_cell(prop.get('description', ''))} |"
+        )
     out = []
     if node.get("description"):
         out.append(_cell(node["description"]) + "\n")

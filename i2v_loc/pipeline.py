@@ -27,7 +27,7 @@ from i2v_loc.stages.concatenation import Concatenation, MotionHint
 from i2v_loc.stages.orientation import OrientationEstimator, UnitObservation
 from i2v_loc.stages.primitives import voxel_centroids
 from i2v_loc.stages.region import Region
-from i2v_loc.stages.tracking import Detection, Tracker, Track
+from i2v_loc.stages.tracking import Detection, Track, Tracker
 
 # "paper": the stages as published (yaw from PCA on the centroid history alone).
 # "default": the unit's shape axis as the yaw axis (PCA keeps the history, the travel test and
@@ -48,14 +48,30 @@ METHOD_PATCHES = {
         "region": {"ground_refit_frames": 10},
         "tracking": {"confirm_paired": True, "reacquire_distance_m": 3.0},
         "centroid": {"truck_front_anchor": True},
-        "classification": {"truck_one_end": True, "complete_width": True, "max_hitch_gap_m": 2.0,
-                           "min_height_fraction": 0.6},
-        "orientation": {"shape_weight": 1.0, "flip_confirm_frames": 5, "hitch_forward": True,
-                        "max_yaw_rate_deg_s": 45.0},
+        "classification": {
+            "truck_one_end": True,
+            "complete_width": True,
+            "max_hitch_gap_m": 2.0,
+            "min_height_fraction": 0.6,
+        },
+        "orientation": {
+            "shape_weight": 1.0,
+            "flip_confirm_frames": 5,
+            "hitch_forward": True,
+            "max_yaw_rate_deg_s": 45.0,
+        },
     },
 }
-STAGES = ("concatenation", "background", "region", "clustering", "classification", "centroid", "tracking",
-          "orientation")
+STAGES = (
+    "concatenation",
+    "background",
+    "region",
+    "clustering",
+    "classification",
+    "centroid",
+    "tracking",
+    "orientation",
+)
 MOTION_HINT_MIN_SPEED_M_S = 0.1
 MOTION_HINT_MARGIN_M = 0.5
 PREDICTION_S = 0.1  # protected boxes are moved ahead by one frame of the track's velocity
@@ -98,9 +114,13 @@ class UnitResult:
     points: int
 
     def to_json(self) -> dict:
-        return {"track_id": self.track_id, "center": [_r(v) for v in self.center],
-                "yaw_deg": None if self.yaw_deg is None else _r(self.yaw_deg, 3),
-                "dimensions": [_r(v, 3) for v in self.dimensions], "points": int(self.points)}
+        return {
+            "track_id": self.track_id,
+            "center": [_r(v) for v in self.center],
+            "yaw_deg": None if self.yaw_deg is None else _r(self.yaw_deg, 3),
+            "dimensions": [_r(v, 3) for v in self.dimensions],
+            "points": int(self.points),
+        }
 
 
 @dataclass
@@ -114,11 +134,14 @@ class VehicleResult:
 
     def to_json(self) -> dict:
         t = self.tractor_to_trailer
-        return {"id": self.id, "vehicle": self.vehicle,
-                "hitch_deg": None if self.hitch_deg is None else _r(self.hitch_deg, 3),
-                "truck": self.truck.to_json() if self.truck else None,
-                "trailer": self.trailer.to_json() if self.trailer else None,
-                "tractor_to_trailer": None if t is None else [[_r(v, 6) for v in row] for row in t]}
+        return {
+            "id": self.id,
+            "vehicle": self.vehicle,
+            "hitch_deg": None if self.hitch_deg is None else _r(self.hitch_deg, 3),
+            "truck": self.truck.to_json() if self.truck else None,
+            "trailer": self.trailer.to_json() if self.trailer else None,
+            "tractor_to_trailer": None if t is None else [[_r(v, 6) for v in row] for row in t],
+        }
 
 
 @dataclass
@@ -136,11 +159,16 @@ class FrameResult:
 
     def to_json(self) -> dict:
         """The state line of docs/formats.md."""
-        return {"type": "state", "frame": int(self.frame),
-                "stamp_s": None if not np.isfinite(self.stamp_s) else _r(self.stamp_s, 6),
-                "latency_ms": {k: _r(v, 3) for k, v in self.latency_ms.items()},
-                "faults": dict(self.faults), "dropped": dict(self.dropped),
-                "clusters": self.clusters, "vehicles": [v.to_json() for v in self.vehicles]}
+        return {
+            "type": "state",
+            "frame": int(self.frame),
+            "stamp_s": None if not np.isfinite(self.stamp_s) else _r(self.stamp_s, 6),
+            "latency_ms": {k: _r(v, 3) for k, v in self.latency_ms.items()},
+            "faults": dict(self.faults),
+            "dropped": dict(self.dropped),
+            "clusters": self.clusters,
+            "vehicles": [v.to_json() for v in self.vehicles],
+        }
 
 
 @dataclass
@@ -252,9 +280,18 @@ class Pipeline(ParameterHandoff):
         timer.lap("orientation")
         self._motion = self._motion_hints(tracked.all_tracks)
         self._count(merged, region, clustering, cluster_lines)
-        return FrameResult(frame.index, merged.stamp_s, timer.total(), merged.faults,
-                           {k: v for k, v in merged.dropped.items() if k != "missing"},
-                           cluster_lines, vehicles, region.ground_found, n_points, region.points)
+        return FrameResult(
+            frame.index,
+            merged.stamp_s,
+            timer.total(),
+            merged.faults,
+            {k: v for k, v in merged.dropped.items() if k != "missing"},
+            cluster_lines,
+            vehicles,
+            region.ground_found,
+            n_points,
+            region.points,
+        )
 
     def _foreground(self, frame: Frame, timer: _Timer):
         """(merged, region, points after concatenation): ``region.points`` are the non-ground points the
@@ -294,20 +331,30 @@ class Pipeline(ParameterHandoff):
             boxes.append(ProtectedBox(tuple(center), unit.corrected.axis_yaw_rad, length / 2, width / 2))
         return boxes
 
-    def _classify(self, clusters: list[Cluster], ground_z, hints: list[_YawHint]) -> tuple[list[_UnitCandidate], list[dict]]:
+    def _classify(
+        self, clusters: list[Cluster], ground_z, hints: list[_YawHint]
+    ) -> tuple[list[_UnitCandidate], list[dict]]:
         units, lines = [], []
         for group, cluster in enumerate(clusters):
             status = cluster.status
             if status == "candidate":
                 center = cluster.center
                 heading = self._trailer_heading(hints, cluster)
-                result = self.classifier.process(cluster.points, cluster.candidates, ground_z(center[0], center[1]), heading)
+                result = self.classifier.process(
+                    cluster.points, cluster.candidates, ground_z(center[0], center[1]), heading
+                )
                 status = f"vehicle:{result.vehicle}" if result.vehicle else "unmatched"
                 for kind, pts in (("truck", result.truck), ("trailer", result.trailer)):
                     if result.vehicle and pts is not None:
                         units.append(_UnitCandidate(kind, result.vehicle, group, pts))
-            lines.append({"points": int(len(cluster.points)), "center": [_r(v, 3) for v in cluster.center],
-                          "volume_m3": _r(cluster.volume_m3, 2), "status": status})
+            lines.append(
+                {
+                    "points": int(len(cluster.points)),
+                    "center": [_r(v, 3) for v in cluster.center],
+                    "volume_m3": _r(cluster.volume_m3, 2),
+                    "status": status,
+                }
+            )
         return units, lines
 
     def _trailer_heading(self, hints: list[_YawHint], cluster: Cluster) -> float | None:
@@ -365,21 +412,29 @@ class Pipeline(ParameterHandoff):
         kept = []
         for unit in units:
             trailer = trailers.get(unit.group)
-            if unit.kind == "truck" and trailer is not None and \
-                    not self._truck_at_hitch(unit, trailer, params.vehicles[unit.vehicle], max_gap):
+            if (
+                unit.kind == "truck"
+                and trailer is not None
+                and not self._truck_at_hitch(unit, trailer, params.vehicles[unit.vehicle], max_gap)
+            ):
                 self.counters["truck_off_hitch"] += 1
                 continue
             kept.append(unit)
         return kept
 
     @staticmethod
-    def _truck_at_hitch(truck: _UnitCandidate, trailer: _UnitCandidate, vehicle: VehicleConfig, max_gap_m: float) -> bool:
+    def _truck_at_hitch(
+        truck: _UnitCandidate, trailer: _UnitCandidate, vehicle: VehicleConfig, max_gap_m: float
+    ) -> bool:
         truck_ahead_m, hitch_ahead_m = centre_to_hitch_m(vehicle)
         truck_xy, trailer_xy = truck.corrected.center[:2], trailer.corrected.center[:2]
         axis = trailer.corrected.axis_yaw_rad
         ahead = np.array([np.cos(axis), np.sin(axis)])
-        front = truck_xy - trailer_xy if trailer.yaw_hint_rad is None else \
-            np.array([np.cos(trailer.yaw_hint_rad), np.sin(trailer.yaw_hint_rad)])
+        front = (
+            truck_xy - trailer_xy
+            if trailer.yaw_hint_rad is None
+            else np.array([np.cos(trailer.yaw_hint_rad), np.sin(trailer.yaw_hint_rad)])
+        )
         ahead *= 1.0 if ahead @ front >= 0 else -1.0
         to_truck = truck_xy - (trailer_xy + hitch_ahead_m * ahead)
         distance_m = float(np.hypot(*to_truck))
@@ -402,7 +457,8 @@ class Pipeline(ParameterHandoff):
                 continue
             payload: _UnitCandidate = t.detection.payload
             by_vehicle.setdefault(t.vehicle_id, {})[t.kind] = UnitResult(
-                t.track_id, t.detection.center, yaws.get(t.track_id), payload.dims, payload.corrected.points)
+                t.track_id, t.detection.center, yaws.get(t.track_id), payload.dims, payload.corrected.points
+            )
             names[t.vehicle_id] = t.vehicle
         return [self._vehicle_result(vid, names[vid], units) for vid, units in sorted(by_vehicle.items())]
 
@@ -411,9 +467,15 @@ class Pipeline(ParameterHandoff):
         hitch_offset_m = 0.0
         if track.kind == "trailer":
             hitch_offset_m = centre_to_hitch_m(params.vehicles[unit.vehicle])[1]
-        return UnitObservation(track.track_id, track.vehicle_id, track.kind, track.detection.center,
-                               float(np.degrees(unit.corrected.shape_yaw_rad)) % 180.0,
-                               self._shape_period_deg(unit.dims), hitch_offset_m)
+        return UnitObservation(
+            track.track_id,
+            track.vehicle_id,
+            track.kind,
+            track.detection.center,
+            float(np.degrees(unit.corrected.shape_yaw_rad)) % 180.0,
+            self._shape_period_deg(unit.dims),
+            hitch_offset_m,
+        )
 
     @staticmethod
     def _shape_period_deg(dims: tuple[float, float, float]) -> float:
@@ -436,9 +498,15 @@ class Pipeline(ParameterHandoff):
                 continue
             unit: _UnitCandidate = t.detection.payload
             length, width, _ = unit.dims
-            hints.append(MotionHint(tuple(t.detection.center[:2]), unit.corrected.axis_yaw_rad,
-                                    length / 2 + MOTION_HINT_MARGIN_M, width / 2 + MOTION_HINT_MARGIN_M,
-                                    tuple(t.velocity)))
+            hints.append(
+                MotionHint(
+                    tuple(t.detection.center[:2]),
+                    unit.corrected.axis_yaw_rad,
+                    length / 2 + MOTION_HINT_MARGIN_M,
+                    width / 2 + MOTION_HINT_MARGIN_M,
+                    tuple(t.velocity),
+                )
+            )
         return hints
 
     def _count(self, merged, region, clustering, cluster_lines: list[dict]) -> None:

@@ -78,13 +78,12 @@ class SensorScans:
 def beam_directions(beam_altitude_deg: np.ndarray, beam_azimuth_offset_deg: np.ndarray, columns: int) -> np.ndarray:
     """Unit rays (beams, columns, 3): azimuth = 2*pi*(1 - c/columns) + offset, clockwise sweep."""
     alt = np.radians(np.asarray(beam_altitude_deg, dtype=np.float64))[:, None]
-    az = 2.0 * np.pi * (1.0 - np.arange(columns) / columns)[None, :] + np.radians(
-        np.asarray(beam_azimuth_offset_deg, dtype=np.float64)
-    )[:, None]
-    cos_alt = np.cos(alt)
-    return np.stack(
-        [cos_alt * np.cos(az), cos_alt * np.sin(az), np.broadcast_to(np.sin(alt), az.shape)], axis=-1
+    az = (
+        2.0 * np.pi * (1.0 - np.arange(columns) / columns)[None, :]
+        + np.radians(np.asarray(beam_azimuth_offset_deg, dtype=np.float64))[:, None]
     )
+    cos_alt = np.cos(alt)
+    return np.stack([cos_alt * np.cos(az), cos_alt * np.sin(az), np.broadcast_to(np.sin(alt), az.shape)], axis=-1)
 
 
 def meters_to_range_mm(range_m: np.ndarray) -> np.ndarray:
@@ -258,7 +257,13 @@ class Recording(RecordingFiles):
                 raise RecordingError(f"{file}: missing scan file of sensor {sensor}")
             try:
                 with np.load(file) as data:
-                    missing = {"range_mm", "stamp_ns", "column_time_ns", "beam_altitude_deg", "beam_azimuth_offset_deg"} - set(data.files)
+                    missing = {
+                        "range_mm",
+                        "stamp_ns",
+                        "column_time_ns",
+                        "beam_altitude_deg",
+                        "beam_azimuth_offset_deg",
+                    } - set(data.files)
                     if missing:
                         raise RecordingError(f"{file}: missing arrays {sorted(missing)}")
                     scans = SensorScans(**{k: data[k] for k in data.files if k in SensorScans.__dataclass_fields__})
@@ -304,8 +309,9 @@ class Recording(RecordingFiles):
             del self._scans[sensor]
             return None
         if index >= scans.n_frames:
-            self.damaged[sensor] = (f"{self._file(sensor)}: holds {scans.n_frames} of the {len(self)} frames; "
-                                    f"frames {scans.n_frames}-{len(self) - 1} of this sensor are missing")
+            self.damaged[sensor] = (
+                f"{self._file(sensor)}: holds {scans.n_frames} of the {len(self)} frames; "
+                f"frames {scans.n_frames}-{len(self) - 1} of this sensor are missing"
+            )
             return None
         return scans
-

@@ -20,8 +20,8 @@ import sys
 from dataclasses import dataclass
 from pathlib import Path
 
-from i2v_loc.frame import Frame, SensorScan
 from i2v_loc.formats import open_recording
+from i2v_loc.frame import Frame, SensorScan
 from i2v_loc.recording import RecordingError
 
 DEFAULT_SCENARIO = "docking"
@@ -88,7 +88,9 @@ class ReplaySource:
             return frame
         shift_s = lap * self.duration_s
         scans = {
-            name: SensorScan(sensor=s.sensor, stamp_s=s.stamp_s + shift_s, points=s.points, time_offset_s=s.time_offset_s)
+            name: SensorScan(
+                sensor=s.sensor, stamp_s=s.stamp_s + shift_s, points=s.points, time_offset_s=s.time_offset_s
+            )
             for name, s in frame.scans.items()
         }
         return Frame(index=k, scans=scans)
@@ -151,13 +153,26 @@ def simulated_recording(spec: SimSpec, cache_dir: str | Path | None = None, quie
     partial = cache / f".{spec.cache_name()}.partial-{os.getpid()}"
     shutil.rmtree(partial, ignore_errors=True)
     cmd = [
-        *_i2v_loc_command(), "sim",
-        "--vehicle", spec.vehicle, "--scenario", spec.scenario,
-        "--seed", str(spec.seed), "--duration", f"{spec.duration_s:g}", "--out", str(partial),
+        *_i2v_loc_command(),
+        "sim",
+        "--vehicle",
+        spec.vehicle,
+        "--scenario",
+        spec.scenario,
+        "--seed",
+        str(spec.seed),
+        "--duration",
+        f"{spec.duration_s:g}",
+        "--out",
+        str(partial),
     ]
     if not quiet:
-        print(f"generating the simulated yard ({spec.vehicle}, {spec.scenario}, {spec.duration_s:g} s) "
-              f"into {target} (once; cached)", file=sys.stderr, flush=True)
+        print(
+            f"generating the simulated yard ({spec.vehicle}, {spec.scenario}, {spec.duration_s:g} s) "
+            f"into {target} (once; cached)",
+            file=sys.stderr,
+            flush=True,
+        )
     # Progress of the simulator goes straight to the terminal, on stderr like everything the
     # service prints (stdout stays empty).
     out = subprocess.DEVNULL if quiet else _stderr_fd()

@@ -35,8 +35,9 @@ def frames(name: str, n: int):
     art = Articulation.from_vehicle(params.vehicles[name])
     state = np.array([-12.0, 6.0, 0.0, 0.0])
     for k in range(n):
-        cloud = vehicle_points(model, state[0], state[1], state[2], state[3] - state[2], sensors=SENSORS,
-                               spacing=0.25, seed=k)
+        cloud = vehicle_points(
+            model, state[0], state[1], state[2], state[3] - state[2], sensors=SENSORS, spacing=0.25, seed=k
+        )
         yield k * 0.1, voxel_centroids(cloud, params.concatenation.voxel_size_m)[0]
         state = step(state, 2.5, float(np.clip(0.3 * (k * 0.1 - 2.0), 0.0, 0.4)), art, 0.1)
 
@@ -74,10 +75,16 @@ def main() -> None:
             f.ukf.x, f.ukf.P, f.stamp_s = x, p, stamp
             fit_ms.append((t3 - t2) * 1e3)
             filter_ms.append((t5 - t4) * 1e3)
-    for label, values in (("points per vehicle", points), ("fit ms", fit_ms), ("UKF predict+update ms", filter_ms),
-                          ("tracker step ms (gate+fit+filter+dimensions)", step_ms)):
+    for label, values in (
+        ("points per vehicle", points),
+        ("fit ms", fit_ms),
+        ("UKF predict+update ms", filter_ms),
+        ("tracker step ms (gate+fit+filter+dimensions)", step_ms),
+    ):
         v = np.asarray(values, float)
-        print(f"{label:>46}: median {np.median(v):7.3f}  p90 {np.percentile(v, 90):7.3f}  min {v.min():7.3f}  (n={len(v)})")
+        print(
+            f"{label:>46}: median {np.median(v):7.3f}  p90 {np.percentile(v, 90):7.3f}  min {v.min():7.3f}  (n={len(v)})"
+        )
 
 
 if __name__ == "__main__":

@@ -41,7 +41,9 @@ def main() -> int:
     p.add_argument("--unknown-keys", type=int, default=200, help="unknown keys in the PATCH (default %(default)s)")
     p.add_argument("--method", default="default", help="pipeline method of the service (default %(default)s)")
     p.add_argument("--recording", default=str(REPO / "samples" / "man_tgx_docking"))
-    p.add_argument("--switch-interval", type=float, help="sys.setswitchinterval of the server (s; default Python's 0.005)")
+    p.add_argument(
+        "--switch-interval", type=float, help="sys.setswitchinterval of the server (s; default Python's 0.005)"
+    )
     args = p.parse_args()
     server = start_server(args)
     try:
@@ -99,8 +101,20 @@ class Server:
 def start_server(args) -> Server:
     env = {**os.environ, "I2V_LOC_API_TOKEN": TOKEN, "PYTHONPATH": str(REPO)}
     prelude = f"sys.setswitchinterval({args.switch_interval}); " if args.switch_interval else ""
-    cmd = [sys.executable, "-c", f"import sys; {prelude}from i2v_loc.cli import main; sys.exit(main())", "serve",
-           "--source", f"replay:{args.recording}", "--loop", "--port", "0", "--quiet", "--method", args.method]
+    cmd = [
+        sys.executable,
+        "-c",
+        f"import sys; {prelude}from i2v_loc.cli import main; sys.exit(main())",
+        "serve",
+        "--source",
+        f"replay:{args.recording}",
+        "--loop",
+        "--port",
+        "0",
+        "--quiet",
+        "--method",
+        args.method,
+    ]
     return Server(subprocess.Popen(cmd, stderr=subprocess.PIPE, stdout=subprocess.DEVNULL, text=True, env=env))
 
 
@@ -123,9 +137,11 @@ def scrape(url: str) -> dict:
         found = re.search(pattern + r" ([0-9.e+]+)", text)
         return float(found.group(1)) if found else 0.0
 
-    return {"ws_dropped": value(r"i2v_loc_websocket_messages_dropped_total"),
-            "processed": value(r"i2v_loc_frames_processed_total"),
-            "late": value(r'i2v_loc_frames_dropped_total\{reason="late"\}')}
+    return {
+        "ws_dropped": value(r"i2v_loc_websocket_messages_dropped_total"),
+        "processed": value(r"i2v_loc_frames_processed_total"),
+        "late": value(r'i2v_loc_frames_dropped_total\{reason="late"\}'),
+    }
 
 
 def rss_mib(pid: int) -> float:
@@ -227,10 +243,15 @@ def time_bad_patch(url: str, n_keys: int, repeat: int = 5, window_s: float = 3.0
         http.get("api/v1/health")
         health_ms.append(1000 * (time.monotonic() - t))
     http.close()
-    return {"statuses": sorted(set(statuses)), "body_bytes": len(json.dumps(body)), "first_reject_ms": round(times[0], 1),
-            "median_reject_ms": round(statistics.median(times), 1),
-            "median_get_health_ms": round(statistics.median(health_ms), 1),
-            f"frames_late_in_{window_s:g}s_with_patches": during, f"frames_late_in_{window_s:g}s_baseline": baseline}
+    return {
+        "statuses": sorted(set(statuses)),
+        "body_bytes": len(json.dumps(body)),
+        "first_reject_ms": round(times[0], 1),
+        "median_reject_ms": round(statistics.median(times), 1),
+        "median_get_health_ms": round(statistics.median(health_ms), 1),
+        f"frames_late_in_{window_s:g}s_with_patches": during,
+        f"frames_late_in_{window_s:g}s_baseline": baseline,
+    }
 
 
 def _late_in_window(url: str, window_s: float, action) -> float:

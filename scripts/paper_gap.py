@@ -86,17 +86,22 @@ def maneuver_rows(recordings: list[dict[str, np.ndarray]]) -> list[dict]:
         sq = err**2
         turning = np.abs(g["truck_yaw_rate_deg_s"][both]) > TURNING_DEG_S
         lags = {u: np.nanmedian([lag_s(p, u) for p in parts]) for u in ("truck", "trailer")}
-        rows.append({
-            "vehicle": vehicle, "maneuver": maneuver, "frames": len(both),
-            "speed p90 m/s": np.nanpercentile(g["speed_mps"], 90),
-            "yaw rate p90 deg/s": np.nanpercentile(np.abs(g["truck_yaw_rate_deg_s"]), 90),
-            "max hitch deg": np.nanmax(np.abs(g["hitch_gt_deg"])),
-            "both reported": both.mean(),
-            "hitch RMSE deg": np.sqrt(np.mean(sq)) if len(sq) else np.nan,
-            "share of sq. error in turns": sq[turning].sum() / sq.sum() if sq.sum() > 0 else np.nan,
-            "flip frames": int((err > 90).sum()),
-            "truck lag s": lags["truck"], "trailer lag s": lags["trailer"],
-        })
+        rows.append(
+            {
+                "vehicle": vehicle,
+                "maneuver": maneuver,
+                "frames": len(both),
+                "speed p90 m/s": np.nanpercentile(g["speed_mps"], 90),
+                "yaw rate p90 deg/s": np.nanpercentile(np.abs(g["truck_yaw_rate_deg_s"]), 90),
+                "max hitch deg": np.nanmax(np.abs(g["hitch_gt_deg"])),
+                "both reported": both.mean(),
+                "hitch RMSE deg": np.sqrt(np.mean(sq)) if len(sq) else np.nan,
+                "share of sq. error in turns": sq[turning].sum() / sq.sum() if sq.sum() > 0 else np.nan,
+                "flip frames": int((err > 90).sum()),
+                "truck lag s": lags["truck"],
+                "trailer lag s": lags["trailer"],
+            }
+        )
     return rows
 
 

@@ -86,11 +86,19 @@ def create_app(service: Service) -> FastAPI:
 
     @app.exception_handler(RequestValidationError)
     async def _invalid_request(request: Request, exc: RequestValidationError):
-        errors = [{"field": ".".join(str(p) for p in e.get("loc", ())), "message": e.get("msg", ""),
-                   "value": e.get("input")} for e in exc.errors()]
-        return JSONResponse(status_code=422, content=jsonable_encoder(
-            {"detail": "invalid request: " + "; ".join(f"{e['field']}: {e['message']}" for e in errors),
-             "errors": errors}))
+        errors = [
+            {"field": ".".join(str(p) for p in e.get("loc", ())), "message": e.get("msg", ""), "value": e.get("input")}
+            for e in exc.errors()
+        ]
+        return JSONResponse(
+            status_code=422,
+            content=jsonable_encoder(
+                {
+                    "detail": "invalid request: " + "; ".join(f"{e['field']}: {e['message']}" for e in errors),
+                    "errors": errors,
+                }
+            ),
+        )
 
     # ------------------------------------------------------------------ state
     # The reads are async: they only copy what the pipeline thread left, so they run on the event
@@ -100,8 +108,12 @@ def create_app(service: Service) -> FastAPI:
     async def health() -> models.Health:
         return service.health()
 
-    @api.get("/state", tags=["state"], summary="The latest frame (state line of docs/formats.md)",
-             responses={503: _error(503, "No frame processed yet")})
+    @api.get(
+        "/state",
+        tags=["state"],
+        summary="The latest frame (state line of docs/formats.md)",
+        responses={503: _error(503, "No frame processed yet")},
+    )
     async def state() -> models.State:
         latest = service.runner.latest
         if latest is None:
@@ -111,10 +123,18 @@ def create_app(service: Service) -> FastAPI:
     @api.get("/vehicles", tags=["state"], summary="Vehicles of the latest frame")
     async def vehicles() -> models.Vehicles:
         latest = service.runner.latest or {}
-        return {"frame": latest.get("frame"), "stamp_s": latest.get("stamp_s"), "vehicles": latest.get("vehicles") or []}
+        return {
+            "frame": latest.get("frame"),
+            "stamp_s": latest.get("stamp_s"),
+            "vehicles": latest.get("vehicles") or [],
+        }
 
-    @api.get("/vehicles/{vehicle_id}", tags=["state"], summary="One vehicle of the latest frame",
-             responses={404: _error(404, "No such vehicle in the latest frame")})
+    @api.get(
+        "/vehicles/{vehicle_id}",
+        tags=["state"],
+        summary="One vehicle of the latest frame",
+        responses={404: _error(404, "No such vehicle in the latest frame")},
+    )
     async def vehicle(vehicle_id: int) -> models.Vehicle:
         latest = service.runner.latest or {}
         found = [v for v in latest.get("vehicles") or [] if v.get("id") == vehicle_id]
@@ -132,8 +152,11 @@ def create_app(service: Service) -> FastAPI:
     @api.get("/params", tags=["parameters"], summary="The parameters in force and their version")
     async def get_params() -> models.ParamsInForce:
         current = service.store.current
-        return {"version": current.version, "applied_version": service.runner.params_version,
-                "params": current.params.model_dump(mode="json")}
+        return {
+            "version": current.version,
+            "applied_version": service.runner.params_version,
+            "params": current.params.model_dump(mode="json"),
+        }
 
     @api.get("/params/schema", tags=["parameters"], summary="JSON Schema of the parameters")
     async def get_schema() -> dict:
@@ -143,14 +166,29 @@ def create_app(service: Service) -> FastAPI:
     async def get_history() -> models.History:
         return {"current": service.store.version, "versions": service.store.history()}
 
-    patch_body = {"requestBody": {"required": True, "description": "A JSON merge patch (RFC 7396) of the parameters",
-                                  "content": {t: {"schema": {"type": "object"}} for t in PATCH_MEDIA_TYPES}}}
+    patch_body = {
+        "requestBody": {
+            "required": True,
+            "description": "A JSON merge patch (RFC 7396) of the parameters",
+            "content": {t: {"schema": {"type": "object"}} for t in PATCH_MEDIA_TYPES},
+        }
+    }
 
-    @api.patch("/params", tags=["parameters"], summary="Change parameters with a JSON merge patch",
-               dependencies=[write_guard], openapi_extra=patch_body, response_model=models.ChangeAccepted,
-               responses={**auth_errors, 400: _error(400, "Body is not JSON"), 415: _error(415, "Not a JSON body"),
-                          422: _error(422, "Validation failed: field, value and allowed range per error"),
-                          NOT_SAVED_STATUS: _not_saved_doc})
+    @api.patch(
+        "/params",
+        tags=["parameters"],
+        summary="Change parameters with a JSON merge patch",
+        dependencies=[write_guard],
+        openapi_extra=patch_body,
+        response_model=models.ChangeAccepted,
+        responses={
+            **auth_errors,
+            400: _error(400, "Body is not JSON"),
+            415: _error(415, "Not a JSON body"),
+            422: _error(422, "Validation failed: field, value and allowed range per error"),
+            NOT_SAVED_STATUS: _not_saved_doc,
+        },
+    )
     async def patch_params(request: Request, creds: HTTPAuthorizationCredentials | None = Depends(_bearer)):
         patch = await _json_body(request)
         try:
@@ -161,9 +199,14 @@ def create_app(service: Service) -> FastAPI:
             return _not_saved(err)
         return _accepted(version)
 
-    @api.post("/params/rollback/{version}", tags=["parameters"], summary="Make an earlier version current again",
-              dependencies=[write_guard], response_model=models.ChangeAccepted,
-              responses={**auth_errors, 404: _error(404, "Unknown version"), NOT_SAVED_STATUS: _not_saved_doc})
+    @api.post(
+        "/params/rollback/{version}",
+        tags=["parameters"],
+        summary="Make an earlier version current again",
+        dependencies=[write_guard],
+        response_model=models.ChangeAccepted,
+        responses={**auth_errors, 404: _error(404, "Unknown version"), NOT_SAVED_STATUS: _not_saved_doc},
+    )
     async def rollback(version: int, creds: HTTPAuthorizationCredentials | None = Depends(_bearer)):
         try:
             entry = await in_daemon_thread(service.store.rollback, version, _change_source(service, creds))
@@ -177,8 +220,14 @@ def create_app(service: Service) -> FastAPI:
 
     # ------------------------------------------------------------------ metrics, dashboard
 
-    @app.get("/metrics", tags=["status"], summary="Prometheus metrics", dependencies=read_deps,
-             response_class=Response, responses={200: {"content": {"text/plain": {}}}, **read_errors})
+    @app.get(
+        "/metrics",
+        tags=["status"],
+        summary="Prometheus metrics",
+        dependencies=read_deps,
+        response_class=Response,
+        responses={200: {"content": {"text/plain": {}}}, **read_errors},
+    )
     def metrics() -> Response:
         return Response(service.metrics.render(), media_type=CONTENT_TYPE_LATEST)
 
@@ -211,8 +260,16 @@ def server_config(app: FastAPI, access_log: bool = False, **options) -> uvicorn.
     """
     log_config = copy.deepcopy(LOGGING_CONFIG)
     log_config["handlers"]["access"]["stream"] = "ext://sys.stderr"  # stdout stays empty, as for the rest
-    config = uvicorn.Config(app, log_level="warning", access_log=access_log, lifespan="on", log_config=log_config,
-                            ws_per_message_deflate=False, timeout_graceful_shutdown=SHUTDOWN_GRACE_S, **options)
+    config = uvicorn.Config(
+        app,
+        log_level="warning",
+        access_log=access_log,
+        lifespan="on",
+        log_config=log_config,
+        ws_per_message_deflate=False,
+        timeout_graceful_shutdown=SHUTDOWN_GRACE_S,
+        **options,
+    )
     if access_log:  # uvicorn sets its access logger to log_level, which would silence it
         logging.getLogger("uvicorn.access").setLevel(logging.INFO)
     return config
@@ -288,10 +345,12 @@ def _change_source(service: Service, creds: HTTPAuthorizationCredentials | None)
 async def _json_body(request: Request):
     media = request.headers.get("content-type", "").split(";")[0].strip().lower()
     if media not in PATCH_MEDIA_TYPES:
-        raise HTTPException(415, f"send the patch as JSON (Content-Type {' or '.join(PATCH_MEDIA_TYPES)}), got {media or 'none'!r}")
+        raise HTTPException(
+            415, f"send the patch as JSON (Content-Type {' or '.join(PATCH_MEDIA_TYPES)}), got {media or 'none'!r}"
+        )
     body = await _read_limited(request, MAX_PATCH_BYTES)
     if not body.strip():
-        raise HTTPException(400, "empty body: send a JSON object, e.g. {\"clustering\": {\"tolerance_m\": 0.5}}")
+        raise HTTPException(400, 'empty body: send a JSON object, e.g. {"clustering": {"tolerance_m": 0.5}}')
     try:
         data = json.loads(body, parse_constant=_non_finite, parse_float=_finite_float)
     except (UnicodeDecodeError, json.JSONDecodeError) as err:
@@ -349,15 +408,28 @@ def _finite_float(text: str) -> float:
 
 _not_saved_doc = {
     "description": "The change is in force but the parameter file could not be written",
-    "content": {"application/json": {"example": {
-        "detail": "parameter version 3 is in force but could not be written to yard.yaml: No space left on device; ...",
-        "version": 3, "in_force": True, "saved": False}}},
+    "content": {
+        "application/json": {
+            "example": {
+                "detail": "parameter version 3 is in force but could not be written to yard.yaml: No space left on device; ...",
+                "version": 3,
+                "in_force": True,
+                "saved": False,
+            }
+        }
+    },
 }
 
 
 def _not_saved(err: ParamsNotSaved) -> JSONResponse:
-    body = {"detail": str(err), "version": err.version.version, "in_force": True, "saved": False,
-            "file": str(err.path), **_accepted(err.version)}
+    body = {
+        "detail": str(err),
+        "version": err.version.version,
+        "in_force": True,
+        "saved": False,
+        "file": str(err.path),
+        **_accepted(err.version),
+    }
     return JSONResponse(status_code=NOT_SAVED_STATUS, content=jsonable_encoder(body))
 
 
@@ -366,8 +438,12 @@ def _rejected(err: PatchRejected) -> JSONResponse:
 
 
 def _accepted(version) -> dict:
-    return {"version": version.version, "source": version.source, "patch": version.patch,
-            "params": version.params.model_dump(mode="json")}
+    return {
+        "version": version.version,
+        "source": version.source,
+        "patch": version.patch,
+        "params": version.params.model_dump(mode="json"),
+    }
 
 
 def parse_flag(text: str | None) -> bool | None:
@@ -445,7 +521,7 @@ async def _first_message_token(websocket: WebSocket) -> str | None:
             return None
         text = first.get("text") if first.get("text") is not None else (first.get("bytes") or b"").decode()
         token = json.loads(text).get("token")
-    except (asyncio.TimeoutError, ValueError, AttributeError, WebSocketDisconnect, RuntimeError):
+    except (TimeoutError, ValueError, AttributeError, WebSocketDisconnect, RuntimeError):
         return None
     return token if isinstance(token, str) and token else None
 

@@ -72,8 +72,12 @@ class AuthConfig:
         if self.token is None:
             return AuthDecision(False, 403, HOW_TO_SET)
         if presented is None:
-            return AuthDecision(False, 401, "a bearer token is required: send the header 'Authorization: Bearer <token>'",
-                                {"WWW-Authenticate": "Bearer"})
+            return AuthDecision(
+                False,
+                401,
+                "a bearer token is required: send the header 'Authorization: Bearer <token>'",
+                {"WWW-Authenticate": "Bearer"},
+            )
         if not hmac.compare_digest(presented.encode(), self.token.encode()):
             return AuthDecision(False, 403, "the bearer token is not valid")
         return AuthDecision(True)

@@ -62,8 +62,20 @@ class Service:
         out = []
         configured = {s.name: s for s in self.store.params.sensors}
         for name in dict.fromkeys([*configured, *stats]):
-            entry = {"name": name, **stats.get(name, {"status": "waiting", "rate_hz": 0.0, "last_stamp_s": None,
-                                                      "last_seen_ago_s": None, "drops": 0, "last_fault": None})}
+            entry = {
+                "name": name,
+                **stats.get(
+                    name,
+                    {
+                        "status": "waiting",
+                        "rate_hz": 0.0,
+                        "last_stamp_s": None,
+                        "last_seen_ago_s": None,
+                        "drops": 0,
+                        "last_fault": None,
+                    },
+                ),
+            }
             sensor = configured.get(name)
             entry["configured"] = sensor is not None
             if sensor is not None:
@@ -90,8 +102,10 @@ class Service:
             return "stalled", ["no frame processed recently"]
         damaged = getattr(runner.source, "damaged", None) or {}
         faulty = [s for s in sensors if s["status"] != "ok"]
-        reasons = [f"sensor {s['name']}: {s['status']}" + (f" ({damaged[s['name']]})" if s["name"] in damaged else "")
-                   for s in faulty]
+        reasons = [
+            f"sensor {s['name']}: {s['status']}" + (f" ({damaged[s['name']]})" if s["name"] in damaged else "")
+            for s in faulty
+        ]
         if sensors and len(faulty) == len(sensors) and all(s["status"].startswith("fault") for s in faulty):
             return "failed", ["no sensor delivers", *reasons]
         frame_drops, ws_drops = runner.drop_rate(), self.hub.drop_rate()
@@ -115,7 +129,10 @@ class Service:
             "live": runner.error is None and (runner.alive or not runner.started_s),
             "ready": status in ("ok", "degraded"),
             "error": runner.error,
-            "source": {**self.source_info, **({"counters": runner.source.counters} if hasattr(runner.source, "counters") else {})},
+            "source": {
+                **self.source_info,
+                **({"counters": runner.source.counters} if hasattr(runner.source, "counters") else {}),
+            },
             "method": runner.method,
             "uptime_s": None if runner.started_s is None else round(now - runner.started_s, 3),
             "last_frame_age_s": None if age is None else round(age, 3),
@@ -144,8 +161,9 @@ def build_service(
     # really runs with, so /params shows it and every later version is exact.
     params = getattr(pipeline, "params", None) or params
     expected = [s.name for s in params.sensors]
-    runner = PipelineRunner(source, pipeline, hub, metrics, expected, realtime=realtime,
-                            points_cap=points_cap, clock=clock)
+    runner = PipelineRunner(
+        source, pipeline, hub, metrics, expected, realtime=realtime, points_cap=points_cap, clock=clock
+    )
     store = ParamStore(params, params_file, on_change=runner.submit)
     describe = getattr(source, "describe", None)
     info = describe() if callable(describe) else {"source": repr(source), "rate_hz": source.rate_hz}

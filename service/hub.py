@@ -95,8 +95,10 @@ class Hub:
 
     def stats(self) -> list[dict]:
         """Per connected client: messages sent, states and parameter messages replaced before it took them."""
-        return [{"sent": c.sent, "dropped": c.dropped, "params_dropped": c.params_dropped, "points": c.want_points}
-                for c in list(self._clients)]
+        return [
+            {"sent": c.sent, "dropped": c.dropped, "params_dropped": c.params_dropped, "points": c.want_points}
+            for c in list(self._clients)
+        ]
 
     def add(self, want_points: bool) -> Client:
         client = Client(want_points=want_points)

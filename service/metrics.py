@@ -17,25 +17,41 @@ class ServiceMetrics:
         r = self.registry
         self.frames_processed = Counter("i2v_loc_frames_processed", "Frames run through the pipeline", registry=r)
         self.frames_dropped = Counter(
-            "i2v_loc_frames_dropped", "Frames not processed, by reason (source_error, pipeline_error, late)",
-            ["reason"], registry=r,
+            "i2v_loc_frames_dropped",
+            "Frames not processed, by reason (source_error, pipeline_error, late)",
+            ["reason"],
+            registry=r,
         )
         self.pipeline_events = Counter(
-            "i2v_loc_pipeline_events", "The pipeline's own counters: dropped sweeps and refused clusters, by reason",
-            ["reason"], registry=r,
+            "i2v_loc_pipeline_events",
+            "The pipeline's own counters: dropped sweeps and refused clusters, by reason",
+            ["reason"],
+            registry=r,
         )
         self.stage_latency = Histogram(
-            "i2v_loc_stage_latency_seconds", "Pipeline stage latency", ["stage"], buckets=LATENCY_BUCKETS_S, registry=r,
+            "i2v_loc_stage_latency_seconds",
+            "Pipeline stage latency",
+            ["stage"],
+            buckets=LATENCY_BUCKETS_S,
+            registry=r,
         )
-        self.sensor_rate = Gauge("i2v_loc_sensor_rate_hz", "Sweeps received per second, per sensor", ["sensor"], registry=r)
+        self.sensor_rate = Gauge(
+            "i2v_loc_sensor_rate_hz", "Sweeps received per second, per sensor", ["sensor"], registry=r
+        )
         self.sensor_drops = Counter(
-            "i2v_loc_sensor_drops", "Frames in which a sensor was missing or faulty", ["sensor"], registry=r,
+            "i2v_loc_sensor_drops",
+            "Frames in which a sensor was missing or faulty",
+            ["sensor"],
+            registry=r,
         )
-        self.sensor_last_stamp = Gauge("i2v_loc_sensor_last_stamp_seconds", "Stamp of the last sweep", ["sensor"], registry=r)
+        self.sensor_last_stamp = Gauge(
+            "i2v_loc_sensor_last_stamp_seconds", "Stamp of the last sweep", ["sensor"], registry=r
+        )
         self.vehicles = Gauge("i2v_loc_vehicles", "Vehicles in the latest frame", registry=r)
         self.ws_clients = Gauge("i2v_loc_websocket_clients", "Connected WebSocket clients", registry=r)
         self.ws_dropped = Counter(
-            "i2v_loc_websocket_messages_dropped", "Messages replaced by a newer one before a slow client took them",
+            "i2v_loc_websocket_messages_dropped",
+            "Messages replaced by a newer one before a slow client took them",
             registry=r,
         )
         self.params_version = Gauge("i2v_loc_params_version", "Version of the parameters in force", registry=r)

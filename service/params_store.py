@@ -42,10 +42,12 @@ class UnknownVersion(KeyError):
 class ParamsNotSaved(Exception):
     """A change is in force (``version``) but the parameter file could not be written."""
 
-    def __init__(self, version: "Version", path: Path, error: OSError):
+    def __init__(self, version: Version, path: Path, error: OSError):
         reason = error.strerror or str(error)
-        super().__init__(f"parameter version {version.version} is in force but could not be written to {path}: "
-                         f"{reason}; it will be lost at a restart unless a later change or the shutdown saves it")
+        super().__init__(
+            f"parameter version {version.version} is in force but could not be written to {path}: "
+            f"{reason}; it will be lost at a restart unless a later change or the shutdown saves it"
+        )
         self.version = version
         self.path = path
         self.reason = reason
@@ -81,8 +83,9 @@ def merge_patch_diff(old: Any, new: Any) -> dict:
 
 
 class ParamStore:
-    def __init__(self, params: Params, path: str | Path | None = None,
-                 on_change: Callable[[Version], None] | None = None):
+    def __init__(
+        self, params: Params, path: str | Path | None = None, on_change: Callable[[Version], None] | None = None
+    ):
         self._lock = threading.Lock()
         self._save_lock = threading.Lock()  # one writer of the file at a time (a change, the shutdown)
         self.path = Path(path) if path else None
@@ -138,13 +141,19 @@ class ParamStore:
             try:
                 self.on_change(entry)
             except ValueError as err:  # ParamsError: a check only the pipeline makes (e.g. grid size)
-                raise PatchRejected(f"{source}: the pipeline refused the parameters: {err}", [
-                    {"source": source, "field": "", "value": None, "message": str(err), "allowed": ""}]) from err
-        log.info("parameter version %d (%s): %s", entry.version, source,
-                 describe_changes(self.params.model_dump(mode="json"), params.model_dump(mode="json")))
+                raise PatchRejected(
+                    f"{source}: the pipeline refused the parameters: {err}",
+                    [{"source": source, "field": "", "value": None, "message": str(err), "allowed": ""}],
+                ) from err
+        log.info(
+            "parameter version %d (%s): %s",
+            entry.version,
+            source,
+            describe_changes(self.params.model_dump(mode="json"), params.model_dump(mode="json")),
+        )
         self._history.append(entry)
         if len(self._history) > HISTORY_LIMIT:
-            del self._history[1:len(self._history) - HISTORY_LIMIT + 1]
+            del self._history[1 : len(self._history) - HISTORY_LIMIT + 1]
         if self.path is not None:
             try:
                 with self._save_lock:
@@ -185,12 +194,21 @@ def _refuse_section_nulls(patch: Any) -> None:
         return
     nulls = sorted(str(k) for k, v in patch.items() if v is None)
     if nulls:
-        errors = [{"source": "patch", "field": name, "value": None, "allowed": "an object (or a list for sensors)",
-                   "message": "null would reset the whole section to the built-in defaults; "
-                              "send the fields to change (null inside a section resets that field)"}
-                  for name in nulls]
-        raise PatchRejected(f"patch: {', '.join(nulls)} = null: a whole section cannot be deleted; "
-                            "send the fields to change instead", errors)
+        errors = [
+            {
+                "source": "patch",
+                "field": name,
+                "value": None,
+                "allowed": "an object (or a list for sensors)",
+                "message": "null would reset the whole section to the built-in defaults; "
+                "send the fields to change (null inside a section resets that field)",
+            }
+            for name in nulls
+        ]
+        raise PatchRejected(
+            f"patch: {', '.join(nulls)} = null: a whole section cannot be deleted; send the fields to change instead",
+            errors,
+        )
 
 
 def _refuse_unknown_keys(patch: Any) -> None:
@@ -207,17 +225,29 @@ def _refuse_unknown_keys(patch: Any) -> None:
             unknown.extend(f"{section}.{k}" for k in value if k not in model.model_fields)
         limit = next((m.max_length for m in getattr(field, "metadata", ()) if hasattr(m, "max_length")), None)
         if limit is not None and isinstance(value, (list, dict)) and len(value) > limit:
-            raise PatchRejected(f"patch: {section} holds {len(value)} entries, at most {limit} are allowed", [
-                {"source": "patch", "field": section, "value": None, "allowed": f"at most {limit} entries",
-                 "message": f"{len(value)} entries"}])
+            raise PatchRejected(
+                f"patch: {section} holds {len(value)} entries, at most {limit} are allowed",
+                [
+                    {
+                        "source": "patch",
+                        "field": section,
+                        "value": None,
+                        "allowed": f"at most {limit} entries",
+                        "message": f"{len(value)} entries",
+                    }
+                ],
+            )
     if not unknown:
         return
     shown = unknown[:MAX_ERRORS_REPORTED]  # in the order sent
-    errors = [{"source": "patch", "field": name, "value": None, "allowed": "", "message": "unknown key"}
-              for name in shown]
+    errors = [
+        {"source": "patch", "field": name, "value": None, "allowed": "", "message": "unknown key"} for name in shown
+    ]
     more = f" (and {len(unknown) - len(shown)} more)" if len(unknown) > len(shown) else ""
-    raise PatchRejected(f"patch: {len(unknown)} unknown keys: {', '.join(shown)}{more}; "
-                        "GET /api/v1/params/schema lists the known ones", errors)
+    raise PatchRejected(
+        f"patch: {len(unknown)} unknown keys: {', '.join(shown)}{more}; GET /api/v1/params/schema lists the known ones",
+        errors,
+    )
 
 
 def _validated(params: Params, patch: Any) -> Params:

@@ -44,7 +44,9 @@ class SensorStats:
         self._last_fault: dict[str, str | None] = {n: None for n in names}
         self._lock = threading.Lock()
 
-    def observe(self, present: dict[str, float], faults: dict[str, str], expected: list[str], now_s: float) -> list[str]:
+    def observe(
+        self, present: dict[str, float], faults: dict[str, str], expected: list[str], now_s: float
+    ) -> list[str]:
         """Record one frame: ``present`` maps sensor to stamp; returns the sensors that dropped."""
         dropped = []
         with self._lock:
@@ -69,7 +71,11 @@ class SensorStats:
 
     def _one(self, name: str, now_s: float) -> dict:
         arrivals = [t for t in self._arrivals[name] if now_s - t <= RATE_WINDOW_S]
-        rate = (len(arrivals) - 1) / (arrivals[-1] - arrivals[0]) if len(arrivals) >= 2 and arrivals[-1] > arrivals[0] else 0.0
+        rate = (
+            (len(arrivals) - 1) / (arrivals[-1] - arrivals[0])
+            if len(arrivals) >= 2 and arrivals[-1] > arrivals[0]
+            else 0.0
+        )
         last = self._arrivals[name][-1] if self._arrivals[name] else None
         if last is None:  # never delivered: faulty if the frames so far said why
             status = f"fault:{self._last_fault[name]}" if self._last_fault[name] else "waiting"
@@ -120,14 +126,23 @@ class ApproximateForeground:
         if cap <= 0 or total == 0:
             return None
         step = max(1, total // (10 * cap))  # most points are ground or outside: sample 10x the cap
-        parts = [transform_points(self.poses[name], scan.points[::step].astype(np.float64))
-                 for name, scan in frame.scans.items() if name in self.poses]
+        parts = [
+            transform_points(self.poses[name], scan.points[::step].astype(np.float64))
+            for name, scan in frame.scans.items()
+            if name in self.poses
+        ]
         if not parts:
             return None
         pts = np.concatenate(parts)
         r = self.region
-        keep = ((pts[:, 0] >= r.x_min_m) & (pts[:, 0] <= r.x_max_m) & (pts[:, 1] >= r.y_min_m)
-                & (pts[:, 1] <= r.y_max_m) & (pts[:, 2] > ABOVE_GROUND_M) & (pts[:, 2] <= r.z_max_m))
+        keep = (
+            (pts[:, 0] >= r.x_min_m)
+            & (pts[:, 0] <= r.x_max_m)
+            & (pts[:, 1] >= r.y_min_m)
+            & (pts[:, 1] <= r.y_max_m)
+            & (pts[:, 2] > ABOVE_GROUND_M)
+            & (pts[:, 2] <= r.z_max_m)
+        )
         return _decimated_xy(pts[keep], cap)
 
 
@@ -159,8 +174,17 @@ def _finite(obj):
 
 
 class PipelineRunner:
-    def __init__(self, source, pipeline, hub: Hub, metrics: ServiceMetrics, expected_sensors: list[str],
-                 realtime: bool = True, points_cap: int = 2000, clock: Callable[[], float] = time.monotonic):
+    def __init__(
+        self,
+        source,
+        pipeline,
+        hub: Hub,
+        metrics: ServiceMetrics,
+        expected_sensors: list[str],
+        realtime: bool = True,
+        points_cap: int = 2000,
+        clock: Callable[[], float] = time.monotonic,
+    ):
         self.source = source
         self.pipeline = pipeline
         self.hub = hub
@@ -286,8 +310,13 @@ class PipelineRunner:
             self.params_version = version.version
             self.metrics.params_version.set(version.version)
             try:
-                message = {"type": "params", "version": version.version, "source": version.source,
-                           "patch": version.patch, "params": version.params.model_dump(mode="json")}
+                message = {
+                    "type": "params",
+                    "version": version.version,
+                    "source": version.source,
+                    "patch": version.patch,
+                    "params": version.params.model_dump(mode="json"),
+                }
                 text = dumps(_finite(message))
             except Exception as err:  # should not happen (validated parameters): log, keep running
                 log.error("the message of parameter version %d could not be built: %s", version.version, err)
@@ -375,8 +404,10 @@ class PipelineRunner:
 
     def status(self) -> dict:
         latest = self.latest or {}
-        vehicles = [{"id": v.get("id"), "vehicle": v.get("vehicle"), "hitch_deg": v.get("hitch_deg")}
-                    for v in latest.get("vehicles") or []]
+        vehicles = [
+            {"id": v.get("id"), "vehicle": v.get("vehicle"), "hitch_deg": v.get("hitch_deg")}
+            for v in latest.get("vehicles") or []
+        ]
         return {
             "frames_processed": self.frames_processed,
             "frames_dropped": dict(self.frames_dropped),

@@ -36,8 +36,14 @@ def _face_grid(b: WorldBox, spacing: float) -> tuple[np.ndarray, np.ndarray, np.
     us = np.arange(-half_l + spacing / 2, half_l, spacing)
     vs = np.arange(-half_w + spacing / 2, half_w, spacing)
     parts = []
-    for face, (fixed, normal) in enumerate((((half_l, None), (1, 0, 0)), ((-half_l, None), (-1, 0, 0)),
-                                            ((None, half_w), (0, 1, 0)), ((None, -half_w), (0, -1, 0)))):
+    for face, (fixed, normal) in enumerate(
+        (
+            ((half_l, None), (1, 0, 0)),
+            ((-half_l, None), (-1, 0, 0)),
+            ((None, half_w), (0, 1, 0)),
+            ((None, -half_w), (0, -1, 0)),
+        )
+    ):
         if fixed[0] is not None:
             v, z = np.meshgrid(vs, zs)
             local = np.column_stack([np.full(v.size, fixed[0]), v.ravel(), z.ravel()])
@@ -72,9 +78,19 @@ def _blocked(sensor: np.ndarray, points: np.ndarray, b: WorldBox) -> np.ndarray:
     return (t_near < t_far) & (t_far > 1e-6) & (t_near < 1.0 - 1e-6) & (t_far - t_near > 1e-6)
 
 
-def vehicle_points(model: VehicleModel, x: float, y: float, yaw: float, hitch: float = 0.0,
-                   sensors=((0.0, -15.0, 4.0),), spacing: float = 0.12, noise_m: float = 0.02,
-                   drop: tuple[tuple[int, str], ...] = (), others: list[WorldBox] = (), seed: int = 0) -> np.ndarray:
+def vehicle_points(
+    model: VehicleModel,
+    x: float,
+    y: float,
+    yaw: float,
+    hitch: float = 0.0,
+    sensors=((0.0, -15.0, 4.0),),
+    spacing: float = 0.12,
+    noise_m: float = 0.02,
+    drop: tuple[tuple[int, str], ...] = (),
+    others: list[WorldBox] = (),
+    seed: int = 0,
+) -> np.ndarray:
     """(N, 3) points of the vehicle seen from ``sensors``; ``drop`` removes whole faces ((unit, face name))
     as if occluded; ``others`` are further boxes that occlude (their own points are not returned)."""
     rng = np.random.default_rng(seed)

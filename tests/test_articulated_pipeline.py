@@ -7,8 +7,8 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-
 from hinged_points import vehicle_points, world_boxes
+
 from i2v_loc.frame import Frame, SensorScan
 from i2v_loc.params import Extrinsics, Params, SensorConfig, apply_patch
 from i2v_loc.pipeline import Pipeline
@@ -44,13 +44,22 @@ def drive(vehicles, seconds: float, speed, steer, sensors=SENSORS):
         clouds = []
         for i, (model, _) in enumerate(vehicles):
             s = states[i]
-            others = [b for j, (m, _) in enumerate(vehicles) if j != i
-                      for b in world_boxes(m, states[j][0], states[j][1], states[j][2], states[j][3] - states[j][2])]
-            clouds.append(vehicle_points(model, s[0], s[1], s[2], s[3] - s[2], sensors=sensors, spacing=0.15,
-                                         others=others, seed=k * 10 + i))
+            others = [
+                b
+                for j, (m, _) in enumerate(vehicles)
+                if j != i
+                for b in world_boxes(m, states[j][0], states[j][1], states[j][2], states[j][3] - states[j][2])
+            ]
+            clouds.append(
+                vehicle_points(
+                    model, s[0], s[1], s[2], s[3] - s[2], sensors=sensors, spacing=0.15, others=others, seed=k * 10 + i
+                )
+            )
         yield t, np.vstack(clouds), [s.copy() for s in states]
         for i in range(len(states)):
-            states[i] = step(states[i], speed(t) if callable(speed) else speed, steer(t) if callable(steer) else steer, arts[i], 0.1)
+            states[i] = step(
+                states[i], speed(t) if callable(speed) else speed, steer(t) if callable(steer) else steer, arts[i], 0.1
+            )
 
 
 def angle_deg(a: float) -> float:
@@ -59,14 +68,19 @@ def angle_deg(a: float) -> float:
 
 def errors(report, truth) -> tuple[float, float, float]:
     s = report.state
-    return (float(np.hypot(s.x_m - truth[0], s.y_m - truth[1])), angle_deg(s.yaw_rad - truth[2]),
-            angle_deg(s.hitch_rad - (truth[3] - truth[2])))
+    return (
+        float(np.hypot(s.x_m - truth[0], s.y_m - truth[1])),
+        angle_deg(s.yaw_rad - truth[2]),
+        angle_deg(s.hitch_rad - (truth[3] - truth[2])),
+    )
 
 
 def test_turning_vehicle_is_started_named_and_tracked():
     tracker = VehicleTracker(PARAMS.articulated, PARAMS.vehicles)
     rows = []
-    for t, points, (truth,) in drive([(volvo(), (-12.0, 4.0, 0.0, 0.0))], 8.0, 2.5, lambda t: float(np.clip(0.4 * (t - 2.0), 0.0, 0.5))):
+    for t, points, (truth,) in drive(
+        [(volvo(), (-12.0, 4.0, 0.0, 0.0))], 8.0, 2.5, lambda t: float(np.clip(0.4 * (t - 2.0), 0.0, 0.5))
+    ):
         reports = tracker.process(points, flat, t)
         if t < 0.15:
             assert reports == []  # not before start_frames
@@ -110,8 +124,9 @@ def test_unknown_trailer_length_converges():
     long_trailer = replace(model, name="truth", trailer=replace(model.trailer, length_m=10.5), trailer_axle_m=l2)
     tracker = VehicleTracker(PARAMS.articulated, PARAMS.vehicles)  # the catalogue has 6.30 and 13.68 m trailers
     hitch_err = []
-    for t, points, (truth,) in drive([(long_trailer, (-14.0, 3.0, 0.0, 0.0))], 12.0, 2.0,
-                                     lambda t: 0.2 * np.sin(t / 2.0)):
+    for t, points, (truth,) in drive(
+        [(long_trailer, (-14.0, 3.0, 0.0, 0.0))], 12.0, 2.0, lambda t: 0.2 * np.sin(t / 2.0)
+    ):
         reports = tracker.process(points, flat, t)
         if reports and t >= 10.0:
             assert abs(reports[0].model.trailer.length_m - 10.5) < 0.3
@@ -167,19 +182,22 @@ def test_articulated_method_end_to_end():
     """Through the front end: one sensor, a ground plane, a wall; the vehicle drives in after the
     background warm-up. The state line is the pipeline's, plus hitch sigma and jackknife."""
     sensor = SensorConfig(name="s1", extrinsics=Extrinsics(x_m=0.0, y_m=-15.0, z_m=4.0))
-    params = apply_patch(Params(sensors=[sensor]), {"background": {"min_samples": 3, "window_frames": 10,
-                                                                    "learn_every_frames": 1}})
+    params = apply_patch(
+        Params(sensors=[sensor]), {"background": {"min_samples": 3, "window_frames": 10, "learn_every_frames": 1}}
+    )
     pipeline = Pipeline(params, method="articulated")
     assert pipeline.method == "articulated" and type(pipeline).__name__ == "ArticulatedPipeline"
     gx, gy = np.meshgrid(np.arange(-30, 30, 0.4), np.arange(-12, 20, 0.4))
     ground = np.column_stack([gx.ravel(), gy.ravel(), np.zeros(gx.size)])
-    wall = np.column_stack([np.repeat(np.arange(-20, 20, 0.2), 15), np.full(200 * 15, 18.0),
-                            np.tile(np.linspace(0.2, 3.0, 15), 200)])
+    wall = np.column_stack(
+        [np.repeat(np.arange(-20, 20, 0.2), 15), np.full(200 * 15, 18.0), np.tile(np.linspace(0.2, 3.0, 15), 200)]
+    )
     model = volvo()
     lines = []
     truth_rows = []
-    for t, points, (truth,) in drive([(model, (-25.0, 4.0, 0.0, 0.0))], 9.0, 2.5, lambda t: 0.2 if t > 5 else 0.0,
-                                     sensors=((0.0, -15.0, 4.0),)):
+    for t, points, (truth,) in drive(
+        [(model, (-25.0, 4.0, 0.0, 0.0))], 9.0, 2.5, lambda t: 0.2 if t > 5 else 0.0, sensors=((0.0, -15.0, 4.0),)
+    ):
         scene = np.vstack([ground, wall, points if t >= 1.0 else np.zeros((0, 3))])
         scan = SensorScan("s1", t, (scene - [0.0, -15.0, 4.0]).astype(np.float32), None)
         line = pipeline.process(Frame(int(round(t * 10)), {"s1": scan})).to_json()
@@ -198,7 +216,10 @@ def test_articulated_method_end_to_end():
         assert abs(v["trailer"]["yaw_deg"] - angle_deg(truth[3])) < 1.0
         assert 0.0 < v["hitch_std_deg"] < 1.0 and v["jackknife"] is False
         transform = np.array(v["tractor_to_trailer"])
-        assert transform.shape == (4, 4) and abs(np.degrees(np.arctan2(transform[1, 0], transform[0, 0])) + v["hitch_deg"]) < 1e-2
+        assert (
+            transform.shape == (4, 4)
+            and abs(np.degrees(np.arctan2(transform[1, 0], transform[0, 0])) + v["hitch_deg"]) < 1e-2
+        )
 
 
 @pytest.mark.parametrize("method", ["paper", "default"])
@@ -208,8 +229,9 @@ def test_other_methods_are_unchanged_pipelines(method):
 
 def test_wall_car_and_pole_are_no_vehicles():
     tracker = VehicleTracker(PARAMS.articulated, PARAMS.vehicles)
-    wall = np.column_stack([np.repeat(np.arange(-8.0, 8.0, 0.15), 20), np.full(107 * 20, 10.0),
-                            np.tile(np.linspace(0.2, 3.5, 20), 107)])
+    wall = np.column_stack(
+        [np.repeat(np.arange(-8.0, 8.0, 0.15), 20), np.full(107 * 20, 10.0), np.tile(np.linspace(0.2, 3.5, 20), 107)]
+    )
     car = vehicle_points(VehicleModel.rigid("car", 4.5, 1.8, 1.5, 0.1), 0.0, 2.0, 0.3, sensors=SENSORS)
     pole = np.column_stack([np.full(30, 6.0), np.full(30, -3.0), np.linspace(0.2, 6.0, 30)])
     for k in range(3 * PARAMS.articulated.start_frames):
@@ -236,14 +258,16 @@ def test_without_the_background_map_vehicles_start_at_once():
     gx, gy = np.meshgrid(np.arange(-30, 30, 0.4), np.arange(-12, 20, 0.4))
     ground = np.column_stack([gx.ravel(), gy.ravel(), np.zeros(gx.size)])
     reported = []
-    for t, points, (truth,) in drive([(volvo(), (-8.0, 4.0, 0.0, 0.0))], 0.6, 2.0, 0.0, sensors=((0.0, -15.0, 4.0),)):
+    for t, points, (_truth,) in drive([(volvo(), (-8.0, 4.0, 0.0, 0.0))], 0.6, 2.0, 0.0, sensors=((0.0, -15.0, 4.0),)):
         scan = SensorScan("s1", t, (np.vstack([ground, points]) - [0.0, -15.0, 4.0]).astype(np.float32), None)
         result = pipeline.process(Frame(int(round(t * 10)), {"s1": scan}))
         reported.append(len(result.vehicles))
         assert "background" not in result.latency_ms
     assert pipeline.background is None
-    assert reported[:PARAMS.articulated.start_frames - 1] == [0] * (PARAMS.articulated.start_frames - 1)
-    assert reported[PARAMS.articulated.start_frames - 1:] == [1] * (len(reported) - PARAMS.articulated.start_frames + 1)
+    assert reported[: PARAMS.articulated.start_frames - 1] == [0] * (PARAMS.articulated.start_frames - 1)
+    assert reported[PARAMS.articulated.start_frames - 1 :] == [1] * (
+        len(reported) - PARAMS.articulated.start_frames + 1
+    )
     with pytest.raises(ValueError):
         pipeline.save_background("/tmp/never.npz")
 

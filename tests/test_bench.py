@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import json
 
+from conftest import SAMPLES
+
 from i2v_loc.cli import main
 from i2v_loc.commands.bench import summarize
-
-from conftest import SAMPLES
 
 
 def test_summarize_orders_stages_and_computes_percentiles():

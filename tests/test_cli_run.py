@@ -23,8 +23,24 @@ def recording(tmp_path_factory):
     if man:
         return man[0]
     out = tmp_path_factory.mktemp("rec") / "man_turn"
-    assert main(["sim", "--vehicle", "man_tgx", "--scenario", "single_turn", "--duration", "3", "--seed", "3",
-                 "--out", str(out)]) == 0
+    assert (
+        main(
+            [
+                "sim",
+                "--vehicle",
+                "man_tgx",
+                "--scenario",
+                "single_turn",
+                "--duration",
+                "3",
+                "--seed",
+                "3",
+                "--out",
+                str(out),
+            ]
+        )
+        == 0
+    )
     return out
 
 
@@ -34,7 +50,11 @@ def hitch_errors(states: list[dict], ground_truth: list[dict]) -> tuple[int, lis
     for state, gt in zip(states, ground_truth):
         for g in gt["vehicles"]:
             for v in state["vehicles"]:
-                if v["truck"] and v["trailer"] and np.hypot(*np.subtract(v["trailer"]["center"][:2], g["trailer"]["center"][:2])) < 4:
+                if (
+                    v["truck"]
+                    and v["trailer"]
+                    and np.hypot(*np.subtract(v["trailer"]["center"][:2], g["trailer"]["center"][:2])) < 4
+                ):
                     both += 1
                     if v["hitch_deg"] is not None:
                         errors.append(abs(wrap_deg(v["hitch_deg"] - g["hitch_deg"])))
@@ -49,13 +69,17 @@ SAMPLES = Path(__file__).resolve().parents[1] / "samples"
 # (i2v-loc realism): both units 0.98 / 0.86 / 0.92 of the frames, |hitch error| median 2.55 / 1.80 / 0.81 deg,
 # p90 4.41 / 3.54 / 2.24, RMSE 2.82 / 2.28 / 1.53, max 4.8, no flips (the old, denser simulator gave 0.35-0.99 deg
 # medians); the bounds keep a margin and fail on a flip, a lost unit or a broken stage
-@pytest.mark.parametrize("sample, min_both_fraction, max_median_deg, max_p90_deg, max_rmse_deg", [
-    ("volvo_fh_u_turn", 0.9, 3.5, 5.0, 4.0),
-    ("twizy_single_turn", 0.7, 3.0, 5.0, 3.5),
-    ("man_tgx_docking", 0.85, 1.5, 4.0, 2.5),  # reversing at up to 45 deg hitch: the cab touches the trailer
-])
-def test_run_on_committed_samples_reports_both_units_in_most_frames(sample, min_both_fraction, max_median_deg,
-                                                                     max_p90_deg, max_rmse_deg, tmp_path, capsys):
+@pytest.mark.parametrize(
+    "sample, min_both_fraction, max_median_deg, max_p90_deg, max_rmse_deg",
+    [
+        ("volvo_fh_u_turn", 0.9, 3.5, 5.0, 4.0),
+        ("twizy_single_turn", 0.7, 3.0, 5.0, 3.5),
+        ("man_tgx_docking", 0.85, 1.5, 4.0, 2.5),  # reversing at up to 45 deg hitch: the cab touches the trailer
+    ],
+)
+def test_run_on_committed_samples_reports_both_units_in_most_frames(
+    sample, min_both_fraction, max_median_deg, max_p90_deg, max_rmse_deg, tmp_path, capsys
+):
     recording = SAMPLES / sample
     if not (recording / "meta.yaml").is_file():
         pytest.skip(f"sample {sample} not committed")
@@ -102,7 +126,9 @@ def test_calibrate_recovers_the_true_extrinsics(recording, tmp_path, capsys):
     out = tmp_path / "calibrated.yaml"
     assert main(["calibrate", str(recording), "--out", str(out)]) == 0
     truth = {s.name: extrinsics_matrix(s.extrinsics) for s in load_params(Path(recording) / "sensors.yaml").sensors}
-    guess = {s.name: extrinsics_matrix(s.extrinsics) for s in load_params(Path(recording) / "sensors_guess.yaml").sensors}
+    guess = {
+        s.name: extrinsics_matrix(s.extrinsics) for s in load_params(Path(recording) / "sensors_guess.yaml").sensors
+    }
     calibrated = load_params(out).sensors
     assert set(yaml.safe_load(out.read_text())) == {"sensors"}
     for s in calibrated:
@@ -170,8 +196,17 @@ def test_detect_reports_nan_points_like_the_state_line_and_names_known_sensors(t
     report = json.loads(capsys.readouterr().out)
     assert report["points"] == 3000 and report["finite_points"] == 2993
     assert report["faults"] == {"cloud": "nan_points"} and report["dropped"]["nan_points"] == 7
-    assert set(report) >= {"file", "points", "finite_points", "ground_found", "latency_ms", "faults", "dropped",
-                           "clusters", "vehicles"}
+    assert set(report) >= {
+        "file",
+        "points",
+        "finite_points",
+        "ground_found",
+        "latency_ms",
+        "faults",
+        "dropped",
+        "clusters",
+        "vehicles",
+    }
     assert main(["detect", str(tmp_path / "c.npy"), "--sensor", "l9"]) == 2
     assert "no sensor named 'l9'; known: l1, l2, l3, l4" in capsys.readouterr().err
 
@@ -186,15 +221,20 @@ def test_detect_on_a_real_roadside_ouster_frame(tmp_path, capsys):
     pcd = sorted(folder.glob("*.pcd"))[0]
     lift_m = 7.0  # the sensor hangs about 7 m above the road: lift the cloud into a yard-like frame
     sensors = tmp_path / "s.yaml"
-    sensors.write_text(f"sensors:\n- name: south\n  max_range_m: 120\n  extrinsics: {{z_m: {lift_m}}}\n"
-                       "region: {x_min_m: -80, x_max_m: 80, y_min_m: -80, y_max_m: 80}\n")
+    sensors.write_text(
+        f"sensors:\n- name: south\n  max_range_m: 120\n  extrinsics: {{z_m: {lift_m}}}\n"
+        "region: {x_min_m: -80, x_max_m: 80, y_min_m: -80, y_max_m: 80}\n"
+    )
     assert main(["detect", str(pcd), "--params", str(sensors), "--sensor", "south"]) == 0
     report = json.loads(capsys.readouterr().out)
     assert report["points"] > 40000 and report["ground_found"]
     label = json.loads(pcd.with_suffix(".json").read_text())["openlabel"]["frames"]
     x, y, z, _, _, qz, qw, length, width, height = next(
-        o["object_data"]["cuboid"]["val"] for f in label.values() for o in f["objects"].values()
-        if o["object_data"]["type"] == "TRUCK")
+        o["object_data"]["cuboid"]["val"]
+        for f in label.values()
+        for o in f["objects"].values()
+        if o["object_data"]["type"] == "TRUCK"
+    )
     yaw = 2.0 * np.arctan2(qz, qw)
     inside = []
     for cluster in report["clusters"]:

@@ -7,15 +7,21 @@ import re
 from pathlib import Path
 
 import pytest
-
 from test_service_support import REPO, TOKEN, sample_recording, serve, wait_for
 
 pytestmark = pytest.mark.timeout(120)
 
 CHROMIUM = Path("/usr/bin/chromium")
 ARTIFACTS = REPO / "test-artifacts"
-BROWSER_ARGS = ["--no-sandbox", "--disable-gpu", "--disable-background-networking", "--disable-component-update",
-                "--disable-sync", "--no-first-run", "--disable-quic"]
+BROWSER_ARGS = [
+    "--no-sandbox",
+    "--disable-gpu",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--disable-sync",
+    "--no-first-run",
+    "--disable-quic",
+]
 TRUCK_RGB = (255, 176, 32)  # --truck in style.css / COLORS.truck in app.js
 
 
@@ -32,14 +38,17 @@ def browser():
 
 def _truck_pixels(page) -> int:
     """Pixels of the yard canvas drawn in the truck's colour."""
-    return page.evaluate("""([r, g, b]) => {
+    return page.evaluate(
+        """([r, g, b]) => {
         const c = document.getElementById('yard');
         const d = c.getContext('2d').getImageData(0, 0, c.width, c.height).data;
         let n = 0;
         for (let i = 0; i < d.length; i += 4)
             if (Math.abs(d[i] - r) < 8 && Math.abs(d[i + 1] - g) < 8 && Math.abs(d[i + 2] - b) < 8) n++;
         return n;
-    }""", list(TRUCK_RGB))
+    }""",
+        list(TRUCK_RGB),
+    )
 
 
 def test_dashboard_shows_vehicle_and_edits_parameters(browser, tmp_path):
@@ -52,8 +61,11 @@ def test_dashboard_shows_vehicle_and_edits_parameters(browser, tmp_path):
 
         # Live: a vehicle with its hitch angle as a number, drawn on the canvas.
         page.wait_for_selector("#vehicles .vehicle .hitch", timeout=30_000)
-        hitch = wait_for(lambda: re.fullmatch(r"[+-]\d+\.\d°", page.inner_text("#vehicles .vehicle .hitch").strip()),
-                         timeout_s=30, what="a numeric hitch angle")
+        hitch = wait_for(
+            lambda: re.fullmatch(r"[+-]\d+\.\d°", page.inner_text("#vehicles .vehicle .hitch").strip()),
+            timeout_s=30,
+            what="a numeric hitch angle",
+        )
         vid = int(page.get_attribute("#vehicles .vehicle", "data-id"))
         latest_ids = [v["id"] for v in (service.runner.latest or {}).get("vehicles", [])]
         assert hitch and (vid in latest_ids or vid <= max(latest_ids, default=vid))
@@ -94,14 +106,34 @@ def test_dashboard_shows_vehicle_and_edits_parameters(browser, tmp_path):
 
 
 def _state(frame, vehicles):
-    return {"type": "state", "frame": frame, "stamp_s": frame / 10, "latency_ms": {"total": 1.0}, "faults": {},
-            "dropped": {}, "clusters": [], "vehicles": vehicles}
+    return {
+        "type": "state",
+        "frame": frame,
+        "stamp_s": frame / 10,
+        "latency_ms": {"total": 1.0},
+        "faults": {},
+        "dropped": {},
+        "clusters": [],
+        "vehicles": vehicles,
+    }
 
 
 def _vehicle(vid, name, hitch, whole=True):
-    unit = {"track_id": vid * 10, "center": [0.0, 0.0, 1.0], "yaw_deg": 0.0, "dimensions": [4.0, 2.0, 2.0], "points": 50}
-    return {"id": vid, "vehicle": name, "hitch_deg": hitch, "truck": unit, "trailer": unit if whole else None,
-            "tractor_to_trailer": None}
+    unit = {
+        "track_id": vid * 10,
+        "center": [0.0, 0.0, 1.0],
+        "yaw_deg": 0.0,
+        "dimensions": [4.0, 2.0, 2.0],
+        "points": 50,
+    }
+    return {
+        "id": vid,
+        "vehicle": name,
+        "hitch_deg": hitch,
+        "truck": unit,
+        "trailer": unit if whole else None,
+        "tractor_to_trailer": None,
+    }
 
 
 def test_dashboard_shows_confirmed_vehicles_only_unconfirmed_greyed_on_request(browser, tmp_path):
@@ -116,10 +148,14 @@ def test_dashboard_shows_confirmed_vehicles_only_unconfirmed_greyed_on_request(b
             return page.eval_on_selector_all("#vehicles .vehicle", "rows => rows.map(r => [r.dataset.id, r.className])")
 
         for k in range(4):  # a vehicle seen whole in 4 states and a half-seen one (only a truck): neither is shown
-            page.evaluate("s => onState(s)", _state(k, [_vehicle(3, "man_tgx", 12.0), _vehicle(7, "twizy", 100.0, whole=False)]))
+            page.evaluate(
+                "s => onState(s)", _state(k, [_vehicle(3, "man_tgx", 12.0), _vehicle(7, "twizy", 100.0, whole=False)])
+            )
         page.wait_for_timeout(100)
         assert shown() == []
-        page.evaluate("s => onState(s)", _state(4, [_vehicle(3, "man_tgx", 12.5), _vehicle(7, "twizy", 100.0, whole=False)]))
+        page.evaluate(
+            "s => onState(s)", _state(4, [_vehicle(3, "man_tgx", 12.5), _vehicle(7, "twizy", 100.0, whole=False)])
+        )
         page.wait_for_timeout(100)
         assert shown() == [["3", "vehicle"]]
         assert page.evaluate("[...store.hitch.keys()]") == [3]  # the phantom never enters the hitch plot

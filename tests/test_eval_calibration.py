@@ -20,8 +20,9 @@ GUESS = load_params(SAMPLE / "sensors_guess.yaml")
 
 
 def _perturbed(extrinsics: Extrinsics, dx=0.0, dy=0.0, dyaw=0.0) -> Extrinsics:
-    return extrinsics.model_copy(update={"x_m": extrinsics.x_m + dx, "y_m": extrinsics.y_m + dy,
-                                         "yaw_deg": extrinsics.yaw_deg + dyaw})
+    return extrinsics.model_copy(
+        update={"x_m": extrinsics.x_m + dx, "y_m": extrinsics.y_m + dy, "yaw_deg": extrinsics.yaw_deg + dyaw}
+    )
 
 
 @pytest.fixture
@@ -101,8 +102,14 @@ def test_a_refused_calibration_evaluates_with_the_guess_and_says_so(fake_calibra
     rows = {r["sensor"]: r for r in result["per_sensor"]}
     assert rows["l2"]["error_cm"] == pytest.approx(rows["l2"]["guess_error_cm"])  # the guess is what is used
     assert rows["l2"]["calibrated_error_cm"] == pytest.approx(5.0)
-    summary = {"recordings": ["volvo_fh_u_turn"], "methods": ["default"], "subsets": ["all"], "primary_subset": "all",
-               "results": {"default": {"all": _empty_groups()}}, "calibration": {str(SAMPLE): result}}
+    summary = {
+        "recordings": ["volvo_fh_u_turn"],
+        "methods": ["default"],
+        "subsets": ["all"],
+        "primary_subset": "all",
+        "results": {"default": {"all": _empty_groups()}},
+        "calibration": {str(SAMPLE): result},
+    }
     text = render_markdown(summary, [])
     assert "WARNING — volvo_fh_u_turn: CALIBRATION REFUSED" in text and "**REFUSED**" in text
 

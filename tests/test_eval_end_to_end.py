@@ -13,8 +13,17 @@ import yaml
 from i2v_loc.cli import main
 
 REPO = Path(__file__).resolve().parents[1]
-REQUIRED = ("truck_pos_rmse_m", "trailer_pos_rmse_m", "truck_yaw_rmse_deg", "trailer_yaw_rmse_deg", "hitch_rmse_deg",
-            "heading_flip_rate", "delta_T_m", "rra_rad", "latency_ms_p50")
+REQUIRED = (
+    "truck_pos_rmse_m",
+    "trailer_pos_rmse_m",
+    "truck_yaw_rmse_deg",
+    "trailer_yaw_rmse_deg",
+    "hitch_rmse_deg",
+    "heading_flip_rate",
+    "delta_T_m",
+    "rra_rad",
+    "latency_ms_p50",
+)
 NEW = ("both_units_rate", "success_rate", "false_vehicle_s", "truck_flip_frames", "trailer_flip_frames")
 
 
@@ -22,15 +31,49 @@ NEW = ("both_units_rate", "success_rate", "false_vehicle_s", "truck_flip_frames"
 def recording(tmp_path_factory) -> Path:
     """A 1.5 s simulated recording (15 frames, 512 columns) of a Volvo FH in a long curve."""
     out = tmp_path_factory.mktemp("rec") / "volvo_curve"
-    assert main(["sim", "--vehicle", "volvo_fh", "--scenario", "long_curve", "--duration", "1.5", "--start", "6",
-                 "--columns", "512", "--seed", "3", "--out", str(out)]) == 0
+    assert (
+        main(
+            [
+                "sim",
+                "--vehicle",
+                "volvo_fh",
+                "--scenario",
+                "long_curve",
+                "--duration",
+                "1.5",
+                "--start",
+                "6",
+                "--columns",
+                "512",
+                "--seed",
+                "3",
+                "--out",
+                str(out),
+            ]
+        )
+        == 0
+    )
     return out
 
 
 def test_eval_writes_a_sane_report(recording, tmp_path, capsys):
     out = tmp_path / "report"
-    assert main(["eval", str(recording), "--out", str(out), "--quiet", "--method", "paper",
-                 "--calibration-cache", str(tmp_path / "cache")]) == 0
+    assert (
+        main(
+            [
+                "eval",
+                str(recording),
+                "--out",
+                str(out),
+                "--quiet",
+                "--method",
+                "paper",
+                "--calibration-cache",
+                str(tmp_path / "cache"),
+            ]
+        )
+        == 0
+    )
     metrics = json.loads((out / "metrics.json").read_text())
     volvo = metrics["vehicles"]["paper"]["volvo_fh"]
     for key in NEW:
@@ -61,8 +104,21 @@ def test_eval_writes_a_sane_report(recording, tmp_path, capsys):
 
 
 def test_unknown_method_is_a_clear_error(recording, tmp_path, capsys):
-    assert main(["eval", str(recording), "--out", str(tmp_path), "--method", "paper,nonsense",
-                 "--calibration-cache", str(tmp_path / "cache")]) == 2
+    assert (
+        main(
+            [
+                "eval",
+                str(recording),
+                "--out",
+                str(tmp_path),
+                "--method",
+                "paper,nonsense",
+                "--calibration-cache",
+                str(tmp_path / "cache"),
+            ]
+        )
+        == 2
+    )
     assert "unknown method 'nonsense'" in capsys.readouterr().err
 
 
@@ -72,8 +128,11 @@ def test_not_a_recording_is_a_clear_error(tmp_path, capsys):
 
 
 def _without_latency(results: list[dict]) -> list[dict]:
-    return [{k: v for k, v in row.items() if "latency" not in k}
-            for result in results for row in result["records"] + result["frames"]]
+    return [
+        {k: v for k, v in row.items() if "latency" not in k}
+        for result in results
+        for row in result["records"] + result["frames"]
+    ]
 
 
 def test_dask_cluster_equals_local_run(recording):
@@ -94,8 +153,22 @@ def test_sweep_ranks_and_writes_best_params(recording, tmp_path):
     grid = tmp_path / "grid.yaml"
     grid.write_text(yaml.safe_dump({"tracking.max_distance_m": [0.5, 2.0], "orientation.smoothing": [0.0]}))
     out = tmp_path / "sweep"
-    assert main(["sweep", str(recording), "--grid", str(grid), "--out", str(out), "--quiet",
-                 "--calibration-cache", str(tmp_path / "cache")]) == 0
+    assert (
+        main(
+            [
+                "sweep",
+                str(recording),
+                "--grid",
+                str(grid),
+                "--out",
+                str(out),
+                "--quiet",
+                "--calibration-cache",
+                str(tmp_path / "cache"),
+            ]
+        )
+        == 0
+    )
     data = json.loads((out / "sweep.json").read_text())
     assert [row["rank"] for row in data["rows"]] == [1, 2]
     assert {row["values"]["tracking.max_distance_m"] for row in data["rows"]} == {0.5, 2.0}
@@ -122,8 +195,23 @@ def test_committed_sample_scores_within_honest_bounds(tmp_path):
     no flips, 51 false detections (5.1 vehicle-s: the moving car and pedestrians as Twizys); the bounds
     fail on a broken pipeline, wrong extrinsics or a flip."""
     out = tmp_path / "report"
-    assert main(["eval", str(REPO / "samples" / "volvo_fh_u_turn"), "--method", "default", "--out", str(out),
-                 "--quiet", "--no-plots", "--calibration-cache", str(tmp_path / "cache")]) == 0
+    assert (
+        main(
+            [
+                "eval",
+                str(REPO / "samples" / "volvo_fh_u_turn"),
+                "--method",
+                "default",
+                "--out",
+                str(out),
+                "--quiet",
+                "--no-plots",
+                "--calibration-cache",
+                str(tmp_path / "cache"),
+            ]
+        )
+        == 0
+    )
     metrics = json.loads((out / "metrics.json").read_text())["vehicles"]["default"]
     volvo = metrics["volvo_fh"]
     assert all(key in volvo for key in REQUIRED)
@@ -144,8 +232,24 @@ def test_committed_sample_scores_within_honest_bounds(tmp_path):
 
 def test_true_extrinsics_skip_calibration_and_say_so(recording, tmp_path):
     out = tmp_path / "report"
-    assert main(["eval", str(recording), "--out", str(out), "--quiet", "--no-plots", "--method", "paper",
-                 "--true-extrinsics", "--calibration-cache", str(tmp_path / "cache")]) == 0
+    assert (
+        main(
+            [
+                "eval",
+                str(recording),
+                "--out",
+                str(out),
+                "--quiet",
+                "--no-plots",
+                "--method",
+                "paper",
+                "--true-extrinsics",
+                "--calibration-cache",
+                str(tmp_path / "cache"),
+            ]
+        )
+        == 0
+    )
     metrics = json.loads((out / "metrics.json").read_text())
     assert [c["status"] for c in metrics["calibration"].values()] == ["true_extrinsics"]
     assert "TRUE extrinsics" in (out / "report.md").read_text()
@@ -158,8 +262,10 @@ def test_openlabel_labels_score_like_the_jsonl_truth(recording):
 
     params = base_params(None)
     label_file = str(recording / "ground_truth.openlabel.json")
-    jsonl, labels = run_tasks([Task(str(recording), "paper", None, params),
-                               Task(str(recording), "paper", None, params, labels=label_file)], progress=False)
+    jsonl, labels = run_tasks(
+        [Task(str(recording), "paper", None, params), Task(str(recording), "paper", None, params, labels=label_file)],
+        progress=False,
+    )
     keys = ("truck_pos_err_m", "trailer_pos_err_m", "truck_yaw_err_deg", "hitch_gt_deg", "static_dT_m")
     a = np.array([[r[k] for k in keys] for r in jsonl["records"] if r["kind"] == "gt"])
     b = np.array([[r[k] for k in keys] for r in labels["records"] if r["kind"] == "gt"])

@@ -20,10 +20,21 @@ def _unit(x, y, yaw, points=500, dims=(10.0, 2.5, 2.5)):
 
 
 def _line(frame, truck, trailer, rate_hz=10.0, vid=1, maneuver="u_turn", vehicle="volvo_fh"):
-    return {"frame": frame, "stamp_s": frame / rate_hz, "vehicles": [{
-        "id": vid, "vehicle": vehicle, "maneuver": maneuver,
-        "hitch_deg": gtm.wrap_deg(trailer["yaw_deg"] - truck["yaw_deg"]),
-        "truck": truck, "trailer": trailer}], "distractors": []}
+    return {
+        "frame": frame,
+        "stamp_s": frame / rate_hz,
+        "vehicles": [
+            {
+                "id": vid,
+                "vehicle": vehicle,
+                "maneuver": maneuver,
+                "hitch_deg": gtm.wrap_deg(trailer["yaw_deg"] - truck["yaw_deg"]),
+                "truck": truck,
+                "trailer": trailer,
+            }
+        ],
+        "distractors": [],
+    }
 
 
 def test_interpolation_is_linear_and_wraps_yaw():
@@ -38,7 +49,9 @@ def test_interpolation_is_linear_and_wraps_yaw():
     # the tractor_to_trailer of the interpolated poses maps the truck centre into the trailer frame
     t = np.asarray(mid["tractor_to_trailer"])
     yaw = math.radians(173.0)
-    local = np.array([[math.cos(yaw), math.sin(yaw)], [-math.sin(yaw), math.cos(yaw)]]) @ (np.array([0.5, 1.0]) - [-7.5, 0.0])
+    local = np.array([[math.cos(yaw), math.sin(yaw)], [-math.sin(yaw), math.cos(yaw)]]) @ (
+        np.array([0.5, 1.0]) - [-7.5, 0.0]
+    )
     assert t[:2, 3] == pytest.approx(local)
 
 
@@ -62,12 +75,31 @@ def test_matching_measures_a_constant_bias_at_shifted_stamps():
     for k in range(19):
         t = k / 10 + 0.03
         x = speed * t
-        states.append({"frame": k, "stamp_s": t, "latency_ms": {"clustering": 1.0, "total": 2.0 + k},
-                       "vehicles": [{"id": 7, "vehicle": "volvo_fh", "hitch_deg": 0.0,
-                                     "truck": {"track_id": 1, "center": [x + 0.2, 0, 1.5], "yaw_deg": 1.0},
-                                     "trailer": {"track_id": 2 if k < 10 else 3, "center": [x + dx, 0.2, 1.5 + dz], "yaw_deg": 1.0}}]})
-    states[5]["vehicles"].append({"id": 9, "vehicle": "twizy", "hitch_deg": None,
-                                  "truck": {"track_id": 5, "center": [50, 50, 1], "yaw_deg": 0.0}, "trailer": None})
+        states.append(
+            {
+                "frame": k,
+                "stamp_s": t,
+                "latency_ms": {"clustering": 1.0, "total": 2.0 + k},
+                "vehicles": [
+                    {
+                        "id": 7,
+                        "vehicle": "volvo_fh",
+                        "hitch_deg": 0.0,
+                        "truck": {"track_id": 1, "center": [x + 0.2, 0, 1.5], "yaw_deg": 1.0},
+                        "trailer": {"track_id": 2 if k < 10 else 3, "center": [x + dx, 0.2, 1.5 + dz], "yaw_deg": 1.0},
+                    }
+                ],
+            }
+        )
+    states[5]["vehicles"].append(
+        {
+            "id": 9,
+            "vehicle": "twizy",
+            "hitch_deg": None,
+            "truck": {"track_id": 5, "center": [50, 50, 1], "yaw_deg": 0.0},
+            "trailer": None,
+        }
+    )
     records, frames = match_states(states, lines, Params())
     s = summarize(records, frames)
     assert s["truck_pos_rmse_m"] == pytest.approx(0.2)
@@ -89,9 +121,22 @@ def test_matching_measures_a_constant_bias_at_shifted_stamps():
 
 def test_matching_counts_flips_and_unreported_units():
     lines = [_line(k, _unit(0, 0, 90.0, points=10), _unit(0, -8, 90.0)) for k in range(4)]
-    states = [{"frame": k, "stamp_s": k / 10, "vehicles": [{"id": 1, "vehicle": "volvo_fh", "hitch_deg": None,
-               "truck": None, "trailer": {"track_id": 1, "center": [0, -8, 1], "yaw_deg": -90.0 if k < 1 else 90.0}}]}
-              for k in range(4)]
+    states = [
+        {
+            "frame": k,
+            "stamp_s": k / 10,
+            "vehicles": [
+                {
+                    "id": 1,
+                    "vehicle": "volvo_fh",
+                    "hitch_deg": None,
+                    "truck": None,
+                    "trailer": {"track_id": 1, "center": [0, -8, 1], "yaw_deg": -90.0 if k < 1 else 90.0},
+                }
+            ],
+        }
+        for k in range(4)
+    ]
     records, frames = match_states(states, lines, Params())
     s = summarize(records, frames)
     assert s["trailer_heading_flip_rate"] == pytest.approx(0.25)
@@ -127,10 +172,18 @@ def _labelcloud(tmp_path, name, objects):
 
 
 def test_labelcloud_centroid_formats(tmp_path):
-    truck = {"name": "truck:man_tgx", "centroid": {"x": 10.0, "y": 5.0, "z": 1.9},
-             "dimensions": {"length": 2.77, "width": 2.77, "height": 2.86}, "rotations": {"x": 0, "y": 0, "z": 350.0}}
-    trailer = {"name": "Trailer", "centroid": {"x": 3.0, "y": 6.0, "z": 2.5},
-               "dimensions": {"length": 13.68, "width": 2.77, "height": 2.55}, "rotations": {"x": 0, "y": 0, "z": 0.0}}
+    truck = {
+        "name": "truck:man_tgx",
+        "centroid": {"x": 10.0, "y": 5.0, "z": 1.9},
+        "dimensions": {"length": 2.77, "width": 2.77, "height": 2.86},
+        "rotations": {"x": 0, "y": 0, "z": 350.0},
+    }
+    trailer = {
+        "name": "Trailer",
+        "centroid": {"x": 3.0, "y": 6.0, "z": 2.5},
+        "dimensions": {"length": 13.68, "width": 2.77, "height": 2.55},
+        "rotations": {"x": 0, "y": 0, "z": 0.0},
+    }
     _labelcloud(tmp_path, "frame_000012.json", [truck, trailer])
     rel = dict(truck, rotations={"x": 0, "y": 0, "z": -math.radians(10.0)})
     _labelcloud(tmp_path, "frame_000013.json", [rel, trailer])
@@ -171,22 +224,47 @@ def test_bad_label_files_give_clear_errors(tmp_path):
 def test_openlabel_relations_pair_units_instead_of_distance(tmp_path):
     """A trailer whose front is 1 m from a truck is its trailer by distance; the file's isTowing
     relations say it belongs to the other truck, 30 m away, and the relations win."""
+
     def cuboid(x, y, length):
         return {"object_data": {"cuboid": {"name": "shape3D", "val": [x, y, 1.5, 0, 0, 0, 1, length, 2.5, 3.0]}}}
 
-    objects = {"1": {"name": "TRUCK_1", "type": "TRUCK"}, "2": {"name": "TRAILER_2", "type": "TRAILER"},
-               "3": {"name": "TRUCK_3", "type": "TRUCK"}}
+    objects = {
+        "1": {"name": "TRUCK_1", "type": "TRUCK"},
+        "2": {"name": "TRAILER_2", "type": "TRAILER"},
+        "3": {"name": "TRUCK_3", "type": "TRUCK"},
+    }
     frame = {"objects": {"1": cuboid(0.0, 0.0, 3.0), "2": cuboid(-7.0, 0.0, 14.0), "3": cuboid(30.0, 0.0, 3.0)}}
-    relations = {"r": {"name": "towing", "type": "isTowing", "rdf_subjects": [{"uid": "3", "type": "object"}],
-                       "rdf_objects": [{"uid": "2", "type": "object"}]}}
+    relations = {
+        "r": {
+            "name": "towing",
+            "type": "isTowing",
+            "rdf_subjects": [{"uid": "3", "type": "object"}],
+            "rdf_objects": [{"uid": "2", "type": "object"}],
+        }
+    }
     file = tmp_path / "labels.json"
-    file.write_text(json.dumps({"openlabel": {"objects": objects, "frames": {"0": {**frame, "relations": {"r": {}}}},
-                                              "relations": relations}}))
+    file.write_text(
+        json.dumps(
+            {
+                "openlabel": {
+                    "objects": objects,
+                    "frames": {"0": {**frame, "relations": {"r": {}}}},
+                    "relations": relations,
+                }
+            }
+        )
+    )
     (line,) = gtm.load_openlabel(file)
-    pairs = sorted((v["truck"] and v["truck"]["center"][0], v["trailer"] and v["trailer"]["center"][0]) for v in line["vehicles"]
-                   if v["truck"] is not None)
+    pairs = sorted(
+        (v["truck"] and v["truck"]["center"][0], v["trailer"] and v["trailer"]["center"][0])
+        for v in line["vehicles"]
+        if v["truck"] is not None
+    )
     assert pairs == [(0.0, None), (30.0, -7.0)]
     file.write_text(json.dumps({"openlabel": {"objects": objects, "frames": {"0": frame}}}))
     (line,) = gtm.load_openlabel(file)  # no relations in the file: by distance
-    assert sorted((v["truck"] and v["truck"]["center"][0], v["trailer"] and v["trailer"]["center"][0])
-                  for v in line["vehicles"] if v["truck"] is not None) == [(0.0, -7.0), (30.0, None)]
+    assert sorted(
+        (v["truck"] and v["truck"]["center"][0], v["trailer"] and v["trailer"]["center"][0])
+        for v in line["vehicles"]
+        if v["truck"] is not None
+    ) == [(0.0, -7.0), (30.0, None)]

@@ -106,4 +106,6 @@ def test_front_to_rear_rotation_is_the_hitch_angle():
     trailer = box_poses([[0.0, 0.0, 2.45]], [10.0])
     t = dcap.front_to_rear(truck, trailer, v)[0]
     assert math.degrees(math.atan2(t[1, 0], t[0, 0])) == pytest.approx(20.0)
-    assert m.transform_errors(t[None], dcap.static_front_to_rear(v)[None])["rra"][0] == pytest.approx(math.radians(20.0))
+    assert m.transform_errors(t[None], dcap.static_front_to_rear(v)[None])["rra"][0] == pytest.approx(
+        math.radians(20.0)
+    )

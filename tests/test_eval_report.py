@@ -14,8 +14,17 @@ from i2v_loc.evaluation.report import collect, write_report
 from i2v_loc.evaluation.runner import compare_task, run_tasks
 from i2v_loc.params import Params
 
-REQUIRED = ("truck_pos_rmse_m", "trailer_pos_rmse_m", "truck_yaw_rmse_deg", "trailer_yaw_rmse_deg", "hitch_rmse_deg",
-            "heading_flip_rate", "delta_T_m", "rra_rad", "latency_ms_p50")
+REQUIRED = (
+    "truck_pos_rmse_m",
+    "trailer_pos_rmse_m",
+    "truck_yaw_rmse_deg",
+    "trailer_yaw_rmse_deg",
+    "hitch_rmse_deg",
+    "heading_flip_rate",
+    "delta_T_m",
+    "rra_rad",
+    "latency_ms_p50",
+)
 
 
 def _unit(x, y, yaw, z=1.5, dims=(3.0, 2.5, 2.5)):
@@ -29,14 +38,40 @@ def synthetic_item(vehicle: str, maneuver: str, yaw_bias_deg: float, method: str
         a = math.radians(3 * k)
         truck = _unit(20 * math.cos(a), 20 * math.sin(a), wrap_deg(math.degrees(a) + 90))
         trailer = _unit(20 * math.cos(a - 0.3), 20 * math.sin(a - 0.3), wrap_deg(math.degrees(a - 0.3) + 90))
-        gt.append({"frame": k, "stamp_s": k / 10, "vehicles": [{
-            "id": 1, "vehicle": vehicle, "maneuver": maneuver,
-            "hitch_deg": wrap_deg(trailer["yaw_deg"] - truck["yaw_deg"]), "truck": truck, "trailer": trailer}]})
+        gt.append(
+            {
+                "frame": k,
+                "stamp_s": k / 10,
+                "vehicles": [
+                    {
+                        "id": 1,
+                        "vehicle": vehicle,
+                        "maneuver": maneuver,
+                        "hitch_deg": wrap_deg(trailer["yaw_deg"] - truck["yaw_deg"]),
+                        "truck": truck,
+                        "trailer": trailer,
+                    }
+                ],
+            }
+        )
         est_trailer = dict(trailer, yaw_deg=wrap_deg(trailer["yaw_deg"] + yaw_bias_deg), track_id=2)
-        states.append({"type": "state", "frame": k, "stamp_s": k / 10,
-                       "latency_ms": {"clustering": 1.0, "total": 5.0},
-                       "vehicles": [{"id": 3, "vehicle": vehicle, "hitch_deg": None,
-                                     "truck": dict(truck, track_id=1), "trailer": est_trailer}]})
+        states.append(
+            {
+                "type": "state",
+                "frame": k,
+                "stamp_s": k / 10,
+                "latency_ms": {"clustering": 1.0, "total": 5.0},
+                "vehicles": [
+                    {
+                        "id": 3,
+                        "vehicle": vehicle,
+                        "hitch_deg": None,
+                        "truck": dict(truck, track_id=1),
+                        "trailer": est_trailer,
+                    }
+                ],
+            }
+        )
     task = {"method": method, "subset": "all", "recording": recording, "tag": ""}
     return {"states": states, "ground_truth": gt, "params": Params().model_dump(mode="json"), "task": task}
 
@@ -101,8 +136,9 @@ def test_local_processes_and_dask_give_the_same_results(items):
     inline = collect(run_tasks(items, func=compare_task, progress=False))
     local = collect(run_tasks(items, func=compare_task, workers=2, progress=False))
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster:
-        dask = collect(run_tasks(items, func=compare_task, executor="dask", address=cluster.scheduler_address,
-                                 progress=False))
+        dask = collect(
+            run_tasks(items, func=compare_task, executor="dask", address=cluster.scheduler_address, progress=False)
+        )
     assert _numbers(local) == _numbers(inline)
     assert _numbers(dask) == _numbers(inline)
     assert np.isfinite(dask["vehicles"]["paper"]["man_tgx"]["hitch_rmse_deg"])

@@ -26,17 +26,34 @@ def _truth(trailer_points=None) -> list[dict]:
     for k in range(N):
         points = trailer_points(k) if trailer_points else 500
         truck, trailer = _unit(*TRUCK), _unit(*TRAILER, points=points)
-        lines.append({"frame": k, "stamp_s": k / 10, "vehicles": [{
-            "id": 1, "vehicle": "man_tgx", "maneuver": "u_turn", "truck": truck, "trailer": trailer,
-            "hitch_deg": wrap_deg(trailer["yaw_deg"] - truck["yaw_deg"])}]})
+        lines.append(
+            {
+                "frame": k,
+                "stamp_s": k / 10,
+                "vehicles": [
+                    {
+                        "id": 1,
+                        "vehicle": "man_tgx",
+                        "maneuver": "u_turn",
+                        "truck": truck,
+                        "trailer": trailer,
+                        "hitch_deg": wrap_deg(trailer["yaw_deg"] - truck["yaw_deg"]),
+                    }
+                ],
+            }
+        )
     return lines
 
 
 def _estimate(k, truck=TRUCK, trailer=TRAILER, vehicle="man_tgx", extra=None) -> dict:
     """State of frame k: one vehicle with the given units (None: not reported), plus ``extra``."""
-    v = {"id": 7, "vehicle": vehicle, "hitch_deg": None,
-         "truck": None if truck is None else dict(_unit(*truck), track_id=1),
-         "trailer": None if trailer is None else dict(_unit(*trailer), track_id=2)}
+    v = {
+        "id": 7,
+        "vehicle": vehicle,
+        "hitch_deg": None,
+        "truck": None if truck is None else dict(_unit(*truck), track_id=1),
+        "trailer": None if trailer is None else dict(_unit(*trailer), track_id=2),
+    }
     return {"type": "state", "frame": k, "stamp_s": k / 10, "vehicles": [v] + (extra or [])}
 
 
@@ -107,16 +124,19 @@ def test_an_unnamed_estimate_or_unlabelled_truth_still_matches():
     assert s["truck_coverage"] == 1.0 and s["false_vehicles"] == 0
 
 
-@pytest.mark.parametrize(("truck", "trailer", "success"), [
-    ((TRUCK[0] + 0.3, TRUCK[1], TRUCK[2]), TRAILER, True),  # 0.3 m: on the boundary, inclusive
-    ((TRUCK[0] + 0.301, TRUCK[1], TRUCK[2]), TRAILER, False),
-    (TRUCK, (TRAILER[0], TRAILER[1] - 0.3, TRAILER[2]), True),
-    (TRUCK, (TRAILER[0], TRAILER[1] - 0.301, TRAILER[2]), False),
-    (TRUCK, (TRAILER[0], TRAILER[1], TRAILER[2] + 2.0), True),  # trailer yaw and hitch both 2 deg off
-    (TRUCK, (TRAILER[0], TRAILER[1], TRAILER[2] + 2.01), False),
-    ((TRUCK[0], TRUCK[1], TRUCK[2] + 1.5), (TRAILER[0], TRAILER[1], TRAILER[2] - 0.6), False),  # yaws ok, hitch 2.1
-    ((TRUCK[0], TRUCK[1], TRUCK[2] + 1.0), (TRAILER[0], TRAILER[1], TRAILER[2] - 1.0), True),  # hitch 2.0
-])
+@pytest.mark.parametrize(
+    ("truck", "trailer", "success"),
+    [
+        ((TRUCK[0] + 0.3, TRUCK[1], TRUCK[2]), TRAILER, True),  # 0.3 m: on the boundary, inclusive
+        ((TRUCK[0] + 0.301, TRUCK[1], TRUCK[2]), TRAILER, False),
+        (TRUCK, (TRAILER[0], TRAILER[1] - 0.3, TRAILER[2]), True),
+        (TRUCK, (TRAILER[0], TRAILER[1] - 0.301, TRAILER[2]), False),
+        (TRUCK, (TRAILER[0], TRAILER[1], TRAILER[2] + 2.0), True),  # trailer yaw and hitch both 2 deg off
+        (TRUCK, (TRAILER[0], TRAILER[1], TRAILER[2] + 2.01), False),
+        ((TRUCK[0], TRUCK[1], TRUCK[2] + 1.5), (TRAILER[0], TRAILER[1], TRAILER[2] - 0.6), False),  # yaws ok, hitch 2.1
+        ((TRUCK[0], TRUCK[1], TRUCK[2] + 1.0), (TRAILER[0], TRAILER[1], TRAILER[2] - 1.0), True),  # hitch 2.0
+    ],
+)
 def test_success_thresholds_at_the_boundary(truck, trailer, success):
     s = _summary([_estimate(k, truck=truck, trailer=trailer) for k in range(N)])
     assert s["success_rate"] == (1.0 if success else 0.0)
@@ -135,8 +155,10 @@ def test_sweep_ranks_by_success_rate_descending_or_hitch_rmse_ascending():
     from i2v_loc.params import Params
 
     combos = [({"a": i}, Params()) for i in range(3)]
-    summaries = [{"hitch_rmse_deg": 0.5, "success_rate": 0.2},  # few, good frames
-                 {"hitch_rmse_deg": 1.5, "success_rate": 0.9},
-                 {"hitch_rmse_deg": 1.0, "success_rate": 0.9}]
+    summaries = [
+        {"hitch_rmse_deg": 0.5, "success_rate": 0.2},  # few, good frames
+        {"hitch_rmse_deg": 1.5, "success_rate": 0.9},
+        {"hitch_rmse_deg": 1.0, "success_rate": 0.9},
+    ]
     assert [r["combination"] for r in rank(combos, summaries)] == [0, 2, 1]
     assert [r["combination"] for r in rank(combos, summaries, "success_rate")] == [2, 1, 0]

@@ -29,9 +29,11 @@ def native(tmp_path_factory) -> Path:
     for name in src.sensor_names:
         s = src.scans(name)
         cut = slice(FIRST, FIRST + COUNT)
-        scans[name] = SensorScans(s.range_mm[cut], s.stamp_ns[cut], s.column_time_ns, s.beam_altitude_deg, s.beam_azimuth_offset_deg)
+        scans[name] = SensorScans(
+            s.range_mm[cut], s.stamp_ns[cut], s.column_time_ns, s.beam_altitude_deg, s.beam_azimuth_offset_deg
+        )
     meta = {k: v for k, v in src.meta.items() if k not in ("n_frames", "format_version")}
-    gt = src.ground_truth()[FIRST:FIRST + COUNT]
+    gt = src.ground_truth()[FIRST : FIRST + COUNT]
     out = tmp_path_factory.mktemp("native") / "rec"
     return write_recording(out, meta, scans, gt, src.sensors_file.read_text(), src.sensors_guess_file.read_text())
 
@@ -81,7 +83,9 @@ def assert_same_points(rec_a, rec_b, frames=(0, 13, COUNT - 1)) -> None:
             assert abs(other.stamp_s - scan.stamp_s) <= 1e-6
 
 
-@pytest.mark.parametrize("fmt, layout", [("pcap", "ouster-pcap"), ("rosbag2", "rosbag2"), ("mcap", "rosbag2"), ("pcd", "pcd")])
+@pytest.mark.parametrize(
+    "fmt, layout", [("pcap", "ouster-pcap"), ("rosbag2", "rosbag2"), ("mcap", "rosbag2"), ("pcd", "pcd")]
+)
 def test_layout_gives_the_native_points_and_states(fmt, layout, native, native_states, tmp_path):
     out = convert_recording(Recording(native), tmp_path / fmt, fmt)
     rec = open_recording(out)
@@ -216,7 +220,9 @@ def test_bin_layouts_recognised_by_content(tmp_path):
     kitti.mkdir(parents=True)
     nusc.mkdir(parents=True)
     np.column_stack([xyz, rng.uniform(0, 1, 1000)]).astype(np.float32).tofile(kitti / "000000.bin")
-    np.column_stack([xyz, rng.uniform(0, 255, 1000), rng.integers(0, 32, 1000)]).astype(np.float32).tofile(nusc / "000000.bin")
+    np.column_stack([xyz, rng.uniform(0, 255, 1000), rng.integers(0, 32, 1000)]).astype(np.float32).tofile(
+        nusc / "000000.bin"
+    )
     for folder, layout in ((kitti.parent, "bin"), (nusc.parent, "bin")):
         rec = open_recording(folder)
         assert rec.layout == layout
@@ -280,7 +286,9 @@ def test_chengdu_background_is_learned(realdata):
 # --------------------------------------------------------------------------- live UDP
 
 
-def _send_pcaps(folder: Path, ports: dict[str, int], drop: dict[str, set[int]], swap_every: int, received) -> dict[str, int]:
+def _send_pcaps(
+    folder: Path, ports: dict[str, int], drop: dict[str, set[int]], swap_every: int, received
+) -> dict[str, int]:
     """The pcaps' lidar packets to ``ports`` on loopback, sensors interleaved in capture order;
     packet i of a sensor is left out when i is in ``drop[sensor]``, and within every sweep
     each ``swap_every``-th packet is sent after its successor. At most 16 packets are in flight
@@ -295,7 +303,7 @@ def _send_pcaps(folder: Path, ports: dict[str, int], drop: dict[str, set[int]], 
     from i2v_loc.formats.ouster import read_metadata
 
     queue = []
-    for name, port in ports.items():
+    for name in ports:
         info = read_metadata(folder / f"{name}.json")
         source = pcap.PcapPacketSource(str(folder / f"{name}.pcap"), sensor_info=[info])
         packets = [(p.host_timestamp, bytes(p.buf)) for _, p in source]
@@ -429,12 +437,27 @@ def test_ros1_bag_is_read(tmp_path):
             data = np.zeros(len(xyz), dtype=[("x", ">f4"), ("y", ">f4"), ("z", ">f4"), ("intensity", ">f4")])
             data["x"], data["y"], data["z"] = xyz.T
             data["x"][7] = np.nan  # a missing return
-            fields = [types["sensor_msgs/msg/PointField"](name=n, offset=4 * i, datatype=7, count=1)
-                      for i, n in enumerate(("x", "y", "z", "intensity"))]
-            header = types["std_msgs/msg/Header"](seq=k, stamp=types["builtin_interfaces/msg/Time"](sec=100, nanosec=k * 100_000_000), frame_id="front")
-            msg = types["sensor_msgs/msg/PointCloud2"](header=header, height=1, width=len(xyz), fields=fields, is_bigendian=True,
-                                                       point_step=16, row_step=16 * len(xyz), data=data.view(np.uint8).reshape(-1), is_dense=False)
-            writer.write(conn, 100_000_000_000 + k * 100_000_000, store.serialize_ros1(msg, "sensor_msgs/msg/PointCloud2"))
+            fields = [
+                types["sensor_msgs/msg/PointField"](name=n, offset=4 * i, datatype=7, count=1)
+                for i, n in enumerate(("x", "y", "z", "intensity"))
+            ]
+            header = types["std_msgs/msg/Header"](
+                seq=k, stamp=types["builtin_interfaces/msg/Time"](sec=100, nanosec=k * 100_000_000), frame_id="front"
+            )
+            msg = types["sensor_msgs/msg/PointCloud2"](
+                header=header,
+                height=1,
+                width=len(xyz),
+                fields=fields,
+                is_bigendian=True,
+                point_step=16,
+                row_step=16 * len(xyz),
+                data=data.view(np.uint8).reshape(-1),
+                is_dense=False,
+            )
+            writer.write(
+                conn, 100_000_000_000 + k * 100_000_000, store.serialize_ros1(msg, "sensor_msgs/msg/PointCloud2")
+            )
     rec = open_recording(bag)
     assert rec.layout == "rosbag1" and rec.sensor_names == ["front"] and len(rec) == 3
     assert rec.rate_hz == pytest.approx(10.0)
@@ -452,8 +475,10 @@ def test_run_writes_its_states_to_a_bag(fmt, native, native_states, tmp_path):
     with AnyReader([out]) as reader:
         assert [c.topic for c in reader.connections] == ["/i2v_loc/states"]
         lines = [json.loads(reader.deserialize(raw, c.msgtype).data) for c, _, raw in reader.messages()]
+
     def strip(line):
         return {k: v for k, v in line.items() if k != "latency_ms"}
+
     assert [strip(line) for line in lines] == [strip(line) for line in native_states[:4]]
 
 
@@ -482,8 +507,14 @@ def test_pcap_with_lost_packets_is_read_and_counted(pcap_dir, native, tmp_path, 
 
 def test_bench_reports_latency_on_the_chengdu_frames(realdata, tmp_path, capsys):
     params = tmp_path / "chengdu.yaml"
-    params.write_text(yaml.safe_dump({"sensors": [{"name": "frames", "extrinsics": {"z_m": 7.5}}],
-                                      "background": {"window_frames": 10, "learn_every_frames": 1, "min_samples": 8}}))
+    params.write_text(
+        yaml.safe_dump(
+            {
+                "sensors": [{"name": "frames", "extrinsics": {"z_m": 7.5}}],
+                "background": {"window_frames": 10, "learn_every_frames": 1, "min_samples": 8},
+            }
+        )
+    )
     folder = realdata / "roadside80_chengdu" / "frames"
     assert main(["bench", str(folder), "--params", str(params), "--method", "default", "--warmup", "10", "--json"]) == 0
     report = json.loads(capsys.readouterr().out)
@@ -511,7 +542,10 @@ def test_every_pcd_variant_ply_and_npy_give_the_same_points(tmp_path):
     (tmp_path / "npy" / "lidar").mkdir(parents=True)
     np.save(tmp_path / "npy" / "lidar" / "000000.npy", np.column_stack([xyz, np.ones(600)]))
     (tmp_path / "ply" / "lidar").mkdir(parents=True)
-    o3d.io.write_point_cloud(str(tmp_path / "ply" / "lidar" / "000000.ply"), o3d.geometry.PointCloud(o3d.utility.Vector3dVector(xyz.astype(np.float64))))
+    o3d.io.write_point_cloud(
+        str(tmp_path / "ply" / "lidar" / "000000.ply"),
+        o3d.geometry.PointCloud(o3d.utility.Vector3dVector(xyz.astype(np.float64))),
+    )
     for layout in ("ascii", "binary", "binary_compressed", "npy", "ply"):
         rec = open_recording(tmp_path / layout)
         scan = rec.frame(0).scans["lidar"]
@@ -525,6 +559,11 @@ def test_eval_task_on_a_pcap_folder_equals_the_native_one(pcap_dir, native):
 
     params = base_params(None)
     results = [run_task(Task(str(path), "paper", None, params)) for path in (native, pcap_dir)]
-    rows = [[{k: v for k, v in row.items() if "latency" not in k and k != "recording"}
-             for row in r["records"] + r["frames"]] for r in results]
+    rows = [
+        [
+            {k: v for k, v in row.items() if "latency" not in k and k != "recording"}
+            for row in r["records"] + r["frames"]
+        ]
+        for r in results
+    ]
     assert rows[0] and json.dumps(rows[0], default=str) == json.dumps(rows[1], default=str)  # NaN-safe

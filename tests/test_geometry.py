@@ -46,8 +46,18 @@ def test_rotation_angle_of_stacks():
     np.testing.assert_allclose(rotation_angle_rad(a, b), np.radians([5, 30, 20]), atol=1e-9)
 
 
-@pytest.mark.parametrize("angle, wrapped", [(0, 0), (np.pi, np.pi), (-np.pi, np.pi), (3 * np.pi, np.pi), (4.0, 4.0 - 2 * np.pi),
-                                            (-4.0, 2 * np.pi - 4.0), (7.0, 7.0 - 2 * np.pi)])
+@pytest.mark.parametrize(
+    "angle, wrapped",
+    [
+        (0, 0),
+        (np.pi, np.pi),
+        (-np.pi, np.pi),
+        (3 * np.pi, np.pi),
+        (4.0, 4.0 - 2 * np.pi),
+        (-4.0, 2 * np.pi - 4.0),
+        (7.0, 7.0 - 2 * np.pi),
+    ],
+)
 def test_wrap_rad_is_half_open_like_wrap_deg(angle, wrapped):
     assert wrap_rad(angle) == pytest.approx(wrapped, abs=1e-12)
     assert isinstance(wrap_rad(angle), float)
@@ -76,7 +86,9 @@ def test_box_poses_from_centres_and_headings_in_degrees():
 
 def test_rotate_xy_turns_counter_clockwise_and_broadcasts():
     np.testing.assert_allclose(rotate_xy([1.0, 0.0], np.pi / 2), [0.0, 1.0], atol=1e-12)
-    np.testing.assert_allclose(rotate_xy([[1.0, 0.0], [0.0, 2.0]], np.radians([90.0, 90.0])), [[0.0, 1.0], [-2.0, 0.0]], atol=1e-12)
+    np.testing.assert_allclose(
+        rotate_xy([[1.0, 0.0], [0.0, 2.0]], np.radians([90.0, 90.0])), [[0.0, 1.0], [-2.0, 0.0]], atol=1e-12
+    )
     assert rotate_xy([3.0, 4.0], np.linspace(0, 1, 5)).shape == (5, 2)
     np.testing.assert_allclose(np.linalg.norm(rotate_xy([3.0, 4.0], np.linspace(0, 6, 7)), axis=1), 5.0)
 

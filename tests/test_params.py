@@ -6,6 +6,7 @@ import json
 import math
 
 import pytest
+from conftest import REPO
 
 from i2v_loc.cli import main
 from i2v_loc.params import (
@@ -18,8 +19,6 @@ from i2v_loc.params import (
     read_yaml,
     save_params,
 )
-
-from conftest import REPO
 
 
 def test_paper_field_distances_match_the_paper():
@@ -143,20 +142,26 @@ def _numeric_fields(schema: dict):
 def test_every_number_has_physical_bounds():
     fields = list(_numeric_fields(json_schema()))
     assert len(fields) > 50  # every section is walked
-    unbounded = [path for path, prop in fields
-                 if not ({"minimum", "exclusiveMinimum"} & set(prop) and {"maximum", "exclusiveMaximum"} & set(prop))]
+    unbounded = [
+        path
+        for path, prop in fields
+        if not ({"minimum", "exclusiveMinimum"} & set(prop) and {"maximum", "exclusiveMaximum"} & set(prop))
+    ]
     assert unbounded == []
 
 
-@pytest.mark.parametrize("patch, field", [
-    ({"vehicles": {"twizy": None, "man_tgx": None, "volvo_fh": None}}, "vehicles"),
-    ({"sensors": [{"name": "l1", "extrinsics": {"x_m": 1e300}}]}, "sensors.0.extrinsics.x_m"),
-    ({"classification": {"min_truck_points": 10**20}}, "classification.min_truck_points"),
-    ({"tracking": {"measurement_noise_m": 1e-300}}, "tracking.measurement_noise_m"),
-    ({"tracking": {"process_noise": 1e300}}, "tracking.process_noise"),
-    ({"region": {"x_max_m": 1e300}}, "region.x_max_m"),
-    ({"vehicles": {"twizy": {"vehicle_volume_tolerance_m3": 1e300}}}, "vehicles.twizy.vehicle_volume_tolerance_m3"),
-])
+@pytest.mark.parametrize(
+    "patch, field",
+    [
+        ({"vehicles": {"twizy": None, "man_tgx": None, "volvo_fh": None}}, "vehicles"),
+        ({"sensors": [{"name": "l1", "extrinsics": {"x_m": 1e300}}]}, "sensors.0.extrinsics.x_m"),
+        ({"classification": {"min_truck_points": 10**20}}, "classification.min_truck_points"),
+        ({"tracking": {"measurement_noise_m": 1e-300}}, "tracking.measurement_noise_m"),
+        ({"tracking": {"process_noise": 1e300}}, "tracking.process_noise"),
+        ({"region": {"x_max_m": 1e300}}, "region.x_max_m"),
+        ({"vehicles": {"twizy": {"vehicle_volume_tolerance_m3": 1e300}}}, "vehicles.twizy.vehicle_volume_tolerance_m3"),
+    ],
+)
 def test_absurd_values_are_refused(patch, field):
     with pytest.raises(ParamsError, match=field.replace(".", r"\.")):
         apply_patch(Params(), patch)
@@ -168,7 +173,9 @@ def test_many_unknown_keys_are_refused_without_rebuilding_the_schema(monkeypatch
     params_module._cached_schema.cache_clear()
     built = []
     original = Params.model_json_schema.__func__
-    monkeypatch.setattr(Params, "model_json_schema", classmethod(lambda cls, *a, **k: built.append(1) or original(cls, *a, **k)))
+    monkeypatch.setattr(
+        Params, "model_json_schema", classmethod(lambda cls, *a, **k: built.append(1) or original(cls, *a, **k))
+    )
     with pytest.raises(ParamsError) as err:
         apply_patch(Params(), {"clustering": {f"unknown_{i}": 1 for i in range(200)}})
     assert len(built) == 1

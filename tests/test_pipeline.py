@@ -5,17 +5,19 @@ import threading
 
 import numpy as np
 import pytest
+from test_stage_classification import articulated_points, articulated_poses, box_surface, place
 
 from i2v_loc.frame import Frame, SensorScan
-from i2v_loc.params import Extrinsics, Params, ParamsError, SensorConfig
 from i2v_loc.geometry import wrap_deg
+from i2v_loc.params import Extrinsics, Params, ParamsError, SensorConfig
 from i2v_loc.pipeline import Pipeline, centre_to_hitch_m, method_params
-from test_stage_classification import articulated_points, articulated_poses, box_surface, place
 
 
 def yard_params(vehicle=None, **sections):
     """One sensor at the yard origin (identity extrinsics) plus three that can be missing."""
-    params = Params(sensors=[SensorConfig(name=n, extrinsics=Extrinsics()) for n in ("l1", "l2", "l3", "l4")], **sections)
+    params = Params(
+        sensors=[SensorConfig(name=n, extrinsics=Extrinsics()) for n in ("l1", "l2", "l3", "l4")], **sections
+    )
     if vehicle:
         params = params.model_copy(update={"vehicles": {vehicle: params.vehicles[vehicle]}})
     return params
@@ -56,7 +58,9 @@ def test_update_params_applies_at_the_next_frame_and_rejects_bad_patches():
     with pytest.raises(ParamsError):
         pipeline.update_params({"clustering": {"tolerance_m": -1}})
     done = threading.Event()
-    threading.Thread(target=lambda: (pipeline.update_params({"clustering": {"tolerance_m": 0.3, "voxel_size_m": 0.0}}), done.set())).start()
+    threading.Thread(
+        target=lambda: (pipeline.update_params({"clustering": {"tolerance_m": 0.3, "voxel_size_m": 0.0}}), done.set())
+    ).start()
     done.wait(5)
     assert pipeline.params.clustering.tolerance_m == 0.3
     assert len(pipeline.process(frame).clusters) == 2
@@ -95,8 +99,16 @@ def test_moving_volvo_is_localized_with_both_units_and_one_vehicle_id():
     # the truck's origin seen from the trailer frame: straight ahead by the centre distance
     assert t[:2, 3] == pytest.approx([np.hypot(*(tc - rc)), 0.0], abs=0.15)
     assert [c["status"] for c in line["clusters"]].count("vehicle:volvo_fh") == 1
-    assert set(line["latency_ms"]) >= {"concatenation", "region", "clustering", "classification",
-                                       "centroid", "tracking", "orientation", "total"}
+    assert set(line["latency_ms"]) >= {
+        "concatenation",
+        "region",
+        "clustering",
+        "classification",
+        "centroid",
+        "tracking",
+        "orientation",
+        "total",
+    }
 
 
 @pytest.mark.parametrize("hitch_deg", [30.0, -30.0])
@@ -171,8 +183,9 @@ def test_foreground_points_are_exposed_but_not_in_the_state_line():
 
 
 def test_method_preset_fills_only_the_fields_left_at_the_model_default():
-    user = yard_params(tracking={"reacquire_distance_m": 5.0}, orientation={"shape_weight": 0.5},
-                       region={"ground_refit_frames": 3})
+    user = yard_params(
+        tracking={"reacquire_distance_m": 5.0}, orientation={"shape_weight": 0.5}, region={"ground_refit_frames": 3}
+    )
     params = Pipeline(user, method="default").params
     assert params.tracking.reacquire_distance_m == 5.0  # the user's, not the preset's 3.0
     assert params.orientation.shape_weight == 0.5
@@ -196,6 +209,7 @@ def test_a_patch_arriving_while_the_previous_one_is_applied_is_not_lost():
         del pipeline._build  # once: back to the method
         pipeline.update_params({"clustering": {"min_points": 7}})
         build(params)
+
     pipeline._build = build_with_a_patch_arriving
     pipeline.process(frame)
     pipeline.process(frame)
@@ -209,7 +223,9 @@ def test_centre_to_hitch_distances_match_the_kinematic_figures(name, hitch_deg):
     v = Params().vehicles[name]
     (tc, _), (rc, ry) = articulated_poses(v, (2.0, -1.0), 25.0, hitch_deg)
     truck_ahead_m, hitch_ahead_m = centre_to_hitch_m(v)
-    hitch = np.array([2.0, -1.0]) - v.truck.hitch_behind_rear_axle_m * np.array([np.cos(np.radians(25.0)), np.sin(np.radians(25.0))])
+    hitch = np.array([2.0, -1.0]) - v.truck.hitch_behind_rear_axle_m * np.array(
+        [np.cos(np.radians(25.0)), np.sin(np.radians(25.0))]
+    )
     assert np.hypot(*(tc - hitch)) == pytest.approx(truck_ahead_m, abs=1e-9)
     assert np.hypot(*(rc - hitch)) == pytest.approx(hitch_ahead_m, abs=1e-9)
     assert hitch - rc == pytest.approx(hitch_ahead_m * np.array([np.cos(np.radians(ry)), np.sin(np.radians(ry))]))
@@ -221,7 +237,9 @@ def test_a_truck_beside_the_trailer_middle_is_not_where_the_hitch_puts_it():
     classification takes it for the truck; the articulation check drops it (its centre is 4 m from
     where the hitch puts a truck) and counts it, the trailer is still reported."""
     v = Params().vehicles["volvo_fh"]
-    trailer = place(box_surface(v.trailer.length_m, v.trailer.width_m, v.trailer.height_m), 0.0, 0.0, 0.0, v.trailer.floor_m)
+    trailer = place(
+        box_surface(v.trailer.length_m, v.trailer.width_m, v.trailer.height_m), 0.0, 0.0, 0.0, v.trailer.floor_m
+    )
     side_y = v.trailer.width_m / 2 + 0.5 + v.truck.width_m / 2
     cab = place(box_surface(v.truck.length_m, v.truck.width_m, v.truck.height_m), 0.0, side_y, 0.0, v.truck.floor_m)
     frame = frame_of(0, 0.0, {"l1": np.vstack([ground(), trailer, cab])})
@@ -232,4 +250,6 @@ def test_a_truck_beside_the_trailer_middle_is_not_where_the_hitch_puts_it():
         results[gap] = pipeline.process(frame).to_json()["vehicles"]
         assert pipeline.counters["truck_off_hitch"] == (1 if gap else 0)
     assert results[0.0][0]["truck"]["center"][:2] == pytest.approx([0.0, side_y], abs=0.3)  # no check: a truck
-    assert results[2.0][0]["truck"] is None and results[2.0][0]["trailer"]["center"][:2] == pytest.approx([0, 0], abs=0.3)
+    assert results[2.0][0]["truck"] is None and results[2.0][0]["trailer"]["center"][:2] == pytest.approx(
+        [0, 0], abs=0.3
+    )

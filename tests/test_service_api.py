@@ -16,9 +16,9 @@ import httpx
 import pytest
 import websockets
 import yaml
+from test_service_support import TOKEN, next_state, sample_recording, serve, wait_for
 
 from i2v_loc.params import json_schema, load_params
-from test_service_support import TOKEN, next_state, sample_recording, serve, wait_for
 
 pytestmark = pytest.mark.timeout(60)
 
@@ -63,6 +63,7 @@ def test_health_state_sensors_vehicles(client, live):
     for name in sensors:  # the sample recording holds every sensor in every frame
         assert by_name[name]["last_stamp_s"] is not None and by_name[name]["drops"] == 0
         assert set(by_name[name]["position"]) == {"x_m", "y_m", "z_m", "yaw_deg"}
+
     # /vehicles is the vehicles of the latest state (asked until both answers are of one frame)
     def same_frame():
         state, vehicles = client.get("/api/v1/state").json(), client.get("/api/v1/vehicles").json()
@@ -77,8 +78,9 @@ def test_health_state_sensors_vehicles(client, live):
 def test_vehicle_found_by_id(client):
     state = wait_for(lambda: (s := client.get("/api/v1/state").json())["vehicles"] and s, what="a vehicle in the state")
     vid = state["vehicles"][0]["id"]
-    found = wait_for(lambda: (r := client.get(f"/api/v1/vehicles/{vid}")).status_code == 200 and r.json(),
-                     what=f"vehicle {vid}")
+    found = wait_for(
+        lambda: (r := client.get(f"/api/v1/vehicles/{vid}")).status_code == 200 and r.json(), what=f"vehicle {vid}"
+    )
     assert found["id"] == vid and "hitch_deg" in found and {"truck", "trailer"} <= set(found)
 
 
@@ -141,8 +143,9 @@ def test_points_are_opt_in_and_capped(live):
 def test_writes_need_the_right_token(client):
     missing = client.patch("/api/v1/params", json={"clustering": {"tolerance_m": 0.5}})
     assert missing.status_code == 401 and missing.headers["www-authenticate"] == "Bearer"
-    wrong = client.patch("/api/v1/params", json={"clustering": {"tolerance_m": 0.5}},
-                         headers={"Authorization": "Bearer nope"})
+    wrong = client.patch(
+        "/api/v1/params", json={"clustering": {"tolerance_m": 0.5}}, headers={"Authorization": "Bearer nope"}
+    )
     assert wrong.status_code == 403
     assert client.post("/api/v1/params/rollback/0").status_code == 401
     assert client.get("/api/v1/params").json()["version"] == 0
@@ -167,7 +170,11 @@ def test_invalid_patch_gives_422_and_changes_nothing(client, live):
 def test_malformed_requests_get_4xx_with_a_message(client):
     cases = [
         (dict(content=b"{not json", headers={**AUTH, "Content-Type": "application/json"}), 400, "not valid JSON"),
-        (dict(content=b'{"region": {"x_min_m": NaN}}', headers={**AUTH, "Content-Type": "application/json"}), 400, "finite"),
+        (
+            dict(content=b'{"region": {"x_min_m": NaN}}', headers={**AUTH, "Content-Type": "application/json"}),
+            400,
+            "finite",
+        ),
         (dict(content=b"x=1", headers={**AUTH, "Content-Type": "text/plain"}), 415, "Content-Type"),
         (dict(content=b"", headers={**AUTH, "Content-Type": "application/json"}), 400, "empty body"),
         (dict(json=[1, 2], headers=AUTH), 422, "JSON object"),
@@ -190,8 +197,11 @@ def test_valid_patch_changes_the_next_frame_and_rolls_back(client, live):
         return [len(s["clusters"]) for s in states]
 
     before = asyncio.run(clusters_at(start_version))
-    response = client.patch("/api/v1/params", headers={**AUTH, "Content-Type": "application/merge-patch+json"},
-                            content=json.dumps({"clustering": {"tolerance_m": 0.3}}))
+    response = client.patch(
+        "/api/v1/params",
+        headers={**AUTH, "Content-Type": "application/merge-patch+json"},
+        content=json.dumps({"clustering": {"tolerance_m": 0.3}}),
+    )
     assert response.status_code == 200, response.text
     version = response.json()["version"]
     assert version == start_version + 1
@@ -219,12 +229,15 @@ def test_params_message_on_the_websocket(client, live):
         async with _ws(server) as ws:
             await next_state(ws)
             response = await asyncio.to_thread(
-                client.patch, "/api/v1/params", json={"tracking": {"max_distance_m": 1.5}}, headers=AUTH)
+                client.patch, "/api/v1/params", json={"tracking": {"max_distance_m": 1.5}}, headers=AUTH
+            )
+
             async def params_message():
                 while True:
                     message = json.loads(await ws.recv())
                     if message["type"] == "params":
                         return message
+
             return response.json(), await asyncio.wait_for(params_message(), 10)
 
     accepted, message = asyncio.run(run())
@@ -241,8 +254,12 @@ def _stalled_websocket(port: int, path: str) -> socket.socket:
     sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
     sock.connect(("127.0.0.1", port))
     key = base64.b64encode(os.urandom(16)).decode()
-    sock.sendall((f"GET {path} HTTP/1.1\r\nHost: 127.0.0.1:{port}\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n"
-                  f"Sec-WebSocket-Key: {key}\r\nSec-WebSocket-Version: 13\r\n\r\n").encode())
+    sock.sendall(
+        (
+            f"GET {path} HTTP/1.1\r\nHost: 127.0.0.1:{port}\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n"
+            f"Sec-WebSocket-Key: {key}\r\nSec-WebSocket-Version: 13\r\n\r\n"
+        ).encode()
+    )
     reply = sock.recv(1024)
     assert b" 101 " in reply.split(b"\r\n", 1)[0], reply
     return sock
@@ -252,6 +269,7 @@ def test_stalled_client_does_not_slow_the_others(live):
     server, service, _ = live
     stalled = _stalled_websocket(server.port, "/ws/states?points=true")
     try:
+
         async def follow():
             async with _ws(server, points=True) as ws:
                 frames = [(await next_state(ws))["frame"] for _ in range(25)]
@@ -272,7 +290,9 @@ def test_metrics(client, live):
     _, service, _ = live
     text = client.get("/metrics").text
     assert "text/plain" in client.get("/metrics").headers["content-type"]
-    processed = float(next(line.split()[-1] for line in text.splitlines() if line.startswith("i2v_loc_frames_processed_total")))
+    processed = float(
+        next(line.split()[-1] for line in text.splitlines() if line.startswith("i2v_loc_frames_processed_total"))
+    )
     assert processed >= 2
     assert 'i2v_loc_frames_dropped_total{reason="source_error"}' in text
     assert 'i2v_loc_stage_latency_seconds_bucket{le="0.5",stage="total"}' in text
@@ -343,7 +363,9 @@ def test_a_failing_source_frame_is_counted_and_skipped(tmp_path):
         health = c.get("/api/v1/health").json()
         assert health["frames_dropped"]["source_error"] >= 1 and health["live"] is True
         error = health["last_frame_error"]
-        assert error["reason"] == "source_error" and error["frame"] % 3 == 1 and "simulated read error" in error["error"]
+        assert (
+            error["reason"] == "source_error" and error["frame"] % 3 == 1 and "simulated read error" in error["error"]
+        )
         frame = c.get("/api/v1/state").json()["frame"]
         assert frame % 3 != 1
 
@@ -398,8 +420,9 @@ def test_health_and_metrics_show_the_method_and_no_created_series(client):
 
 
 def test_unwritable_parameter_file_gives_a_json_507(tmp_path):
-    from service.app import create_app
     from test_service_support import make_service
+
+    from service.app import create_app
 
     blocker = tmp_path / "not-a-folder"
     blocker.write_text("x")
@@ -446,8 +469,12 @@ def test_a_deeply_nested_body_is_a_400(client):
 def test_a_huge_declared_body_is_refused_before_it_is_sent(live):
     server, _, _ = live
     with socket.create_connection(("127.0.0.1", server.port), timeout=10) as sock:
-        sock.sendall((f"PATCH /api/v1/params HTTP/1.1\r\nHost: 127.0.0.1\r\nAuthorization: Bearer {TOKEN}\r\n"
-                      "Content-Type: application/json\r\nContent-Length: 400000000\r\n\r\n{").encode())
+        sock.sendall(
+            (
+                f"PATCH /api/v1/params HTTP/1.1\r\nHost: 127.0.0.1\r\nAuthorization: Bearer {TOKEN}\r\n"
+                "Content-Type: application/json\r\nContent-Length: 400000000\r\n\r\n{"
+            ).encode()
+        )
         reply = sock.recv(4096)  # the server answers without waiting for the 400 MB
     assert reply.startswith(b"HTTP/1.1 413 "), reply[:200]
     assert b"larger than 1000000 bytes" in reply
@@ -480,6 +507,7 @@ def test_websocket_from_another_site_is_refused(live):
 def test_allowed_origins_may_open_the_websocket(tmp_path):
     source_server, _ = serve(sample_recording(), allowed_origins=("https://ops.example.com",))
     with source_server as server:
+
         async def attempt(origin):
             async with websockets.connect(server.ws_url + "/ws/states", origin=origin) as ws:
                 return (await next_state(ws))["type"]
@@ -499,8 +527,10 @@ def test_the_server_stops_while_a_change_is_still_in_flight(tmp_path):
         with server:
             wait_for(lambda: service.runner.frames_processed >= 1, what="a frame")
             with httpx.Client(base_url=server.url, timeout=60) as c:
-                sender = threading.Thread(target=lambda: c.patch("/api/v1/params", headers=AUTH,
-                                                                 json={"tracking": {"max_age_frames": 4}}), daemon=True)
+                sender = threading.Thread(
+                    target=lambda: c.patch("/api/v1/params", headers=AUTH, json={"tracking": {"max_age_frames": 4}}),
+                    daemon=True,
+                )
                 sender.start()
                 wait_for(lambda: service.store._lock.locked(), what="the change in flight")
                 server.server.should_exit = True
@@ -527,7 +557,9 @@ def test_api_docs_need_no_internet(client):
 
 def test_openapi_marks_only_guarded_operations_and_types_every_answer(client):
     spec = client.get("/openapi.json").json()
-    secured = {(path, method) for path, ops in spec["paths"].items() for method, op in ops.items() if op.get("security")}
+    secured = {
+        (path, method) for path, ops in spec["paths"].items() for method, op in ops.items() if op.get("security")
+    }
     assert secured == {("/api/v1/params", "patch"), ("/api/v1/params/rollback/{version}", "post")}
     for path, ops in spec["paths"].items():
         for method, op in ops.items():

@@ -21,18 +21,33 @@ def installed(tmp_path_factory):
     """A fresh venv holding the wheel of this checkout; the dependencies come from the test's own
     environment through a path file (installing open3d and the rest again would take minutes)."""
     tmp = tmp_path_factory.mktemp("wheel")
-    build = subprocess.run([sys.executable, "-m", "pip", "wheel", "--no-deps", "-q", "-w", str(tmp / "dist"), str(REPO)],
-                           capture_output=True, text=True, check=False)
+    build = subprocess.run(
+        [sys.executable, "-m", "pip", "wheel", "--no-deps", "-q", "-w", str(tmp / "dist"), str(REPO)],
+        capture_output=True,
+        text=True,
+        check=False,
+    )
     assert build.returncode == 0, build.stderr
     (wheel,) = (tmp / "dist").glob("i2v_loc-*.whl")
     venv = tmp / "venv"
     subprocess.run([sys.executable, "-m", "venv", "--without-pip", str(venv)], check=True)
     python = venv / "bin" / "python"
-    site = Path(subprocess.run([str(python), "-c", "import sysconfig; print(sysconfig.get_paths()['purelib'])"],
-                               capture_output=True, text=True, check=True).stdout.strip())
+    site = Path(
+        subprocess.run(
+            [str(python), "-c", "import sysconfig; print(sysconfig.get_paths()['purelib'])"],
+            capture_output=True,
+            text=True,
+            check=True,
+        ).stdout.strip()
+    )
     env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "VIRTUAL_ENV")}
-    install = subprocess.run([sys.executable, "-m", "pip", "--python", str(python), "install", "--no-deps", "--no-index",
-                              "-q", str(wheel)], capture_output=True, text=True, env=env, check=False)
+    install = subprocess.run(
+        [sys.executable, "-m", "pip", "--python", str(python), "install", "--no-deps", "--no-index", "-q", str(wheel)],
+        capture_output=True,
+        text=True,
+        env=env,
+        check=False,
+    )
     assert install.returncode == 0, install.stderr
     # After the install (else pip finds the checkout's editable install there and installs nothing).
     (site / "dependencies.pth").write_text(sysconfig.get_paths()["purelib"] + "\n")
@@ -43,16 +58,26 @@ def installed(tmp_path_factory):
 
 def _run(installed, *args):
     venv, _, env, run_dir = installed
-    return subprocess.run([str(venv / "bin" / "i2v-loc"), *args], capture_output=True, text=True, env=env,
-                          cwd=run_dir, timeout=500, check=False)
+    return subprocess.run(
+        [str(venv / "bin" / "i2v-loc"), *args],
+        capture_output=True,
+        text=True,
+        env=env,
+        cwd=run_dir,
+        timeout=500,
+        check=False,
+    )
 
 
 def test_the_wheel_holds_the_samples_and_imports_from_the_venv(installed):
     venv, site, env, run_dir = installed
-    code = ("import i2v_loc, i2v_loc.resources as r; print(i2v_loc.__file__); print(r.samples_dir()); "
-            "print(sorted(p.name for p in r.suites_dir().glob('*.yaml')))")
-    done = subprocess.run([str(venv / "bin" / "python"), "-c", code], capture_output=True, text=True, env=env,
-                          cwd=run_dir, check=True)
+    code = (
+        "import i2v_loc, i2v_loc.resources as r; print(i2v_loc.__file__); print(r.samples_dir()); "
+        "print(sorted(p.name for p in r.suites_dir().glob('*.yaml')))"
+    )
+    done = subprocess.run(
+        [str(venv / "bin" / "python"), "-c", code], capture_output=True, text=True, env=env, cwd=run_dir, check=True
+    )
     module, samples, suites = done.stdout.splitlines()
     assert module.startswith(str(site)) and samples == str(site / "i2v_loc" / "samples")
     assert "paper.yaml" in suites

@@ -11,7 +11,6 @@ import schemathesis
 from hypothesis import HealthCheck, given, settings
 from hypothesis.errors import Unsatisfiable
 from schemathesis import GenerationMode
-
 from test_service_support import TOKEN, sample_recording, serve, wait_for
 
 pytestmark = pytest.mark.timeout(150)
@@ -29,8 +28,13 @@ def live_url(tmp_path_factory):
 
 def _no_server_errors(operation, mode: GenerationMode, base_url: str, seen: list) -> None:
     @given(case=operation.as_strategy(generation_mode=mode))
-    @settings(max_examples=EXAMPLES_PER_OPERATION, deadline=None, derandomize=True, database=None,
-              suppress_health_check=list(HealthCheck))
+    @settings(
+        max_examples=EXAMPLES_PER_OPERATION,
+        deadline=None,
+        derandomize=True,
+        database=None,
+        suppress_health_check=list(HealthCheck),
+    )
     def check(case):
         # With the token, so PATCH / POST reach validation instead of stopping at 401.
         response = case.call(base_url=base_url, headers={"Authorization": f"Bearer {TOKEN}"})

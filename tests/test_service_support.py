@@ -54,7 +54,7 @@ class LiveServer:
         self.server = uvicorn.Server(config)
         self.thread = threading.Thread(target=self.server.run, kwargs={"sockets": [self.sock]}, daemon=True)
 
-    def __enter__(self) -> "LiveServer":
+    def __enter__(self) -> LiveServer:
         self.thread.start()
         deadline = time.monotonic() + 20
         while not self.server.started:
@@ -69,8 +69,15 @@ class LiveServer:
         self.sock.close()
 
 
-def make_service(recording: Path, params_file: Path | None = None, token: str | None = TOKEN,
-                 require_token_for_reads: bool = False, loop: bool = True, allowed_origins: tuple = (), **kwargs):
+def make_service(
+    recording: Path,
+    params_file: Path | None = None,
+    token: str | None = TOKEN,
+    require_token_for_reads: bool = False,
+    loop: bool = True,
+    allowed_origins: tuple = (),
+    **kwargs,
+):
     """A service with the real pipeline replaying ``recording``."""
     source = ReplaySource(recording, loop=loop)
     existing = params_file if params_file is not None and params_file.is_file() else None

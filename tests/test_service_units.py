@@ -237,8 +237,10 @@ def _runner(pipeline, n_frames: int) -> PipelineRunner:
 
 
 def test_a_frame_failing_after_the_pipeline_is_skipped_and_the_thread_goes_on():
-    states = {2: {"vehicles": [{"id": 1, "note": object()}]},  # not JSON: fails when serialised
-              3: {"vehicles": [{"id": 1, "hitch_deg": np.array([np.nan, 2.5])}]}}  # numpy NaN: becomes null
+    states = {
+        2: {"vehicles": [{"id": 1, "note": object()}]},  # not JSON: fails when serialised
+        3: {"vehicles": [{"id": 1, "hitch_deg": np.array([np.nan, 2.5])}]},
+    }  # numpy NaN: becomes null
     runner = _runner(FakePipeline(Params(), states), n_frames=6)
     runner.start()
     try:
@@ -367,8 +369,10 @@ def test_sim_source_rejects_unknown_scenario_and_vehicle_before_simulating(tmp_p
 
 
 def test_status_line_names_the_method():
-    line = format_status({"method": "default", "frame_rate_hz": 9.8, "frame": 12, "frames_dropped": {"late": 2},
-                          "params_version": 1}, ws_clients=3)
+    line = format_status(
+        {"method": "default", "frame_rate_hz": 9.8, "frame": 12, "frames_dropped": {"late": 2}, "params_version": 1},
+        ws_clients=3,
+    )
     assert line.startswith("default |") and "9.8 fps" in line and "dropped 2" in line
 
 
@@ -457,15 +461,18 @@ def test_health_degrades_with_the_reason_when_frames_or_messages_are_dropped(tmp
         def process(self, frame):
             raise AssertionError("not called")
 
-    service = build_service(ReplaySource(rec, loop=True), Params(), pipeline_factory=lambda p, m: Nothing(), clock=clock)
+    service = build_service(
+        ReplaySource(rec, loop=True), Params(), pipeline_factory=lambda p, m: Nothing(), clock=clock
+    )
     runner = service.runner
     names = runner.expected_sensors
 
     def processed(n):
         for _ in range(n):
             clock.t += 0.1
-            scans = {name: SensorScan(name, clock.t, np.zeros((1, 3), np.float32), np.zeros(1, np.float32))
-                     for name in names}
+            scans = {
+                name: SensorScan(name, clock.t, np.zeros((1, 3), np.float32), np.zeros(1, np.float32)) for name in names
+            }
             runner._record(Frame(index=0, scans=scans), {"vehicles": []}, clock.t)
 
     processed(20)
@@ -473,7 +480,9 @@ def test_health_degrades_with_the_reason_when_frames_or_messages_are_dropped(tmp
     assert (health["status"], health["reasons"]) == ("ok", [])
     runner._drop("late", 5)  # 5 of the last 25 frames
     health = service.health()
-    assert health["status"] == "degraded" and health["reasons"] == ["20% of the last frames dropped (late or unreadable)"]
+    assert health["status"] == "degraded" and health["reasons"] == [
+        "20% of the last frames dropped (late or unreadable)"
+    ]
     processed(40)  # 5 of the last 65: below the threshold
     assert service.health()["status"] == "ok"
 
@@ -482,7 +491,9 @@ def test_health_degrades_with_the_reason_when_frames_or_messages_are_dropped(tmp
         service.hub._deliver(Message("state", f'{{"frame":{k}}}'))
     health = service.health()
     assert slow.dropped == 3
-    assert health["status"] == "degraded" and health["reasons"] == ["75% of the recent WebSocket messages dropped for slow clients"]
+    assert health["status"] == "degraded" and health["reasons"] == [
+        "75% of the recent WebSocket messages dropped for slow clients"
+    ]
 
 
 def test_unknown_keys_are_refused_before_the_model_is_validated(tmp_path, monkeypatch):

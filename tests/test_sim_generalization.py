@@ -27,10 +27,23 @@ UNKNOWN = SUITES_DIR / "vehicles_unknown.yaml"
 # A trailer with figures found nowhere else, so that their absence from the recording's files means something.
 ODD_VEHICLE = {
     "description": "test tractor with a 10.537 m semitrailer",
-    "truck": {"length_m": 2.61, "width_m": 2.513, "height_m": 2.9, "floor_m": 0.5, "wheelbase_m": 3.8,
-              "front_overhang_m": 1.4, "hitch_behind_rear_axle_m": -0.4},
-    "trailer": {"length_m": 10.537, "width_m": 2.513, "height_m": 2.7, "floor_m": 1.2, "hitch_to_axle_m": 6.3,
-                "hitch_to_front_m": 1.2},
+    "truck": {
+        "length_m": 2.61,
+        "width_m": 2.513,
+        "height_m": 2.9,
+        "floor_m": 0.5,
+        "wheelbase_m": 3.8,
+        "front_overhang_m": 1.4,
+        "hitch_behind_rear_axle_m": -0.4,
+    },
+    "trailer": {
+        "length_m": 10.537,
+        "width_m": 2.513,
+        "height_m": 2.7,
+        "floor_m": 1.2,
+        "hitch_to_axle_m": 6.3,
+        "hitch_to_front_m": 1.2,
+    },
     "vehicle_volume_tolerance_m3": 200.0,
     "trailer_volume_tolerance_m3": 40.0,
 }
@@ -48,15 +61,20 @@ def _points_in_box(points: np.ndarray, unit: dict, margin_m: float = 0.2) -> int
 
 def _yard_points(rec: Recording, k: int) -> dict[str, np.ndarray]:
     params = load_params(rec.sensors_file)
-    return {n: transform_points(extrinsics_matrix(params.sensor(n).extrinsics), s.points.astype(float))
-            for n, s in rec.frame(k).scans.items()}
+    return {
+        n: transform_points(extrinsics_matrix(params.sensor(n).extrinsics), s.points.astype(float))
+        for n, s in rec.frame(k).scans.items()
+    }
 
 
 # --------------------------------------------------------------------------- --vehicles-file
 
 
 def test_vehicles_file_is_validated_with_the_parameter_model(tmp_path):
-    bad = _write(tmp_path / "bad.yaml", {"vehicles": {"long": {**ODD_VEHICLE, "trailer": {**ODD_VEHICLE["trailer"], "length_m": 30.0}}}})
+    bad = _write(
+        tmp_path / "bad.yaml",
+        {"vehicles": {"long": {**ODD_VEHICLE, "trailer": {**ODD_VEHICLE["trailer"], "length_m": 30.0}}}},
+    )
     with pytest.raises(ParamsError, match=r"bad\.yaml: vehicles\.long\.trailer\.length_m = 30\.0.*<= 25"):
         load_vehicles_file(bad)
     typo = _write(tmp_path / "typo.yaml", {"vehicles": {"long": {**ODD_VEHICLE, "trailer_length": 3.0}}})
@@ -68,11 +86,17 @@ def test_vehicles_file_is_validated_with_the_parameter_model(tmp_path):
     clash = _write(tmp_path / "clash.yaml", {"vehicles": {"man_tgx": ODD_VEHICLE}})
     with pytest.raises(ParamsError, match="vehicles.man_tgx is a configured vehicle"):
         load_vehicles_file(clash, known=Params().vehicles)
-    assert load_vehicles_file(_write(tmp_path / "ok.yaml", {"vehicles": {"long": ODD_VEHICLE}}))["long"].trailer.length_m == 10.537
+    assert (
+        load_vehicles_file(_write(tmp_path / "ok.yaml", {"vehicles": {"long": ODD_VEHICLE}}))["long"].trailer.length_m
+        == 10.537
+    )
 
 
 def test_command_refuses_a_bad_vehicles_file_with_one_line(tmp_path, capsys):
-    bad = _write(tmp_path / "bad.yaml", {"vehicles": {"long": {**ODD_VEHICLE, "truck": {**ODD_VEHICLE["truck"], "width_m": -1.0}}}})
+    bad = _write(
+        tmp_path / "bad.yaml",
+        {"vehicles": {"long": {**ODD_VEHICLE, "truck": {**ODD_VEHICLE["truck"], "width_m": -1.0}}}},
+    )
     assert main(["sim", "--vehicles-file", str(bad), "--vehicle", "long", "--out", str(tmp_path / "x")]) == 2
     err = capsys.readouterr().err
     assert "bad.yaml: vehicles.long.truck.width_m = -1.0" in err
@@ -82,8 +106,31 @@ def test_command_refuses_a_bad_vehicles_file_with_one_line(tmp_path, capsys):
 def test_vehicles_file_round_trip_names_unknown_and_hides_the_dimensions(tmp_path):
     vehicles_file = _write(tmp_path / "vehicles.yaml", {"vehicles": {"trailer_10m5": ODD_VEHICLE}})
     out = tmp_path / "rec"
-    assert main(["sim", "--vehicles-file", str(vehicles_file), "--vehicle", "trailer_10m5", "--scenario", "straight",
-                 "--seed", "5", "--start", "3", "--duration", "0.3", "--columns", "512", "--out", str(out), "--preview"]) == 0
+    assert (
+        main(
+            [
+                "sim",
+                "--vehicles-file",
+                str(vehicles_file),
+                "--vehicle",
+                "trailer_10m5",
+                "--scenario",
+                "straight",
+                "--seed",
+                "5",
+                "--start",
+                "3",
+                "--duration",
+                "0.3",
+                "--columns",
+                "512",
+                "--out",
+                str(out),
+                "--preview",
+            ]
+        )
+        == 0
+    )
     assert (out / "preview.png").stat().st_size > 10_000  # --preview without a file: preview.png in the recording
     rec = Recording(out)
     gt = rec.ground_truth()
@@ -111,12 +158,27 @@ def _unit(center, yaw_deg, dims):
 def test_evaluation_matches_an_unknown_vehicle_with_a_reported_vehicle_of_any_type():
     """Association is by position only: an unknown_* truth pairs with whatever type the pipeline
     reports; the DCAP errors need the vehicle's geometry and stay NaN."""
-    gt = {"id": 1, "vehicle": "unknown_trailer_10m5", "maneuver": "straight", "hitch_deg": 0.0,
-          "truck": _unit([10.0, 5.0, 1.95], 0.0, [2.6, 2.55, 2.9]), "trailer": _unit([2.4, 5.0, 2.55], 0.0, [10.5, 2.55, 2.7])}
-    est = {"id": 7, "vehicle": "man_tgx", "truck": _unit([10.3, 5.1, 1.9], 1.0, [2.77, 2.77, 2.86]),
-           "trailer": _unit([2.0, 5.2, 2.5], -1.0, [13.68, 2.77, 2.55])}
+    gt = {
+        "id": 1,
+        "vehicle": "unknown_trailer_10m5",
+        "maneuver": "straight",
+        "hitch_deg": 0.0,
+        "truck": _unit([10.0, 5.0, 1.95], 0.0, [2.6, 2.55, 2.9]),
+        "trailer": _unit([2.4, 5.0, 2.55], 0.0, [10.5, 2.55, 2.7]),
+    }
+    est = {
+        "id": 7,
+        "vehicle": "man_tgx",
+        "truck": _unit([10.3, 5.1, 1.9], 1.0, [2.77, 2.77, 2.86]),
+        "trailer": _unit([2.0, 5.2, 2.5], -1.0, [13.68, 2.77, 2.55]),
+    }
     (rec,) = match_frame({"frame": 0, "stamp_s": 0.0, "vehicles": [est]}, {"vehicles": [gt]}, Params(), gate_m=5.0)
-    assert (rec["kind"], rec["vehicle"], rec["est_vehicle"], rec["est_id"]) == ("gt", "unknown_trailer_10m5", "man_tgx", 7)
+    assert (rec["kind"], rec["vehicle"], rec["est_vehicle"], rec["est_id"]) == (
+        "gt",
+        "unknown_trailer_10m5",
+        "man_tgx",
+        7,
+    )
     assert rec["truck_pos_err_m"] == pytest.approx(math.hypot(0.3, 0.1))
     assert rec["trailer_pos_err_m"] == pytest.approx(math.hypot(0.4, 0.2))
     assert math.isnan(rec["dcap_dT_m"])
@@ -128,7 +190,9 @@ def test_evaluation_matches_an_unknown_vehicle_with_a_reported_vehicle_of_any_ty
 def test_one_side_layout_is_new_and_tilted_towards_the_field():
     params = load_params(LAYOUT)
     assert [s.name for s in params.sensors] == ["s1", "s2", "s3"]
-    assert all(s.extrinsics.z_m == 6.0 and s.extrinsics.y_m == 22.0 and s.extrinsics.pitch_deg == 10.0 for s in params.sensors)
+    assert all(
+        s.extrinsics.z_m == 6.0 and s.extrinsics.y_m == 22.0 and s.extrinsics.pitch_deg == 10.0 for s in params.sensors
+    )
     for path in (SUITES_DIR.parents[1] / "params").glob("*.yaml"):
         other = yaml.safe_load(path.read_text()).get("sensors")
         assert not other or [s["extrinsics"] for s in other] != [s.extrinsics.model_dump() for s in params.sensors]
@@ -137,7 +201,10 @@ def test_one_side_layout_is_new_and_tilted_towards_the_field():
         forward = t[:3, 0]
         to_centre = np.array([0.0, 6.0]) - t[:2, 3]
         assert forward[2] == pytest.approx(-math.sin(math.radians(10.0)))
-        assert math.degrees(math.acos(forward[:2] @ to_centre / np.linalg.norm(forward[:2]) / np.linalg.norm(to_centre))) < 0.01
+        assert (
+            math.degrees(math.acos(forward[:2] @ to_centre / np.linalg.norm(forward[:2]) / np.linalg.norm(to_centre)))
+            < 0.01
+        )
 
 
 @pytest.fixture(scope="module")
@@ -174,7 +241,9 @@ def test_one_side_sensors_each_see_the_vehicle_and_the_ground_from_10_m(suite_re
         # The lowest beam (-20.5 deg on an OS1-32, uniform), tilted 10 deg down, meets the ground
         # 6 m / tan(30.5 deg) = 10.2 m away.
         lowest_deg = -float(model_beam_table("OS1-32", 1024).altitude_deg[-1]) + 10.0
-        assert np.hypot(ahead[ground, 0], ahead[ground, 1]).min() == pytest.approx(6.0 / math.tan(math.radians(lowest_deg)), abs=0.4)
+        assert np.hypot(ahead[ground, 0], ahead[ground, 1]).min() == pytest.approx(
+            6.0 / math.tan(math.radians(lowest_deg)), abs=0.4
+        )
 
 
 # --------------------------------------------------------------------------- the suite
@@ -189,7 +258,9 @@ def test_generalization_suite_parses_and_every_case_is_valid():
     assert not {e["seed"] for e in entries} & paper_seeds
     assert all(20.0 <= c["duration_s"] <= 30.0 for _, c, _ in cases)
     known = Params().vehicles
-    unknown_lengths = sorted({v.trailer.length_m for _, c, _ in cases for n, v in c["extra_vehicles"].items() if n in c["vehicles"]})
+    unknown_lengths = sorted(
+        {v.trailer.length_m for _, c, _ in cases for n, v in c["extra_vehicles"].items() if n in c["vehicles"]}
+    )
     assert unknown_lengths[0] >= 6.0 and unknown_lengths[-1] <= 16.0 and len(unknown_lengths) >= 4
     assert not set(unknown_lengths) & {v.trailer.length_m for v in known.values()}
     assert any(len(c["vehicles"]) == 2 and c.get("clutter_near") for _, c, _ in cases)
@@ -211,8 +282,10 @@ def test_suite_refuses_unknown_keys_and_vehicles(tmp_path, capsys):
     steep = _write(tmp_path / "steep.yaml", {"recordings": [{"scenario": "straight", "slope_deg": 12.0}]})
     assert main(["sim", "--suite", str(steep), "--out", str(tmp_path / "o")]) == 2
     assert "entry 0: slope_deg must be within ±10 degrees, got 12.0" in capsys.readouterr().err
-    late = _write(tmp_path / "late.yaml", {"recordings": [{"scenario": "straight", "duration_s": 0.2, "columns": 512},
-                                                          {"scenario": "parking"}]})
+    late = _write(
+        tmp_path / "late.yaml",
+        {"recordings": [{"scenario": "straight", "duration_s": 0.2, "columns": 512}, {"scenario": "parking"}]},
+    )
     assert main(["sim", "--suite", str(late), "--out", str(tmp_path / "o")]) == 2
     assert "entry 1: unknown scenario 'parking'" in capsys.readouterr().err
     assert not (tmp_path / "o").exists()  # checked before anything is generated
@@ -223,10 +296,14 @@ def test_two_vehicles_with_clutter_beside_them_and_no_collision(suite_recordings
     gt = rec.ground_truth()
     assert [v["vehicle"] for v in gt[0]["vehicles"]] == entry["vehicles"]
     static = [o for o in rec.meta["static_objects"] if o["kind"] in ("container", "parked_trailer")]
-    assert sum(o["kind"] == "parked_trailer" for o in static) == 2 and sum(o["kind"] == "container" for o in static) == 3
+    assert (
+        sum(o["kind"] == "parked_trailer" for o in static) == 2 and sum(o["kind"] == "container" for o in static) == 3
+    )
     # Vehicle boxes over the clip never come within 1.5 m of a container or parked trailer.
     units = [u for line in gt for v in line["vehicles"] for u in (v["truck"], v["trailer"])]
-    boxes = np.vstack([footprint_points(u["center"][:2], *u["dimensions"][:2], math.radians(u["yaw_deg"]), 0.25) for u in units])
+    boxes = np.vstack(
+        [footprint_points(u["center"][:2], *u["dimensions"][:2], math.radians(u["yaw_deg"]), 0.25) for u in units]
+    )
     length = {"container": CONTAINER_SIZE_M[0], "parked_trailer": Params().vehicles["man_tgx"].trailer.length_m}
     for o in static:
         pts = footprint_points(o["center"], length[o["kind"]], 2.8, math.radians(o["yaw_deg"]), 0.25)
@@ -235,11 +312,18 @@ def test_two_vehicles_with_clutter_beside_them_and_no_collision(suite_recordings
 
 def test_clutter_near_puts_containers_and_parked_trailers_beside_the_swept_area():
     def gaps(near: bool) -> list[float]:
-        sim = build_simulation(SimConfig(vehicles=["man_tgx", "volvo_fh"], scenario="straight", seed=209, duration_s=25.0, clutter_near=near))
+        sim = build_simulation(
+            SimConfig(
+                vehicles=["man_tgx", "volvo_fh"], scenario="straight", seed=209, duration_s=25.0, clutter_near=near
+            )
+        )
         swept = cKDTree(np.vstack([v.footprint() for v in sim.vehicles]))
         size = {"container": CONTAINER_SIZE_M[:2], "parked_trailer": (13.68, 2.77)}
-        return [float(swept.query(footprint_points(o["center"], *size[o["kind"]], math.radians(o["yaw_deg"])))[0].min())
-                for o in sim.yard.static_objects if o["kind"] in size]
+        return [
+            float(swept.query(footprint_points(o["center"], *size[o["kind"]], math.radians(o["yaw_deg"])))[0].min())
+            for o in sim.yard.static_objects
+            if o["kind"] in size
+        ]
 
     near, spread = gaps(True), gaps(False)
     assert len(near) == 5
@@ -265,4 +349,6 @@ def test_unknown_case_ground_truth_and_recording(suite_recordings):
     assert v["trailer"]["dimensions"][0] == extra[entry["vehicle"]].trailer.length_m
     assert v["trailer"]["points"] > 100
     assert set(load_params(rec.sensors_file).vehicles) == set(Params().vehicles)
-    assert json.loads((rec.path / "ground_truth.jsonl").read_text().splitlines()[0])["vehicles"][0]["vehicle"].startswith("unknown_")
+    assert json.loads((rec.path / "ground_truth.jsonl").read_text().splitlines()[0])["vehicles"][0][
+        "vehicle"
+    ].startswith("unknown_")

@@ -40,8 +40,12 @@ def test_ground_truth_boxes_contain_the_points_counted_for_them(recording):
     params = load_params(recording.sensors_file)
     k = 5
     frame, gt = recording.frame(k), recording.ground_truth()[k]
-    pts = np.vstack([transform_points(extrinsics_matrix(params.sensor(n).extrinsics), s.points.astype(float))
-                     for n, s in frame.scans.items()])
+    pts = np.vstack(
+        [
+            transform_points(extrinsics_matrix(params.sensor(n).extrinsics), s.points.astype(float))
+            for n, s in frame.scans.items()
+        ]
+    )
     v = gt["vehicles"][0]
     for unit, dims in (("truck", v["truck"]), ("trailer", v["trailer"])):
         local = transform_points(np.linalg.inv(pose_matrix(*dims["center"], 0, 0, dims["yaw_deg"])), pts)
@@ -49,7 +53,9 @@ def test_ground_truth_boxes_contain_the_points_counted_for_them(recording):
         assert dims["points"] > 100, unit
         # Wheels, rails and legs lie outside the Table-1 box: most, not all, counted points are inside.
         assert 0.7 * dims["points"] <= inside <= 1.1 * dims["points"], unit
-        assert dims["center"][2] == pytest.approx(dims["dimensions"][2] / 2 + (1.2 if unit == "trailer" else 0.45), abs=0.01)
+        assert dims["center"][2] == pytest.approx(
+            dims["dimensions"][2] / 2 + (1.2 if unit == "trailer" else 0.45), abs=0.01
+        )
 
 
 def test_sweep_timing_phase_and_clock_offset(recording):
@@ -85,7 +91,9 @@ def test_sensors_guess_perturbs_all_but_the_reference(recording):
     for name in ("l2", "l3", "l4"):
         t, g = true.sensor(name).extrinsics, guess.sensor(name).extrinsics
         np.testing.assert_allclose(np.abs([g.x_m - t.x_m, g.y_m - t.y_m, g.z_m - t.z_m]), 0.3, atol=1e-9)
-        np.testing.assert_allclose(np.abs([g.roll_deg - t.roll_deg, g.pitch_deg - t.pitch_deg, g.yaw_deg - t.yaw_deg]), 2.0, atol=1e-9)
+        np.testing.assert_allclose(
+            np.abs([g.roll_deg - t.roll_deg, g.pitch_deg - t.pitch_deg, g.yaw_deg - t.yaw_deg]), 2.0, atol=1e-9
+        )
 
 
 def test_openlabel_has_truck_and_trailer_cuboids(recording):
@@ -98,7 +106,10 @@ def test_openlabel_has_truck_and_trailer_cuboids(recording):
         val = obj["object_data"]["cuboid"]["val"]
         assert len(val) == 10
         yaw = math.degrees(2 * math.atan2(val[5], val[6]))
-        assert any(np.allclose(val[:3], gt[u]["center"]) and abs(wrap_deg(yaw - gt[u]["yaw_deg"])) < 1e-3 for u in ("truck", "trailer"))
+        assert any(
+            np.allclose(val[:3], gt[u]["center"]) and abs(wrap_deg(yaw - gt[u]["yaw_deg"])) < 1e-3
+            for u in ("truck", "trailer")
+        )
 
 
 def test_same_seed_gives_identical_arrays_and_other_seed_differs():
@@ -114,7 +125,9 @@ def test_same_seed_gives_identical_arrays_and_other_seed_differs():
 
 
 def test_two_vehicles_do_not_overlap():
-    _, _, gt = simulate(SimConfig(vehicles=["man_tgx", "volvo_fh"], scenario="straight", seed=1, duration_s=0.2, columns=512))
+    _, _, gt = simulate(
+        SimConfig(vehicles=["man_tgx", "volvo_fh"], scenario="straight", seed=1, duration_s=0.2, columns=512)
+    )
     a, b = gt[0]["vehicles"]
     assert (a["vehicle"], b["vehicle"]) == ("man_tgx", "volvo_fh")
     assert math.dist(a["trailer"]["center"][:2], b["trailer"]["center"][:2]) > 4.0
@@ -122,8 +135,25 @@ def test_two_vehicles_do_not_overlap():
 
 def test_command_writes_recording_and_preview(tmp_path, capsys):
     out = tmp_path / "rec"
-    code = main(["sim", "--vehicle", "volvo_fh", "--scenario", "u_turn", "--seed", "2", "--duration", "0.3",
-                 "--columns", "512", "--out", str(out), "--preview", str(out / "preview.png")])
+    code = main(
+        [
+            "sim",
+            "--vehicle",
+            "volvo_fh",
+            "--scenario",
+            "u_turn",
+            "--seed",
+            "2",
+            "--duration",
+            "0.3",
+            "--columns",
+            "512",
+            "--out",
+            str(out),
+            "--preview",
+            str(out / "preview.png"),
+        ]
+    )
     assert code == 0
     rec = Recording(out)
     assert len(rec) == 3 and rec.meta["scenario"] == "u_turn" and rec.meta["sensors"][0]["columns"] == 512

@@ -74,7 +74,9 @@ def test_range_noise_grows_with_range_and_darkness():
     for surface, distance_m in (("white_paint", 10.0), ("white_paint", 50.0), ("dark_paint", 30.0)):
         errors, truth = _surface_returns(surface, distance_m, seed=5)
         returned = np.isfinite(errors)
-        sigma = model.noise_sigma_m(model.signal(truth[returned], m.REFLECTIVITY[surface], distance_m / truth[returned]))
+        sigma = model.noise_sigma_m(
+            model.signal(truth[returned], m.REFLECTIVITY[surface], distance_m / truth[returned])
+        )
         normalized = errors[returned] / sigma
         assert abs(normalized.mean()) < 0.1 and 0.9 < normalized.std() < 1.1
         spreads[(surface, distance_m)] = float(np.median(sigma))
@@ -116,5 +118,3 @@ def test_column_timestamps_span_one_sweep():
     assert t[0] == 0 and np.all(np.diff(t) > 0)
     assert t[-1] == pytest.approx(100e6 * 1023 / 1024, abs=1)
     assert _lidar(columns=2048).column_time_ns[-1] < 100_000_000
-
-

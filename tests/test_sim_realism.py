@@ -3,8 +3,8 @@
 import json
 
 import pytest
-
 from conftest import REALDATA
+
 from i2v_loc.cli import main
 
 FRAMES = ["1646667315_454719936", "1646667310_053239541"]
@@ -30,7 +30,9 @@ def test_simulated_point_counts_match_the_real_frame(frame, tmp_path, capsys):
 
 def test_a_cloud_without_rings_is_refused_with_one_line(tmp_path, capsys):
     cloud = tmp_path / "plain.pcd"
-    cloud.write_text("VERSION 0.7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\nWIDTH 1\nHEIGHT 1\n"
-                     "VIEWPOINT 0 0 0 1 0 0 0\nPOINTS 1\nDATA ascii\n1 2 3\n")
+    cloud.write_text(
+        "VERSION 0.7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\nWIDTH 1\nHEIGHT 1\n"
+        "VIEWPOINT 0 0 0 1 0 0 0\nPOINTS 1\nDATA ascii\n1 2 3\n"
+    )
     assert main(["realism", str(cloud), str(tmp_path / "labels.json")]) == 2
     assert "needs fields x y z ring" in capsys.readouterr().err

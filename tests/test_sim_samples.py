@@ -37,10 +37,18 @@ def test_paper_suite_covers_every_vehicle_and_maneuver_for_30_s():
 
 def test_suite_command_writes_one_recording_per_entry(tmp_path):
     suite = tmp_path / "mini.yaml"
-    suite.write_text(yaml.safe_dump({"recordings": [
-        {"vehicle": "twizy", "scenario": "straight", "seed": 1, "duration_s": 0.2, "columns": 512},
-        {"vehicle": "volvo_fh", "scenario": "standstill", "seed": 2, "duration_s": 0.2, "columns": 512},
-    ]}))
+    suite.write_text(
+        yaml.safe_dump(
+            {
+                "recordings": [
+                    {"vehicle": "twizy", "scenario": "straight", "seed": 1, "duration_s": 0.2, "columns": 512},
+                    {"vehicle": "volvo_fh", "scenario": "standstill", "seed": 2, "duration_s": 0.2, "columns": 512},
+                ]
+            }
+        )
+    )
     assert main(["sim", "--suite", str(suite), "--out", str(tmp_path / "out")]) == 0
     assert len(Recording(tmp_path / "out" / "twizy_straight")) == 2
-    assert Recording(tmp_path / "out" / "volvo_fh_standstill").ground_truth()[0]["vehicles"][0]["maneuver"] == "standstill"
+    assert (
+        Recording(tmp_path / "out" / "volvo_fh_standstill").ground_truth()[0]["vehicles"][0]["maneuver"] == "standstill"
+    )

@@ -2,12 +2,16 @@
 
 import numpy as np
 import pytest
-
 from conftest import REALDATA
+
 from i2v_loc.params import SensorConfig
 from i2v_loc.sim.lidar import LidarModel
 from i2v_loc.sim.sensor_model import (
-    OS1_CHANNEL_PITCH_DEG, SensorModelError, metadata_beam_table, model_beam_table, os1_channels,
+    OS1_CHANNEL_PITCH_DEG,
+    SensorModelError,
+    metadata_beam_table,
+    model_beam_table,
+    os1_channels,
 )
 
 TUMTRAF = REALDATA / "tumtraf_s110_south" / "1646667315_454719936_s110_lidar_ouster_south"

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from i2v_loc.params import BackgroundParams, ParamsError, Params, RegionParams
+from i2v_loc.params import BackgroundParams, Params, ParamsError, RegionParams
 from i2v_loc.pipeline import Pipeline
 from i2v_loc.stages.background import BackgroundMap, ProtectedBox
 
@@ -42,7 +42,7 @@ def test_static_box_disappears_once_learned_and_a_new_object_is_foreground():
     assert results[-1].foreground.sum() == 0
     newcomer = solid_box((-4.0, 5.0))
     fg = bg.process(np.vstack([scene, newcomer]).astype(np.float32)).foreground
-    assert fg[: n_ground + len(box)].sum() == 0 and fg[n_ground + len(box):].all()
+    assert fg[: n_ground + len(box)].sum() == 0 and fg[n_ground + len(box) :].all()
 
 
 def test_points_outside_the_region_are_neither_region_nor_foreground():
@@ -89,9 +89,9 @@ def test_occluded_background_is_kept_until_unseen_for_the_whole_window():
     wall = solid_box((5.0, 0.0), size=(0.4, 6.0, 3.0))
     run(bg, [np.vstack([ground(), wall])] * 10)
     hidden = run(bg, [ground()] * 9)  # the wall hidden for 9 of the 10 samples of the window
-    assert bg.process(np.vstack([ground(), wall]).astype(np.float32)).foreground[len(ground()):].sum() == 0
+    assert bg.process(np.vstack([ground(), wall]).astype(np.float32)).foreground[len(ground()) :].sum() == 0
     run(bg, [ground()] * 12)  # unseen for a whole window: forgotten
-    assert bg.process(np.vstack([ground(), wall]).astype(np.float32)).foreground[len(ground()):].all()
+    assert bg.process(np.vstack([ground(), wall]).astype(np.float32)).foreground[len(ground()) :].all()
     assert len(hidden) == 9
 
 
@@ -128,6 +128,7 @@ def test_a_huge_or_infinite_region_is_refused_with_a_value_error(x_max_m):
     of 1e30 m; it is a ValueError naming the fix, like any too-large grid."""
     from i2v_loc.params import BackgroundParams, RegionParams
     from i2v_loc.stages.background import check_grid
+
     region = RegionParams.model_construct(**{**RegionParams().model_dump(), "x_max_m": x_max_m})
     with pytest.raises(ValueError, match="max_voxels"):
         check_grid(BackgroundParams(), region)

@@ -48,19 +48,25 @@ def articulated_points(v: VehicleConfig, rear_axle_xy=(0.0, 0.0), truck_yaw_deg=
     cab_rear = tc - fwd * v.truck.length_m / 2
     hitch = np.asarray(rear_axle_xy) - fwd * v.truck.hitch_behind_rear_axle_m
     rail_len = float(np.hypot(*(cab_rear - hitch)))
-    rails = place(box_surface(rail_len, 0.9, 0.2, spacing), *((cab_rear + hitch) / 2), ty, 0.1 if v.trailer.floor_m < 0.6 else 0.7)
+    rails = place(
+        box_surface(rail_len, 0.9, 0.2, spacing), *((cab_rear + hitch) / 2), ty, 0.1 if v.trailer.floor_m < 0.6 else 0.7
+    )
     rails = rails[rails[:, 2] < v.trailer.floor_m]
-    trailer = place(box_surface(v.trailer.length_m, v.trailer.width_m, v.trailer.height_m, spacing), *rc, ry, v.trailer.floor_m)
+    trailer = place(
+        box_surface(v.trailer.length_m, v.trailer.width_m, v.trailer.height_m, spacing), *rc, ry, v.trailer.floor_m
+    )
     return np.vstack([truck, rails]), trailer
 
 
 def min_dist(a, b):
     from scipy.spatial import cKDTree
+
     return cKDTree(b).query(a)[0]
 
 
-@pytest.mark.parametrize("name, hitch_deg", [("man_tgx", 0.0), ("man_tgx", 10.0), ("volvo_fh", 0.0),
-                                             ("volvo_fh", -30.0), ("twizy", 25.0)])
+@pytest.mark.parametrize(
+    "name, hitch_deg", [("man_tgx", 0.0), ("man_tgx", 10.0), ("volvo_fh", 0.0), ("volvo_fh", -30.0), ("twizy", 25.0)]
+)
 def test_trailer_and_truck_are_separated(name, hitch_deg):
     params = Params()
     truck, trailer = articulated_points(params.vehicles[name], (3.0, 4.0), 40.0, hitch_deg)
@@ -78,10 +84,15 @@ def test_no_trailer_in_gate_means_no_vehicle():
     params = Params()
     v = params.vehicles["volvo_fh"]
     lone_trailer_sized_box = box_surface(2.0, 2.0, 2.0)  # 8 m3, far below the trailer gate
-    result = TruckTrailerClassifier(params.classification, params.vehicles).process(lone_trailer_sized_box, ["volvo_fh"])
+    result = TruckTrailerClassifier(params.classification, params.vehicles).process(
+        lone_trailer_sized_box, ["volvo_fh"]
+    )
     assert result.vehicle is None and result.truck is None and result.trailer is None
     just_a_trailer = box_surface(v.trailer.length_m, v.trailer.width_m, v.trailer.height_m) + [0, 0, v.trailer.floor_m]
-    assert TruckTrailerClassifier(params.classification, params.vehicles).process(just_a_trailer, ["volvo_fh"]).vehicle is None
+    assert (
+        TruckTrailerClassifier(params.classification, params.vehicles).process(just_a_trailer, ["volvo_fh"]).vehicle
+        is None
+    )
     assert v.trailer.volume_m3 - v.trailer_volume_tolerance_m3 > 8
 
 
@@ -103,7 +114,9 @@ def test_far_trailer_wall_apart_from_the_seen_part_joins_the_trailer_with_comple
     length, width, height = v.trailer.length_m, v.trailer.width_m, v.trailer.height_m
     u, z = np.arange(-length / 2, length / 2, 0.1), np.arange(0.0, height, 0.2)
     near_wall = np.array(np.meshgrid(u, [width / 2], z, indexing="ij")).reshape(3, -1).T
-    roof_strip = np.array(np.meshgrid(u, np.arange(width / 2 - 1.6, width / 2, 0.1), [height], indexing="ij")).reshape(3, -1).T
+    roof_strip = (
+        np.array(np.meshgrid(u, np.arange(width / 2 - 1.6, width / 2, 0.1), [height], indexing="ij")).reshape(3, -1).T
+    )
     far_wall = np.array(np.meshgrid(u, [-width / 2], z, indexing="ij")).reshape(3, -1).T  # on the cab's side
     seen = place(np.vstack([near_wall, roof_strip]), *rc, ry, v.trailer.floor_m)
     far = place(far_wall, *rc, ry, v.trailer.floor_m)
@@ -111,8 +124,9 @@ def test_far_trailer_wall_apart_from_the_seen_part_joins_the_trailer_with_comple
     cab = truck[truck[:, 2] > v.trailer.floor_m]
     plain = TruckTrailerClassifier(params.classification, params.vehicles).process(cluster, ["man_tgx"])
     assert plain.vehicle == "man_tgx" and min_dist(far, plain.truck).min() == 0.0  # part of the far wall is "truck"
-    complete = TruckTrailerClassifier(params.classification.model_copy(update={"complete_width": True}),
-                                      params.vehicles).process(cluster, ["man_tgx"])
+    complete = TruckTrailerClassifier(
+        params.classification.model_copy(update={"complete_width": True}), params.vehicles
+    ).process(cluster, ["man_tgx"])
     assert complete.vehicle == "man_tgx"
     assert min_dist(far, complete.trailer).max() == 0.0  # the whole far wall is trailer
     # the cab, but for its corner inside the widened footprint, is the truck
@@ -133,7 +147,9 @@ def test_a_car_is_no_twizy_when_the_trailer_must_reach_its_height():
     car = place(np.vstack([body, bumpers]), 5.0, 2.0, 30.0, 0.0)
     plain = TruckTrailerClassifier(params.classification, params.vehicles)
     assert plain.process(car, ["twizy"]).vehicle == "twizy"  # what happened on the docking loop
-    strict = TruckTrailerClassifier(params.classification.model_copy(update={"min_height_fraction": 0.6}), params.vehicles)
+    strict = TruckTrailerClassifier(
+        params.classification.model_copy(update={"min_height_fraction": 0.6}), params.vehicles
+    )
     assert strict.process(car, ["twizy"]).vehicle is None
     truck, trailer = articulated_points(params.vehicles["twizy"], (3.0, 4.0), 40.0, 20.0)
     assert strict.process(np.vstack([truck, trailer]), ["twizy"]).vehicle == "twizy"

@@ -2,11 +2,10 @@
 
 import numpy as np
 import pytest
-
-from i2v_loc.stages.articulation import centre_to_hitch_m, max_box_volume_m3
 from test_stage_classification import articulated_points
 
 from i2v_loc.params import ClusteringParams, Params
+from i2v_loc.stages.articulation import centre_to_hitch_m, max_box_volume_m3
 from i2v_loc.stages.clustering import Clustering
 from i2v_loc.stages.primitives import euclidean_labels, min_area_rect, oriented_box_volume
 

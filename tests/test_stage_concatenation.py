@@ -34,8 +34,9 @@ def test_voxel_centroids_average_the_points_of_each_voxel():
 def test_sweeps_outside_the_tolerance_are_dropped_and_the_reference_is_the_earliest_in_sync():
     sensors = SENSORS + [SensorConfig(name="c", time_offset_s=-0.5)]
     stage = Concatenation(ConcatenationParams(voxel_size_m=0, sync_tolerance_s=0.05), sensors)
-    result = stage.process({"a": scan("a", 2.02, [[5, 0, -4]]), "b": scan("b", 2.0, [[3, 2, -3]]),
-                            "c": scan("c", 2.6, [[1, 1, 1]])})  # c on the common clock: 2.1
+    result = stage.process(
+        {"a": scan("a", 2.02, [[5, 0, -4]]), "b": scan("b", 2.0, [[3, 2, -3]]), "c": scan("c", 2.6, [[1, 1, 1]])}
+    )  # c on the common clock: 2.1
     assert result.faults == {"c": "out_of_sync"}
     assert result.dropped["out_of_sync"] == 1
     assert result.stamp_s == pytest.approx(2.0)
@@ -46,7 +47,9 @@ def test_missing_empty_and_nan_are_counted_not_raised():
     sensors = SENSORS + [SensorConfig(name="c")]
     stage = Concatenation(ConcatenationParams(voxel_size_m=0), sensors)
     bad = [[np.nan, 0, 0], [np.inf, 1, 1], [3, 0, 0]]
-    result = stage.process({"a": scan("a", 1.0, np.zeros((0, 3))), "b": scan("b", 1.0, bad), "x": scan("x", 1.0, [[1, 1, 1]])})
+    result = stage.process(
+        {"a": scan("a", 1.0, np.zeros((0, 3))), "b": scan("b", 1.0, bad), "x": scan("x", 1.0, [[1, 1, 1]])}
+    )
     assert result.faults == {"a": "empty", "b": "nan_points", "c": "missing", "x": "unknown_sensor"}
     assert result.dropped == {"out_of_sync": 0, "empty": 1, "missing": 1, "nan_points": 2}
     assert result.points.tolist() == [[3.0, 0.0, 4.0]]

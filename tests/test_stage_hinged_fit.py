@@ -6,8 +6,8 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-
 from hinged_points import vehicle_points
+
 from i2v_loc.params import Params
 from i2v_loc.stages.hinged_fit import Prior, fit
 from i2v_loc.stages.vehicle_model import VehicleModel
@@ -85,7 +85,9 @@ def test_foreign_points_are_not_explained_and_do_not_move_the_fit():
 
 def test_hidden_trailer_leaves_the_hitch_at_the_prior_and_says_so():
     model = volvo()
-    points = vehicle_points(model, *TRUTH, 0.3, sensors=SENSORS, drop=tuple((1, f) for f in ("front", "rear", "left", "right", "roof")))
+    points = vehicle_points(
+        model, *TRUTH, 0.3, sensors=SENSORS, drop=tuple((1, f) for f in ("front", "rear", "left", "right", "roof"))
+    )
     m = fit(points, Prior(*TRUTH, 0.2, model), PARAMS.articulated)
     assert abs(m.hitch_rad - 0.2) < np.radians(1.0)  # not measured: kept at the prior
     assert np.degrees(np.sqrt(m.covariance[3, 3])) > 10.0  # and its sigma says so
@@ -108,7 +110,9 @@ def test_analytic_jacobian_matches_finite_differences():
     for k in range(4):
         step = np.zeros(4)
         step[k] = eps
-        numeric = (faces(v + step, points[:, :2], z, model, 0.25, 1.0).residual
-                   - faces(v - step, points[:, :2], z, model, 0.25, 1.0).residual) / (2 * eps)
+        numeric = (
+            faces(v + step, points[:, :2], z, model, 0.25, 1.0).residual
+            - faces(v - step, points[:, :2], z, model, 0.25, 1.0).residual
+        ) / (2 * eps)
         same_face = np.abs(numeric) < 1e3  # a point switching faces inside the step has no derivative
         np.testing.assert_allclose(at.jacobian[same_face, k], numeric[same_face], atol=1e-5)

@@ -17,7 +17,9 @@ R = np.diag([0.03, 0.03, np.radians(0.3), np.radians(0.3)]) ** 2
 
 def new_filter(truth: np.ndarray, speed: float = 0.0) -> KinematicFilter:
     z = np.array([truth[0], truth[1], truth[2], truth[3] - truth[2]])
-    return KinematicFilter(z, R, 0.0, ART.hitch_behind_axle_m, ART.trailer_hitch_to_axle_m, True, PARAMS.articulated, speed)
+    return KinematicFilter(
+        z, R, 0.0, ART.hitch_behind_axle_m, ART.trailer_hitch_to_axle_m, True, PARAMS.articulated, speed
+    )
 
 
 def run(speed: float, steer: float, seconds: float, seed: int = 0):

@@ -13,8 +13,10 @@ def run(estimator, tracks, n_frames=15, dt=0.1):
     """tracks: {track_id: (vehicle_id, kind, start_xy, velocity_xy, shape_axis_deg)}; returns last yaws."""
     yaws = {}
     for k in range(n_frames):
-        units = [UnitObservation(tid, vid, kind, np.array([*(np.array(start) + k * dt * np.array(vel)), 1.0]), shape)
-                 for tid, (vid, kind, start, vel, shape) in tracks.items()]
+        units = [
+            UnitObservation(tid, vid, kind, np.array([*(np.array(start) + k * dt * np.array(vel)), 1.0]), shape)
+            for tid, (vid, kind, start, vel, shape) in tracks.items()
+        ]
         yaws = estimator.process(units, k * dt, set(tracks))
     return yaws
 
@@ -56,8 +58,14 @@ def test_standstill_holds_the_last_yaw_and_first_estimate_uses_the_shape_axis():
     # standing still from the start: shape axis 120 deg (mod 180), truck ahead along 120 deg
     fwd = np.array([np.cos(np.radians(120)), np.sin(np.radians(120))])
     for k in range(5):
-        yaws = est.process([UnitObservation(1, 1, "truck", np.r_[5 * fwd, 0], 120.0),
-                            UnitObservation(2, 1, "trailer", np.r_[-2 * fwd, 0], 120.0)], k * 0.1, {1, 2})
+        yaws = est.process(
+            [
+                UnitObservation(1, 1, "truck", np.r_[5 * fwd, 0], 120.0),
+                UnitObservation(2, 1, "trailer", np.r_[-2 * fwd, 0], 120.0),
+            ],
+            k * 0.1,
+            {1, 2},
+        )
     assert yaws[1] == pytest.approx(120.0) and yaws[2] == pytest.approx(120.0)
     # later, tiny jitter while standing does not move the yaw even if the shape axis wobbles
     yaws = est.process([UnitObservation(1, 1, "truck", np.r_[5 * fwd + 0.01, 0], 100.0)], 0.6, {1, 2})
@@ -65,7 +73,9 @@ def test_standstill_holds_the_last_yaw_and_first_estimate_uses_the_shape_axis():
 
 
 def test_yaw_change_is_rate_bounded():
-    est = OrientationEstimator(OrientationParams(history_frames=2, min_travel_m=0.01, max_yaw_rate_deg_s=10.0, smoothing=0.0))
+    est = OrientationEstimator(
+        OrientationParams(history_frames=2, min_travel_m=0.01, max_yaw_rate_deg_s=10.0, smoothing=0.0)
+    )
     est.process([UnitObservation(1, 1, "truck", np.array([0.0, 0.0, 0]), 0.0)], 0.0, {1})
     first = est.process([UnitObservation(1, 1, "truck", np.array([1.0, 0.0, 0]), 0.0)], 0.1, {1})[1]
     turned = est.process([UnitObservation(1, 1, "truck", np.array([1.0, 1.0, 0]), 0.0)], 0.2, {1})[1]
@@ -83,8 +93,14 @@ def test_new_square_cab_takes_the_shape_equivalent_ahead_of_its_trailer(truck_ya
     truck = trailer + [8.0 * np.cos(heading), 8.0 * np.sin(heading), 0.0]
     for shape_deg in ((truck_yaw_deg + 90.0) % 180.0, truck_yaw_deg % 90.0):
         est.states.clear()
-        yaws = est.process([UnitObservation(1, 1, "truck", truck, shape_deg, 90.0),
-                            UnitObservation(2, 1, "trailer", trailer, truck_yaw_deg % 180.0)], 0.0, {1, 2})
+        yaws = est.process(
+            [
+                UnitObservation(1, 1, "truck", truck, shape_deg, 90.0),
+                UnitObservation(2, 1, "trailer", trailer, truck_yaw_deg % 180.0),
+            ],
+            0.0,
+            {1, 2},
+        )
         assert abs(((yaws[1] - truck_yaw_deg) + 180.0) % 360.0 - 180.0) < 1e-6
         assert abs(((yaws[2] - truck_yaw_deg) + 180.0) % 360.0 - 180.0) < 1e-6
 
@@ -102,13 +118,17 @@ def test_reacquired_unit_keeps_its_yaw_and_restarts_its_history():
 
 def test_smoothing_does_not_halve_the_rate_bound():
     """Smoothed first, then bounded: with smoothing 0.5 the yaw still turns at max_yaw_rate_deg_s."""
-    est = OrientationEstimator(OrientationParams(history_frames=2, min_travel_m=0.01, max_yaw_rate_deg_s=10.0, smoothing=0.5))
+    est = OrientationEstimator(
+        OrientationParams(history_frames=2, min_travel_m=0.01, max_yaw_rate_deg_s=10.0, smoothing=0.5)
+    )
     est.process([UnitObservation(1, 1, "truck", np.array([0.0, 0.0, 0]), 0.0)], 0.0, {1})
     est.process([UnitObservation(1, 1, "truck", np.array([1.0, 0.0, 0]), 0.0)], 0.1, {1})
     turned = est.process([UnitObservation(1, 1, "truck", np.array([1.0, 1.0, 0]), 0.0)], 0.2, {1})[1]
     assert turned == pytest.approx(1.0, abs=1e-6)  # 10 deg/s * 0.1 s, not half of it
     # a small change is smoothed, not bounded: 2 deg measured -> half of it
-    est2 = OrientationEstimator(OrientationParams(history_frames=2, min_travel_m=0.01, max_yaw_rate_deg_s=100.0, smoothing=0.5))
+    est2 = OrientationEstimator(
+        OrientationParams(history_frames=2, min_travel_m=0.01, max_yaw_rate_deg_s=100.0, smoothing=0.5)
+    )
     est2.process([UnitObservation(1, 1, "truck", np.array([0.0, 0.0, 0]), 0.0)], 0.0, {1})
     est2.process([UnitObservation(1, 1, "truck", np.array([1.0, 0.0, 0]), 0.0)], 0.1, {1})
     yaw = est2.process([UnitObservation(1, 1, "truck", np.array([2.0, np.tan(np.radians(2.0)), 0]), 0.0)], 0.2, {1})[1]
@@ -116,7 +136,9 @@ def test_smoothing_does_not_halve_the_rate_bound():
 
 
 def test_rate_bound_covers_the_time_since_the_unit_was_last_seen():
-    est = OrientationEstimator(OrientationParams(history_frames=2, min_travel_m=0.01, max_yaw_rate_deg_s=10.0, smoothing=0.0))
+    est = OrientationEstimator(
+        OrientationParams(history_frames=2, min_travel_m=0.01, max_yaw_rate_deg_s=10.0, smoothing=0.0)
+    )
     est.process([UnitObservation(1, 1, "truck", np.array([0.0, 0.0, 0]), 0.0)], 0.0, {1})
     est.process([UnitObservation(1, 1, "truck", np.array([1.0, 0.0, 0]), 0.0)], 0.1, {1})
     est.process([], 0.2, {1})
@@ -129,7 +151,9 @@ def forward_trailer_pair(truck_yaw_deg, trailer_yaw_deg, hitch_ahead_m=5.64, tru
     """Truck and trailer centres of an articulated vehicle whose hitch is at ``shift``."""
     hitch = np.array(shift, dtype=float)
     truck = hitch + truck_ahead_m * np.array([np.cos(np.radians(truck_yaw_deg)), np.sin(np.radians(truck_yaw_deg))])
-    trailer = hitch - hitch_ahead_m * np.array([np.cos(np.radians(trailer_yaw_deg)), np.sin(np.radians(trailer_yaw_deg))])
+    trailer = hitch - hitch_ahead_m * np.array(
+        [np.cos(np.radians(trailer_yaw_deg)), np.sin(np.radians(trailer_yaw_deg))]
+    )
     return np.r_[truck, 1.0], np.r_[trailer, 1.0]
 
 
@@ -139,8 +163,10 @@ def test_square_cab_at_a_large_hitch_angle_takes_the_heading_from_the_hitch_poin
     trailer's centre the wrong 90 deg equivalent wins; from the hitch point the right one does."""
     truck_yaw = 20.0
     truck, trailer = forward_trailer_pair(truck_yaw, truck_yaw + hitch_deg)
-    units = [UnitObservation(1, 1, "truck", truck, truck_yaw % 90.0, 90.0),
-             UnitObservation(2, 1, "trailer", trailer, (truck_yaw + hitch_deg) % 180.0, 180.0, hitch_offset_m=5.64)]
+    units = [
+        UnitObservation(1, 1, "truck", truck, truck_yaw % 90.0, 90.0),
+        UnitObservation(2, 1, "trailer", trailer, (truck_yaw + hitch_deg) % 180.0, 180.0, hitch_offset_m=5.64),
+    ]
     from_hitch = OrientationEstimator(PARAMS.model_copy(update={"shape_weight": 1.0, "hitch_forward": True}))
     yaws = from_hitch.process(units, 0.0, {1, 2})
     assert yaws[1] == pytest.approx(truck_yaw, abs=1e-6)
@@ -161,8 +187,12 @@ def test_isolated_180_deg_flip_is_rejected_and_a_persistent_one_taken_at_once():
         truck = np.array([k * 0.2, 0.0, 1.0])
         trailer = truck + [8.0 * trailer_side, 0.0, 0.0]
         k += 1
-        return est.process([UnitObservation(1, 1, "truck", truck, 0.0), UnitObservation(2, 1, "trailer", trailer, 0.0)],
-                           k * 0.1, {1, 2})
+        return est.process(
+            [UnitObservation(1, 1, "truck", truck, 0.0), UnitObservation(2, 1, "trailer", trailer, 0.0)],
+            k * 0.1,
+            {1, 2},
+        )
+
     for _ in range(5):
         yaws = step(-1.0)  # trailer behind (west): heading east
     assert yaws[1] == pytest.approx(0.0) and yaws[2] == pytest.approx(0.0)
@@ -185,6 +215,12 @@ def test_provisional_shape_guess_is_replaced_at_once_by_the_first_real_measureme
     truck = np.array([8.0, 0.0, 1.0])
     guess = est.process([UnitObservation(1, 1, "truck", truck, 90.0, 90.0)], 0.0, {1, 2})[1]
     assert guess == pytest.approx(90.0)
-    yaws = est.process([UnitObservation(1, 1, "truck", truck, 90.0, 90.0),
-                        UnitObservation(2, 1, "trailer", np.array([0.0, 0.0, 1.0]), 0.0)], 0.1, {1, 2})
+    yaws = est.process(
+        [
+            UnitObservation(1, 1, "truck", truck, 90.0, 90.0),
+            UnitObservation(2, 1, "trailer", np.array([0.0, 0.0, 1.0]), 0.0),
+        ],
+        0.1,
+        {1, 2},
+    )
     assert yaws[1] == pytest.approx(0.0) and yaws[2] == pytest.approx(0.0)

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from i2v_loc.params import ParamsError, RegionParams, apply_patch, Params
+from i2v_loc.params import Params, ParamsError, RegionParams, apply_patch
 from i2v_loc.stages.region import Region
 
 

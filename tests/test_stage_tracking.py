@@ -42,8 +42,9 @@ def test_gate_min_hits_and_death():
 
 def test_truck_and_trailer_of_one_cluster_share_a_vehicle_id_and_kinds_do_not_mix():
     tracker = Tracker(TrackingParams(min_hits=1))
-    result = tracker.process([det("truck", 0, 0, group=0), det("trailer", -0.5, 0, group=0),
-                              det("truck", 20, 0, group=1)], 0.0)
+    result = tracker.process(
+        [det("truck", 0, 0, group=0), det("trailer", -0.5, 0, group=0), det("truck", 20, 0, group=1)], 0.0
+    )
     by_id = {t.track_id: t for t in result.tracks}
     assert by_id[1].vehicle_id == by_id[2].vehicle_id != by_id[3].vehicle_id
     # the truck detection is closer to the trailer track than to the truck track: kinds must not swap

@@ -17,8 +17,12 @@ DEFAULT_RECORDING = sample_recording("man_tgx_docking")
 
 def register(sub) -> None:
     p = sub.add_parser("bench", help="measure the per-stage latency of the pipeline on a recording")
-    p.add_argument("recording", nargs="?", default=str(DEFAULT_RECORDING),
-                   help="recording directory (default: the committed MAN TGX docking sample)")
+    p.add_argument(
+        "recording",
+        nargs="?",
+        default=str(DEFAULT_RECORDING),
+        help="recording directory (default: the committed MAN TGX docking sample)",
+    )
     p.add_argument("--method", default=DEFAULT_METHOD)
     p.add_argument("--params", action="append", default=[], help="parameter files merged over the recording's sensors")
     p.add_argument("--threads", type=int, default=1, help="threads for numpy/BLAS and open3d (default 1: one core)")
@@ -47,15 +51,19 @@ def summarize(latencies: list[dict[str, float]]) -> dict[str, dict[str, float]]:
     out = {}
     for stage in stages:
         values = np.array([lat[stage] for lat in latencies if stage in lat], dtype=float)
-        out[stage] = {"mean": float(values.mean()), "p50": float(np.percentile(values, 50)),
-                      "p95": float(np.percentile(values, 95)), "max": float(values.max())}
+        out[stage] = {
+            "mean": float(values.mean()),
+            "p50": float(np.percentile(values, 50)),
+            "p95": float(np.percentile(values, 95)),
+            "max": float(values.max()),
+        }
     return out
 
 
 def run(args) -> int:
+    from i2v_loc.formats import open_recording
     from i2v_loc.params import load_params
     from i2v_loc.pipeline import Pipeline
-    from i2v_loc.formats import open_recording
     from i2v_loc.recording import RecordingError
 
     rec_path = Path(args.recording)
@@ -79,12 +87,24 @@ def run(args) -> int:
                     latencies.append(result["latency_ms"])
     figures = summarize(latencies)
     if args.json:
-        print(json.dumps({"recording": str(rec_path), "method": args.method, "threads": args.threads,
-                          "frames": len(latencies), "mean_points": float(np.mean(points)),
-                          "latency_ms": figures}, indent=2))
+        print(
+            json.dumps(
+                {
+                    "recording": str(rec_path),
+                    "method": args.method,
+                    "threads": args.threads,
+                    "frames": len(latencies),
+                    "mean_points": float(np.mean(points)),
+                    "latency_ms": figures,
+                },
+                indent=2,
+            )
+        )
         return 0
-    print(f"{rec_path.name}: {len(latencies)} frames, {np.mean(points):.0f} points per frame "
-          f"({len(recording.sensor_names)} sensors), method {args.method}, {args.threads} thread(s)")
+    print(
+        f"{rec_path.name}: {len(latencies)} frames, {np.mean(points):.0f} points per frame "
+        f"({len(recording.sensor_names)} sensors), method {args.method}, {args.threads} thread(s)"
+    )
     print(f"{'stage':<16}{'mean':>9}{'p50':>9}{'p95':>9}{'max':>9}  [ms]")
     for stage, f in figures.items():
         print(f"{stage:<16}{f['mean']:>9.2f}{f['p50']:>9.2f}{f['p95']:>9.2f}{f['max']:>9.2f}")

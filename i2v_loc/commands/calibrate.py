@@ -8,19 +8,23 @@ from i2v_loc.cli import UserError
 
 
 def register(sub) -> None:
-    p = sub.add_parser("calibrate", help="refine sensor extrinsics from REC/sensors_guess.yaml by ICP; write a params YAML")
+    p = sub.add_parser(
+        "calibrate", help="refine sensor extrinsics from REC/sensors_guess.yaml by ICP; write a params YAML"
+    )
     p.add_argument("recording", metavar="REC", help="recording folder with sensors_guess.yaml")
     p.add_argument("--out", required=True, help="parameter file to write (section 'sensors')")
     p.add_argument("--guess", help="initial guess other than REC/sensors_guess.yaml")
-    p.add_argument("--params", action="append", default=[], metavar="FILE", help="parameter files (calibration section)")
+    p.add_argument(
+        "--params", action="append", default=[], metavar="FILE", help="parameter files (calibration section)"
+    )
     p.add_argument("--threads", type=int, default=1, help="open3d worker threads (default 1)")
     p.set_defaults(func=run)
 
 
 def run(args) -> int:
     from i2v_loc.evaluation.calibration import run_calibration, sensor_errors
-    from i2v_loc.params import dump_yaml, load_params
     from i2v_loc.formats import open_recording
+    from i2v_loc.params import dump_yaml, load_params
     from i2v_loc.recording import RecordingError
 
     rec_path = Path(args.recording)
@@ -48,8 +52,10 @@ def run(args) -> int:
     refused = [r for r in results if r.fitness < params.calibration.min_fitness]
     if refused:
         names = ", ".join(f"{r.name} ({r.fitness:.2f})" for r in refused)
-        raise UserError(f"calibration refused: fitness below min_fitness {params.calibration.min_fitness} for {names}; "
-                        f"{args.out} not written")
+        raise UserError(
+            f"calibration refused: fitness below min_fitness {params.calibration.min_fitness} for {names}; "
+            f"{args.out} not written"
+        )
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(dump_yaml(params.model_copy(update={"sensors": sensors}), ["sensors"]))
@@ -62,4 +68,3 @@ def _set_threads(n: int) -> None:
 
     if hasattr(o3d.utility, "set_max_threads"):  # Open3D >= 0.20 (TBB); OMP_NUM_THREADS has no effect
         o3d.utility.set_max_threads(max(1, n))
-

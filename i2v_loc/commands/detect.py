@@ -35,13 +35,22 @@ def run(args) -> int:
         sensor = params.sensor(args.sensor)
     else:
         sensor = SensorConfig(name="cloud", extrinsics=Extrinsics(), min_range_m=0.0, max_range_m=300.0)
-    params = params.model_copy(update={"sensors": [sensor], "tracking": params.tracking.model_copy(update={"min_hits": 1})})
+    params = params.model_copy(
+        update={"sensors": [sensor], "tracking": params.tracking.model_copy(update={"min_hits": 1})}
+    )
     result = Pipeline(params).process(Frame(0, {sensor.name: SensorScan(sensor.name, 0.0, points, None)}))
     line = result.to_json()
     # one sweep: faults name the sensor; the counts of what was dropped are the state line's
-    report = {"file": args.cloud, "points": int(len(points)), "finite_points": int(np.isfinite(points).all(axis=1).sum()),
-              "ground_found": result.ground_found, "latency_ms": line["latency_ms"], "faults": line["faults"],
-              "dropped": line["dropped"], "clusters": line["clusters"],
-              "vehicles": [{k: v[k] for k in ("vehicle", "truck", "trailer", "hitch_deg")} for v in line["vehicles"]]}
+    report = {
+        "file": args.cloud,
+        "points": int(len(points)),
+        "finite_points": int(np.isfinite(points).all(axis=1).sum()),
+        "ground_found": result.ground_found,
+        "latency_ms": line["latency_ms"],
+        "faults": line["faults"],
+        "dropped": line["dropped"],
+        "clusters": line["clusters"],
+        "vehicles": [{k: v[k] for k in ("vehicle", "truck", "trailer", "hitch_deg")} for v in line["vehicles"]],
+    }
     print(json.dumps(report, indent=2))
     return 0

@@ -10,19 +10,33 @@ from i2v_loc.params import DEFAULT_METHOD
 
 
 def register(sub) -> None:
-    p = sub.add_parser("eval", help="evaluate methods on recordings or suites against the ground truth",
-                       description="Evaluate on recordings (or suites = folders of recordings); writes "
-                                   "report.md, metrics.json, per_frame.csv and plots to --out.")
+    p = sub.add_parser(
+        "eval",
+        help="evaluate methods on recordings or suites against the ground truth",
+        description="Evaluate on recordings (or suites = folders of recordings); writes "
+        "report.md, metrics.json, per_frame.csv and plots to --out.",
+    )
     p.add_argument("inputs", nargs="+", metavar="REC_OR_SUITE", help="recording folders or folders of recordings")
     p.add_argument("--out", required=True, help="report folder")
-    p.add_argument("--method", default=DEFAULT_METHOD,
-                   help=f"comma-separated methods, e.g. paper,default (default: {DEFAULT_METHOD})")
+    p.add_argument(
+        "--method",
+        default=DEFAULT_METHOD,
+        help=f"comma-separated methods, e.g. paper,default (default: {DEFAULT_METHOD})",
+    )
     p.add_argument("--subsets", action="store_true", help="also evaluate all 15 non-empty subsets of the LiDARs")
-    p.add_argument("--params", action="append", default=[], metavar="FILE",
-                   help="parameter file merged after the defaults and each recording's sensors.yaml, as in "
-                        "`i2v-loc run` (repeatable; a sensors section here replaces the recording's sensors)")
-    p.add_argument("--labels", help="ground truth other than ground_truth.jsonl: OpenLABEL or labelCloud labels "
-                                    "(file or folder); only with a single recording")
+    p.add_argument(
+        "--params",
+        action="append",
+        default=[],
+        metavar="FILE",
+        help="parameter file merged after the defaults and each recording's sensors.yaml, as in "
+        "`i2v-loc run` (repeatable; a sensors section here replaces the recording's sensors)",
+    )
+    p.add_argument(
+        "--labels",
+        help="ground truth other than ground_truth.jsonl: OpenLABEL or labelCloud labels "
+        "(file or folder); only with a single recording",
+    )
     p.add_argument("--gate-m", type=float, default=4.0, help="association gate of estimated to GT vehicles (m)")
     add_calibration_options(p)
     p.add_argument("--workers", type=int, default=1, help="parallel processes (or Dask workers of a local cluster)")
@@ -34,11 +48,17 @@ def register(sub) -> None:
 
 
 def add_calibration_options(p) -> None:
-    p.add_argument("--true-extrinsics", action="store_true",
-                   help="run with each recording's true sensors.yaml instead of calibrating from its "
-                        "sensors_guess.yaml first (diagnosis only)")
-    p.add_argument("--calibration-cache", metavar="DIR",
-                   help="where calibrations are cached (default ~/.cache/i2v-loc/calibration)")
+    p.add_argument(
+        "--true-extrinsics",
+        action="store_true",
+        help="run with each recording's true sensors.yaml instead of calibrating from its "
+        "sensors_guess.yaml first (diagnosis only)",
+    )
+    p.add_argument(
+        "--calibration-cache",
+        metavar="DIR",
+        help="where calibrations are cached (default ~/.cache/i2v-loc/calibration)",
+    )
 
 
 def calibrate(recordings: list[Path], patch: dict, args) -> dict[str, dict]:
@@ -47,9 +67,16 @@ def calibrate(recordings: list[Path], patch: dict, args) -> dict[str, dict]:
 
     from i2v_loc.evaluation.calibration import LOUD, calibrate_recordings
 
-    calibrations = calibrate_recordings(recordings, patch, args.true_extrinsics, args.calibration_cache,
-                                        workers=args.workers, executor=args.executor, address=args.address,
-                                        progress=not args.quiet)
+    calibrations = calibrate_recordings(
+        recordings,
+        patch,
+        args.true_extrinsics,
+        args.calibration_cache,
+        workers=args.workers,
+        executor=args.executor,
+        address=args.address,
+        progress=not args.quiet,
+    )
     for c in calibrations.values():
         if c["status"] in LOUD:
             print(f"WARNING {c['recording']}: {c['message']}", file=sys.stderr)
@@ -107,8 +134,15 @@ def sensor_subsets(names: list[str]) -> list[tuple[str, ...]]:
     return [combo for k in range(1, len(names) + 1) for combo in itertools.combinations(names, k)]
 
 
-def build_tasks(recordings: list[Path], methods: list[str], subsets: bool, params: dict, labels: str | None,
-                gate_m: float, calibrations: dict[str, dict] | None = None) -> list:
+def build_tasks(
+    recordings: list[Path],
+    methods: list[str],
+    subsets: bool,
+    params: dict,
+    labels: str | None,
+    gate_m: float,
+    calibrations: dict[str, dict] | None = None,
+) -> list:
     """One task per recording, method and sensor subset; a recording's calibrated sensors (if
     any, ``calibrations`` keyed by its path) come before the --params patch."""
     from i2v_loc.evaluation.calibration import task_patch
@@ -145,8 +179,9 @@ def run(args) -> int:
     try:
         calibrations = calibrate(recordings, params, args)
         tasks = build_tasks(recordings, methods, args.subsets, params, args.labels, args.gate_m, calibrations)
-        results = run_tasks(tasks, workers=args.workers, executor=args.executor, address=args.address,
-                            progress=not args.quiet)
+        results = run_tasks(
+            tasks, workers=args.workers, executor=args.executor, address=args.address, progress=not args.quiet
+        )
     except EvaluationError as err:
         raise UserError(str(err).split("\nTraceback")[0]) from err
     summary = collect(results)
@@ -161,21 +196,31 @@ def print_summary(summary: dict) -> None:
     primary = summary["primary_subset"]
     for c in (summary.get("calibration") or {}).values():
         errors = [r for r in c["per_sensor"] if r.get("error_cm") is not None]
-        worst = (f"; worst sensor error {max(r['error_cm'] for r in errors):.2f} cm / "
-                 f"{max(r['error_deg'] for r in errors):.3f} deg" if errors else "")
+        worst = (
+            f"; worst sensor error {max(r['error_cm'] for r in errors):.2f} cm / "
+            f"{max(r['error_deg'] for r in errors):.3f} deg"
+            if errors
+            else ""
+        )
         print(f"extrinsics {c['recording']}: {c['status']}{' (cached)' if c.get('cached') else ''}{worst}")
     for method in summary["methods"]:
         for vehicle, s in summary["results"][method][primary]["by_vehicle"].items():
             if not s["gt_vehicle_frames"]:
-                print(f"{method:>10} {vehicle:>10}: not in the ground truth; {s['false_vehicles']} false detections "
-                      f"({s['false_vehicle_s']:.1f} vehicle-s)")
+                print(
+                    f"{method:>10} {vehicle:>10}: not in the ground truth; {s['false_vehicles']} false detections "
+                    f"({s['false_vehicle_s']:.1f} vehicle-s)"
+                )
                 continue
-            def f(key, digits=2):
+
+            def f(key, digits=2, s=s):
                 v = s.get(key)
                 return "-" if v is None or v != v else f"{v:.{digits}f}"
-            print(f"{method:>10} {vehicle:>10}: frames {s['gt_vehicle_frames']}, success {f('success_rate', 3)}, "
-                  f"both units {f('both_units_rate', 3)}, false {f('false_vehicle_s', 1)} vehicle-s; "
-                  f"over reported frames: truck {f('truck_pos_rmse_m')} m / "
-                  f"{f('truck_yaw_rmse_deg')} deg, trailer {f('trailer_pos_rmse_m')} m / {f('trailer_yaw_rmse_deg')} deg, "
-                  f"HAE {f('hitch_rmse_deg')} deg, flips {f('heading_flip_rate', 3)}, ΔT {f('delta_T_m', 3)} m, "
-                  f"RRA {f('rra_rad', 4)} rad, latency p50 {f('latency_ms_p50', 1)} ms")
+
+            print(
+                f"{method:>10} {vehicle:>10}: frames {s['gt_vehicle_frames']}, success {f('success_rate', 3)}, "
+                f"both units {f('both_units_rate', 3)}, false {f('false_vehicle_s', 1)} vehicle-s; "
+                f"over reported frames: truck {f('truck_pos_rmse_m')} m / "
+                f"{f('truck_yaw_rmse_deg')} deg, trailer {f('trailer_pos_rmse_m')} m / {f('trailer_yaw_rmse_deg')} deg, "
+                f"HAE {f('hitch_rmse_deg')} deg, flips {f('heading_flip_rate', 3)}, ΔT {f('delta_T_m', 3)} m, "
+                f"RRA {f('rra_rad', 4)} rad, latency p50 {f('latency_ms_p50', 1)} ms"
+            )

@@ -21,7 +21,9 @@ def register(sub) -> None:
     check.set_defaults(func=_check)
 
     schema = ps.add_parser("schema", help="print the JSON Schema of the parameter model")
-    schema.add_argument("--state", action="store_true", help="the schema of the state line (run JSONL, WebSocket) instead")
+    schema.add_argument(
+        "--state", action="store_true", help="the schema of the state line (run JSONL, WebSocket) instead"
+    )
     schema.set_defaults(func=_schema)
 
 

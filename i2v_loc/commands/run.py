@@ -12,21 +12,35 @@ from i2v_loc.params import DEFAULT_METHOD
 
 
 def register(sub) -> None:
-    p = sub.add_parser("run", help="run the localization pipeline on a recording, write state lines (JSONL)",
-                       description="Exit status: 0, or 1 when damaged sensors were left out (the output holds "
-                                   "every frame, from the sensors that could be read; stderr says what was skipped), "
-                                   "2 for bad input.")
+    p = sub.add_parser(
+        "run",
+        help="run the localization pipeline on a recording, write state lines (JSONL)",
+        description="Exit status: 0, or 1 when damaged sensors were left out (the output holds "
+        "every frame, from the sensors that could be read; stderr says what was skipped), "
+        "2 for bad input.",
+    )
     p.add_argument("recording", metavar="REC", help="recording in any layout of `i2v-loc sources` (docs/formats.md)")
     p.add_argument("--out", required=True, help="output file of state lines (missing parent folders are created)")
-    p.add_argument("--format", default="jsonl", choices=["jsonl", "openlabel", "rosbag2", "mcap"],
-                   help="jsonl: one state line per frame (default); openlabel: ASAM OpenLABEL (TRUCK/TRAILER cuboids); "
-                        "rosbag2/mcap: a ROS 2 bag folder with the lines as std_msgs/String on /i2v_loc/states")
-    p.add_argument("--bin-layout", choices=["kitti", "nuscenes"], help="layout of .bin clouds when their content fits both")
+    p.add_argument(
+        "--format",
+        default="jsonl",
+        choices=["jsonl", "openlabel", "rosbag2", "mcap"],
+        help="jsonl: one state line per frame (default); openlabel: ASAM OpenLABEL (TRUCK/TRAILER cuboids); "
+        "rosbag2/mcap: a ROS 2 bag folder with the lines as std_msgs/String on /i2v_loc/states",
+    )
+    p.add_argument(
+        "--bin-layout", choices=["kitti", "nuscenes"], help="layout of .bin clouds when their content fits both"
+    )
     p.add_argument("--method", default=DEFAULT_METHOD, help=f"pipeline method (default: {DEFAULT_METHOD})")
     p.add_argument("--sensors", help="comma-separated subset of the sensors, e.g. l1,l4 (default: all)")
     p.add_argument("--vehicles", help="comma-separated subset of the configured vehicles to look for (default: all)")
-    p.add_argument("--params", action="append", default=[], metavar="FILE",
-                   help="parameter file merged after the defaults and REC/sensors.yaml (repeatable)")
+    p.add_argument(
+        "--params",
+        action="append",
+        default=[],
+        metavar="FILE",
+        help="parameter file merged after the defaults and REC/sensors.yaml (repeatable)",
+    )
     p.add_argument("--frames", type=int, metavar="N", help="only the first N frames (N >= 1)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=run)
@@ -54,9 +68,9 @@ def restricted_params(params, sensors: list[str] | None, vehicles: list[str] | N
 def run(args) -> int:
     from tqdm import tqdm
 
+    from i2v_loc.formats import open_recording
     from i2v_loc.params import load_params
     from i2v_loc.pipeline import METHODS, Pipeline
-    from i2v_loc.formats import open_recording
     from i2v_loc.recording import RecordingError
 
     rec_path = Path(args.recording)
@@ -137,6 +151,8 @@ class Summary:
         mean = {k: v / n for k, v in self.latency.items()}
         stages = ", ".join(f"{k} {v:.2f}" for k, v in mean.items() if k != "total")
         faults = ", ".join(f"{k} {v}" for k, v in sorted(counters.items()) if k != "frames" and v) or "none"
-        return (f"{out}: {self.frames} frames, {self.any_vehicle} with a vehicle, {self.both_units} with both units\n"
-                f"mean latency {mean.get('total', 0.0):.2f} ms ({stages})\n"
-                f"counters: {faults}")
+        return (
+            f"{out}: {self.frames} frames, {self.any_vehicle} with a vehicle, {self.both_units} with both units\n"
+            f"mean latency {mean.get('total', 0.0):.2f} ms ({stages})\n"
+            f"counters: {faults}"
+        )

@@ -20,35 +20,70 @@ GIL_SWITCH_INTERVAL_S = 0.0005
 
 def register(sub) -> None:
     p = sub.add_parser(
-        "serve", help="run the live service: REST API, WebSocket stream and dashboard",
+        "serve",
+        help="run the live service: REST API, WebSocket stream and dashboard",
         description="Run the pipeline live on a source and serve its states (see docs/service.md).",
     )
-    p.add_argument("--source", default=DEFAULT_SOURCE,
-                   help="sim[:SCENARIO] (simulated yard, loops; default %(default)s), replay:REC (any layout of `i2v-loc sources`) or ouster-udp:DIR[@PORT,...]")
-    p.add_argument("--method", default=DEFAULT_METHOD, metavar="paper|default",
-                   help="pipeline method (default %(default)s: fast enough for 10 Hz; paper: the published one)")
-    p.add_argument("--params", type=Path, metavar="FILE",
-                   help="parameter file: loaded at start (if it exists) and rewritten on every change")
+    p.add_argument(
+        "--source",
+        default=DEFAULT_SOURCE,
+        help="sim[:SCENARIO] (simulated yard, loops; default %(default)s), replay:REC (any layout of `i2v-loc sources`) or ouster-udp:DIR[@PORT,...]",
+    )
+    p.add_argument(
+        "--method",
+        default=DEFAULT_METHOD,
+        metavar="paper|default",
+        help="pipeline method (default %(default)s: fast enough for 10 Hz; paper: the published one)",
+    )
+    p.add_argument(
+        "--params",
+        type=Path,
+        metavar="FILE",
+        help="parameter file: loaded at start (if it exists) and rewritten on every change",
+    )
     p.add_argument("--host", default="127.0.0.1", help="address to bind (default %(default)s: this machine only)")
     p.add_argument("--port", type=int, default=8000, help="port (default %(default)s; 0 picks a free one)")
     p.add_argument("--loop", action="store_true", help="replay the recording in an endless loop")
-    p.add_argument("--token-file", type=Path, metavar="PATH",
-                   help="file holding the API token (default: the environment variable I2V_LOC_API_TOKEN)")
+    p.add_argument(
+        "--token-file",
+        type=Path,
+        metavar="PATH",
+        help="file holding the API token (default: the environment variable I2V_LOC_API_TOKEN)",
+    )
     p.add_argument("--require-token-for-reads", action="store_true", help="reads need the token too")
-    p.add_argument("--allow-open-reads", action="store_true",
-                   help="allow reads without a token on an address other than loopback (refused otherwise)")
-    p.add_argument("--allowed-origin", action="append", default=[], metavar="URL",
-                   help="a web page origin (e.g. https://ops.example.com) allowed to open the WebSocket "
-                        "besides the service's own; repeatable")
+    p.add_argument(
+        "--allow-open-reads",
+        action="store_true",
+        help="allow reads without a token on an address other than loopback (refused otherwise)",
+    )
+    p.add_argument(
+        "--allowed-origin",
+        action="append",
+        default=[],
+        metavar="URL",
+        help="a web page origin (e.g. https://ops.example.com) allowed to open the WebSocket "
+        "besides the service's own; repeatable",
+    )
     p.add_argument("--ssl-keyfile", type=Path, metavar="FILE", help="TLS private key (with --ssl-certfile: HTTPS)")
     p.add_argument("--ssl-certfile", type=Path, metavar="FILE", help="TLS certificate chain")
     p.add_argument("--vehicle", default="man_tgx", help="vehicle of the simulated yard (default %(default)s)")
     p.add_argument("--sim-seed", type=int, default=1, help="seed of the simulated yard (default %(default)s)")
-    p.add_argument("--sim-duration", type=float, default=30.0, metavar="S",
-                   help="length of the simulated recording that loops (default %(default)s s)")
-    p.add_argument("--cache-dir", type=Path, help="where simulated recordings are cached (default ~/.cache/i2v-loc/sim)")
-    p.add_argument("--max-points", type=int, default=2000,
-                   help="foreground points per WebSocket message for the dashboard (default %(default)s; 0: none)")
+    p.add_argument(
+        "--sim-duration",
+        type=float,
+        default=30.0,
+        metavar="S",
+        help="length of the simulated recording that loops (default %(default)s s)",
+    )
+    p.add_argument(
+        "--cache-dir", type=Path, help="where simulated recordings are cached (default ~/.cache/i2v-loc/sim)"
+    )
+    p.add_argument(
+        "--max-points",
+        type=int,
+        default=2000,
+        help="foreground points per WebSocket message for the dashboard (default %(default)s; 0: none)",
+    )
     p.add_argument("--no-realtime", action="store_true", help="process frames as fast as possible (benchmarking)")
     p.add_argument("--access-log", action="store_true", help="log every HTTP request")
     p.add_argument("--quiet", action="store_true", help="no live status line")
@@ -76,8 +111,14 @@ def run(args) -> int:
     _check_exposure(args)
     sock = _bind(args.host, args.port)
     try:
-        source = open_source(args.source, loop=args.loop, vehicle=args.vehicle, seed=args.sim_seed,
-                             duration_s=args.sim_duration, cache_dir=args.cache_dir)
+        source = open_source(
+            args.source,
+            loop=args.loop,
+            vehicle=args.vehicle,
+            seed=args.sim_seed,
+            duration_s=args.sim_duration,
+            cache_dir=args.cache_dir,
+        )
     except SourceError as err:
         sock.close()
         raise UserError(str(err)) from err
@@ -102,9 +143,11 @@ def _check_exposure(args) -> None:
             raise UserError(f"{file}: no such TLS file")
     if args.host in LOOPBACK or args.require_token_for_reads or args.allow_open_reads:
         return
-    raise UserError(f"--host {args.host} without --require-token-for-reads opens the yard's data to the network: "
-                    "pass --require-token-for-reads (with a token) or --allow-open-reads; without TLS "
-                    "(--ssl-keyfile/--ssl-certfile or a reverse proxy) tokens travel in clear text")
+    raise UserError(
+        f"--host {args.host} without --require-token-for-reads opens the yard's data to the network: "
+        "pass --require-token-for-reads (with a token) or --allow-open-reads; without TLS "
+        "(--ssl-keyfile/--ssl-certfile or a reverse proxy) tokens travel in clear text"
+    )
 
 
 def _bind(host: str, port: int) -> socket.socket:
@@ -138,8 +181,15 @@ def _serve(args, sock, source, params, params_file, auth) -> int:
     # WebSocket clients on 2 busy cores, 16-29 ms at 0.5 ms, and the pipeline kept up better too).
     sys.setswitchinterval(GIL_SWITCH_INTERVAL_S)
     try:
-        service = build_service(source, params, params_file, auth, realtime=not args.no_realtime,
-                                points_cap=args.max_points, method=args.method)
+        service = build_service(
+            source,
+            params,
+            params_file,
+            auth,
+            realtime=not args.no_realtime,
+            points_cap=args.max_points,
+            method=args.method,
+        )
     except ParamsError as err:  # the method's own checks (e.g. the background grid) refuse the parameters
         sock.close()
         raise UserError(f"method {args.method}: {err}") from err
@@ -182,8 +232,12 @@ def _announce(args, source, service, params_file, auth, url) -> None:
         f"  dashboard  {url}",
         f"  API        {url}api/v1/  (docs {url}docs)",
         f"  parameters {params_file if params_file else 'not persisted (pass --params FILE to keep changes)'}",
-        "  writes     " + ("need the bearer token" if auth.token else
-                          "disabled: set I2V_LOC_API_TOKEN or pass --token-file PATH to enable them"),
+        "  writes     "
+        + (
+            "need the bearer token"
+            if auth.token
+            else "disabled: set I2V_LOC_API_TOKEN or pass --token-file PATH to enable them"
+        ),
     ]
     if auth.require_token_for_reads:
         lines.append("  reads      need the bearer token")
@@ -191,8 +245,10 @@ def _announce(args, source, service, params_file, auth, url) -> None:
         if not auth.require_token_for_reads:
             lines.append(f"  warning    listening on {args.host}: reads are open to the network (--allow-open-reads)")
         if not args.ssl_keyfile:
-            lines.append("  warning    no TLS: the token travels in clear text (use --ssl-keyfile/--ssl-certfile "
-                         "or a reverse proxy)")
+            lines.append(
+                "  warning    no TLS: the token travels in clear text (use --ssl-keyfile/--ssl-certfile "
+                "or a reverse proxy)"
+            )
     print("\n".join(lines), file=sys.stderr, flush=True)
 
 
@@ -237,5 +293,7 @@ def format_status(status: dict, ws_clients: int) -> str:
     else:
         shown = "no vehicle"
     drops = sum(status.get("frames_dropped", {}).values())
-    return (f"{status.get('method') or '?'} | {status.get('frame_rate_hz', 0):5.1f} fps | frame {status.get('frame')} | {shown} | "
-            f"dropped {drops} | params v{status.get('params_version')} | ws {ws_clients}")
+    return (
+        f"{status.get('method') or '?'} | {status.get('frame_rate_hz', 0):5.1f} fps | frame {status.get('frame')} | {shown} | "
+        f"dropped {drops} | params v{status.get('params_version')} | ws {ws_clients}"
+    )

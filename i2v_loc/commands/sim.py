@@ -21,18 +21,34 @@ def register(sub) -> None:
     p.add_argument("--start", type=float, default=0.0, help="skip this many seconds of the maneuver")
     p.add_argument("--out", required=True, help="recording directory to write")
     p.add_argument("--sensors", help="parameter file with the sensors (default: the paper's field)")
-    p.add_argument("--vehicles-file", metavar="FILE",
-                   help="extra vehicles for the simulator only (format of params/vehicles.yaml); the recording "
-                        "does not give the pipeline their dimensions and the ground truth names them unknown_<name>")
+    p.add_argument(
+        "--vehicles-file",
+        metavar="FILE",
+        help="extra vehicles for the simulator only (format of params/vehicles.yaml); the recording "
+        "does not give the pipeline their dimensions and the ground truth names them unknown_<name>",
+    )
     p.add_argument("--columns", type=int, choices=[512, 1024, 2048], help="columns of every sensor")
     p.add_argument("--slope-deg", type=float, default=0.0, help="ground grade along +x in degrees")
     p.add_argument("--no-distractors", action="store_true", help="no car and pedestrians")
-    p.add_argument("--clutter-near", action="store_true", help="containers and parked trailers right beside the vehicles' paths")
-    p.add_argument("--preview", nargs="?", const="", metavar="PNG",
-                   help="write a bird's-eye-view PNG of the middle frame here (no value: preview.png in each recording)")
-    p.add_argument("--format", default="native", choices=["native", "pcap", "rosbag2", "mcap", "pcd"],
-                   help="layout of --out (docs/formats.md; default native: meta.yaml + scans/*.npz)")
-    p.add_argument("--suite", help="generate every entry of a suite (name in samples/suites/ or a YAML file) into --out")
+    p.add_argument(
+        "--clutter-near", action="store_true", help="containers and parked trailers right beside the vehicles' paths"
+    )
+    p.add_argument(
+        "--preview",
+        nargs="?",
+        const="",
+        metavar="PNG",
+        help="write a bird's-eye-view PNG of the middle frame here (no value: preview.png in each recording)",
+    )
+    p.add_argument(
+        "--format",
+        default="native",
+        choices=["native", "pcap", "rosbag2", "mcap", "pcd"],
+        help="layout of --out (docs/formats.md; default native: meta.yaml + scans/*.npz)",
+    )
+    p.add_argument(
+        "--suite", help="generate every entry of a suite (name in samples/suites/ or a YAML file) into --out"
+    )
     p.set_defaults(func=_run)
 
 
@@ -51,9 +67,18 @@ def _run(args) -> int:
     if unknown:
         raise UserError(f"unknown vehicle(s) {', '.join(unknown)}; known: {', '.join([*params.vehicles, *extra])}")
     _check_ranges(args.duration, args.slope_deg, "--duration", "--slope-deg")
-    entry = {"vehicles": vehicles, "scenario": args.scenario, "seed": args.seed, "duration_s": args.duration,
-             "start_s": args.start, "columns": args.columns, "slope_deg": args.slope_deg, "distractors": not args.no_distractors,
-             "clutter_near": args.clutter_near, "extra_vehicles": extra}
+    entry = {
+        "vehicles": vehicles,
+        "scenario": args.scenario,
+        "seed": args.seed,
+        "duration_s": args.duration,
+        "start_s": args.start,
+        "columns": args.columns,
+        "slope_deg": args.slope_deg,
+        "distractors": not args.no_distractors,
+        "clutter_near": args.clutter_near,
+        "extra_vehicles": extra,
+    }
     preview = args.preview or (str(Path(args.out) / "preview.png") if args.preview == "" else None)
     if args.format != "native":
         from i2v_loc.commands.sources import converted_output
@@ -90,14 +115,18 @@ def _generate(entry: dict, params, out: Path, preview: str | None, position: int
 
     cfg = SimConfig(params=params, **entry)
     label = f"{'+'.join(cfg.vehicles)} {cfg.scenario}"
-    with tqdm(total=int(round(cfg.duration_s * params.sensors[0].rate_hz)), desc=label, unit="frame", position=position) as bar:
+    with tqdm(
+        total=int(round(cfg.duration_s * params.sensors[0].rate_hz)), desc=label, unit="frame", position=position
+    ) as bar:
         try:
             sim, path = run(cfg, out, progress=bar.update)
         except ValueError as err:
             raise UserError(str(err)) from err
     if preview:
         render_preview(Recording(path), preview)
-    print(f"wrote {path} ({sim.n_frames} frames, {len(sim.lidars)} sensors)" + (f", preview {preview}" if preview else ""))
+    print(
+        f"wrote {path} ({sim.n_frames} frames, {len(sim.lidars)} sensors)" + (f", preview {preview}" if preview else "")
+    )
 
 
 def _run_suite(args, params) -> int:
@@ -119,14 +148,26 @@ def _run_suite(args, params) -> int:
     cases = [suite_case(suite_file, i, entry, params, args.vehicles_file) for i, entry in enumerate(entries)]
     names = [name for name, _, _ in cases]
     if len(set(names)) != len(names):
-        raise UserError(f"{suite_file}: recording names must be unique, got {', '.join(sorted({n for n in names if names.count(n) > 1}))}")
+        raise UserError(
+            f"{suite_file}: recording names must be unique, got {', '.join(sorted({n for n in names if names.count(n) > 1}))}"
+        )
     for name, clean, case_params in cases:
         _generate(clean, case_params, out / name, str(out / name / "preview.png") if args.preview is not None else None)
     print(f"suite {suite_file.stem}: {len(entries)} recordings in {out}")
     return 0
 
 
-SUITE_KEYS = {"vehicles", "scenario", "seed", "duration_s", "start_s", "columns", "slope_deg", "distractors", "clutter_near"}
+SUITE_KEYS = {
+    "vehicles",
+    "scenario",
+    "seed",
+    "duration_s",
+    "start_s",
+    "columns",
+    "slope_deg",
+    "distractors",
+    "clutter_near",
+}
 SUITE_FILE_KEYS = {"sensors", "vehicles_file"}  # paths relative to the suite file
 
 
@@ -142,9 +183,13 @@ def suite_case(suite_file: Path, i: int, entry, params, vehicles_file: str | Non
         got = sorted(entry) if isinstance(entry, dict) else entry
         raise UserError(f"{suite_file}: entry {i} needs 'scenario' and may have {sorted(allowed)}; got {got}")
     if entry["scenario"] not in SCENARIOS:
-        raise UserError(f"{suite_file}: entry {i}: unknown scenario {entry['scenario']!r}; choose one of {', '.join(SCENARIOS)}")
+        raise UserError(
+            f"{suite_file}: entry {i}: unknown scenario {entry['scenario']!r}; choose one of {', '.join(SCENARIOS)}"
+        )
     where = f"{suite_file}: entry {i}:"
-    _check_ranges(entry.get("duration_s", 30.0), entry.get("slope_deg", 0.0), f"{where} duration_s", f"{where} slope_deg")
+    _check_ranges(
+        entry.get("duration_s", 30.0), entry.get("slope_deg", 0.0), f"{where} duration_s", f"{where} slope_deg"
+    )
     files = {k: suite_file.parent / entry[k] for k in SUITE_FILE_KEYS if k in entry}
     if "sensors" in files:
         params = load_params(files["sensors"])
@@ -152,7 +197,9 @@ def suite_case(suite_file: Path, i: int, entry, params, vehicles_file: str | Non
     vehicles = entry.get("vehicles") or [entry.get("vehicle", "man_tgx")]
     unknown = [v for v in vehicles if v not in params.vehicles and v not in extra]
     if unknown:
-        raise UserError(f"{suite_file}: entry {i}: unknown vehicle(s) {', '.join(unknown)}; known: {', '.join([*params.vehicles, *extra])}")
+        raise UserError(
+            f"{suite_file}: entry {i}: unknown vehicle(s) {', '.join(unknown)}; known: {', '.join([*params.vehicles, *extra])}"
+        )
     name = entry.get("name") or f"{'_'.join(vehicles)}_{entry['scenario']}"
     clean = {k: v for k, v in entry.items() if k in SUITE_KEYS}
     clean["vehicles"] = vehicles

@@ -38,8 +38,12 @@ Outputs: `run --format jsonl|openlabel`; `sim --format native|pcap|rosbag2|mcap|
 
 
 def register(sub) -> None:
-    p = sub.add_parser("sources", help="list the recording layouts and live sources; check or convert a recording",
-                       description=TABLE, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = sub.add_parser(
+        "sources",
+        help="list the recording layouts and live sources; check or convert a recording",
+        description=TABLE,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     p.add_argument("--check", metavar="PATH", help="say which layout PATH is, its sensors, frames and rate")
     p.add_argument("--convert", metavar="REC", help="a recording (meta.yaml folder) to write in another layout")
     p.add_argument("--to", choices=["pcap", "rosbag2", "mcap", "pcd"], help="layout for --convert")
@@ -60,8 +64,10 @@ def run(args) -> int:
             raise UserError(str(err)) from err
         layout = getattr(rec, "layout", "recording")
         points = ", ".join(f"{n} {len(s.points)}" for n, s in first.scans.items())
-        print(f"{args.check}: {layout}, {len(rec)} frames at {rec.rate_hz:g} Hz, sensors {', '.join(rec.sensor_names)}; "
-              f"frame 0 points: {points}; parameters from {rec.sensors_file}")
+        print(
+            f"{args.check}: {layout}, {len(rec)} frames at {rec.rate_hz:g} Hz, sensors {', '.join(rec.sensor_names)}; "
+            f"frame 0 points: {points}; parameters from {rec.sensors_file}"
+        )
         return 0
     if args.convert:
         if not args.to or not args.out:

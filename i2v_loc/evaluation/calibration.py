@@ -51,8 +51,10 @@ def extrinsics_error(estimate, truth) -> tuple[float, float]:
     from i2v_loc.geometry import extrinsics_matrix, rotation_angle_rad
 
     a, b = extrinsics_matrix(estimate), extrinsics_matrix(truth)
-    return (float(100.0 * np.linalg.norm(a[:3, 3] - b[:3, 3])),
-            float(np.degrees(rotation_angle_rad(a[:3, :3], b[:3, :3]))))
+    return (
+        float(100.0 * np.linalg.norm(a[:3, 3] - b[:3, 3])),
+        float(np.degrees(rotation_angle_rad(a[:3, :3], b[:3, :3]))),
+    )
 
 
 def sensor_errors(used, truth) -> list[dict]:
@@ -114,8 +116,14 @@ def calibrate_recording(recording_path: str, patch: dict, cache_dir: str | Path 
         return _status(name, FROM_PARAMS, "sensors from the --params files (not calibrated here)", None, [])
     if not recording.sensors_guess_file.is_file():
         used = truth
-        return _status(name, NO_GUESS, "NO sensors_guess.yaml: evaluated with the recording's sensors.yaml "
-                                       "(true extrinsics for a simulated recording)", None, sensor_errors(used, truth))
+        return _status(
+            name,
+            NO_GUESS,
+            "NO sensors_guess.yaml: evaluated with the recording's sensors.yaml "
+            "(true extrinsics for a simulated recording)",
+            None,
+            sensor_errors(used, truth),
+        )
     guess = apply_patch(load_params(recording.sensors_guess_file), patch, source=f"{recording_path}: --params")
     cache = Path(cache_dir) if cache_dir else default_cache_dir()
     file = cache / f"{name}-{cache_key(recording, guess.calibration)[:20]}.json"
@@ -128,21 +136,31 @@ def calibrate_recording(recording_path: str, patch: dict, cache_dir: str | Path 
     calibrated = [s.model_copy(update={"extrinsics": by_name[s.name].extrinsics}) for s in guess.sensors]
     used = guess.sensors if refused else calibrated
     rows = []
-    for row, cal_row, guess_row in zip(sensor_errors(used, truth), sensor_errors(calibrated, truth),
-                                       sensor_errors(guess.sensors, truth)):
+    for row, cal_row, guess_row in zip(
+        sensor_errors(used, truth), sensor_errors(calibrated, truth), sensor_errors(guess.sensors, truth)
+    ):
         r = by_name[row["sensor"]]
-        row.update(fitness=r.fitness, inlier_rmse_m=r.inlier_rmse_m, target=r.target,
-                   calibrated_error_cm=cal_row["error_cm"], calibrated_error_deg=cal_row["error_deg"],
-                   guess_error_cm=guess_row["error_cm"], guess_error_deg=guess_row["error_deg"])
+        row.update(
+            fitness=r.fitness,
+            inlier_rmse_m=r.inlier_rmse_m,
+            target=r.target,
+            calibrated_error_cm=cal_row["error_cm"],
+            calibrated_error_deg=cal_row["error_deg"],
+            guess_error_cm=guess_row["error_cm"],
+            guess_error_deg=guess_row["error_deg"],
+        )
         rows.append(row)
     if refused:
         low = ", ".join(f"{r.name} ({r.fitness:.2f})" for r in results if r.fitness < guess.calibration.min_fitness)
-        message = (f"CALIBRATION REFUSED (fitness below {guess.calibration.min_fitness} for {low}): "
-                   "evaluated with the uncalibrated guess sensors_guess.yaml")
+        message = (
+            f"CALIBRATION REFUSED (fitness below {guess.calibration.min_fitness} for {low}): "
+            "evaluated with the uncalibrated guess sensors_guess.yaml"
+        )
         result = _status(name, REFUSED, message, [s.model_dump(mode="json") for s in used], rows)
     else:
-        result = _status(name, CALIBRATED, "calibrated from sensors_guess.yaml",
-                         [s.model_dump(mode="json") for s in used], rows)
+        result = _status(
+            name, CALIBRATED, "calibrated from sensors_guess.yaml", [s.model_dump(mode="json") for s in used], rows
+        )
     cache.mkdir(parents=True, exist_ok=True)
     tmp = file.with_suffix(f".{os.getpid()}.tmp")
     tmp.write_text(json.dumps(result, indent=1))
@@ -151,13 +169,24 @@ def calibrate_recording(recording_path: str, patch: dict, cache_dir: str | Path 
 
 
 def true_extrinsics_status(recording_path: str) -> dict:
-    return _status(Path(recording_path).name, TRUE, "TRUE extrinsics and clock offsets (--true-extrinsics: "
-                                                      "diagnosis only, not what a deployment has)", None, [])
+    return _status(
+        Path(recording_path).name,
+        TRUE,
+        "TRUE extrinsics and clock offsets (--true-extrinsics: diagnosis only, not what a deployment has)",
+        None,
+        [],
+    )
 
 
 def _status(name: str, status: str, message: str, sensors: list[dict] | None, rows: list[dict]) -> dict:
-    return {"recording": name, "status": status, "message": message, "sensors": sensors, "per_sensor": rows,
-            "cached": False}
+    return {
+        "recording": name,
+        "status": status,
+        "message": message,
+        "sensors": sensors,
+        "per_sensor": rows,
+        "cached": False,
+    }
 
 
 def calibration_job(item: tuple) -> dict:
@@ -182,8 +211,9 @@ def task_patch(patch: dict, calibration: dict) -> dict:
     return deep_merge({"sensors": calibration["sensors"]}, patch)
 
 
-def calibrate_recordings(recordings: list, patch: dict, true_extrinsics: bool = False,
-                         cache_dir: str | Path | None = None, **run_kwargs) -> dict[str, dict]:
+def calibrate_recordings(
+    recordings: list, patch: dict, true_extrinsics: bool = False, cache_dir: str | Path | None = None, **run_kwargs
+) -> dict[str, dict]:
     """``{recording path: calibrate_recording(...)}`` for every recording (in parallel like the
     evaluation's tasks; ``run_kwargs`` go to ``run_tasks``), or the true-extrinsics status."""
     from i2v_loc.evaluation.runner import run_tasks

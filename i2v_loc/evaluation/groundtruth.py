@@ -60,8 +60,9 @@ def _blend_vehicle(v0: dict, v1: dict, w: float) -> dict:
     return out
 
 
-def interpolate_ground_truth(lines: list[dict], stamp_s: float, max_gap_s: float | None = None,
-                             times: np.ndarray | None = None) -> dict:
+def interpolate_ground_truth(
+    lines: list[dict], stamp_s: float, max_gap_s: float | None = None, times: np.ndarray | None = None
+) -> dict:
     """The truth at ``stamp_s``: poses linearly interpolated between the two GT lines around it
     (yaw along the shorter arc); labels and point counts from the nearer line. A vehicle must be
     in both lines. Stamps outside the GT span by more than ``max_gap_s`` (default half a frame
@@ -145,16 +146,23 @@ def pair_units(trucks: list[dict], trailers: list[dict], gate_m: float = 8.0) ->
     return out
 
 
-def pair_linked(trucks: list[dict], trailers: list[dict], links: list[tuple[str, str]]) -> list[tuple[dict | None, dict | None]]:
+def pair_linked(
+    trucks: list[dict], trailers: list[dict], links: list[tuple[str, str]]
+) -> list[tuple[dict | None, dict | None]]:
     """Group units by the file's own (truck key, trailer key) links; the others stay alone."""
     by_key = {u["key"]: u for u in trucks + trailers}
     pairs = [(by_key[t], by_key[r]) for t, r in links if t in by_key and r in by_key]
     linked = {id(u) for pair in pairs for u in pair}
-    return pairs + [(t, None) for t in trucks if id(t) not in linked] + [(None, r) for r in trailers if id(r) not in linked]
+    return (
+        pairs
+        + [(t, None) for t in trucks if id(t) not in linked]
+        + [(None, r) for r in trailers if id(r) not in linked]
+    )
 
 
-def _vehicle_line(units: list[dict], frame: int, stamp_s: float, ids: dict, gate_m: float,
-                  links: list[tuple[str, str]] | None = None) -> dict:
+def _vehicle_line(
+    units: list[dict], frame: int, stamp_s: float, ids: dict, gate_m: float, links: list[tuple[str, str]] | None = None
+) -> dict:
     """One GT line from labelled units (dicts with kind, key, center, dimensions, yaw_deg, ...),
     paired by ``links`` (truck key, trailer key) when the labels have them, else by distance."""
     trucks = [u for u in units if u["kind"] == "truck"]
@@ -162,7 +170,9 @@ def _vehicle_line(units: list[dict], frame: int, stamp_s: float, ids: dict, gate
     vehicles = []
     if links is not None:  # in the file's order
         position = {id(u): i for i, u in enumerate(units)}
-        pairs = sorted(pair_linked(trucks, trailers, links), key=lambda p: min(position[id(u)] for u in p if u is not None))
+        pairs = sorted(
+            pair_linked(trucks, trailers, links), key=lambda p: min(position[id(u)] for u in p if u is not None)
+        )
     else:
         pairs = pair_units(trucks, trailers, gate_m)
     for truck, trailer in pairs:
@@ -211,8 +221,13 @@ def _apply_transform(unit: dict, transform: np.ndarray | None) -> dict:
     return unit
 
 
-def load_openlabel(path: str | Path, rate_hz: float = 10.0, transform=None, stamp_origin_s: float | None = None,
-                   pair_gate_m: float = 8.0) -> list[dict]:
+def load_openlabel(
+    path: str | Path,
+    rate_hz: float = 10.0,
+    transform=None,
+    stamp_origin_s: float | None = None,
+    pair_gate_m: float = 8.0,
+) -> list[dict]:
     """GT lines from ASAM OpenLABEL (TUMTraf style): one file with many frames, or a folder of
     one-frame files. Cuboid ``val`` = [x, y, z, qx, qy, qz, qw, length, width, height]; classes
     TRUCK and TRAILER; ``num_points`` becomes ``points``; optional text attributes ``vehicle`` and
@@ -248,8 +263,9 @@ def load_openlabel(path: str | Path, rate_hz: float = 10.0, transform=None, stam
     origin = stamp_origin_s if stamp_origin_s is not None else (min(stamps) if stamps else 0.0)
     ids: dict = {}
     return [
-        _vehicle_line(units, number, (float(stamp) - origin) if stamp is not None else number / rate_hz, ids, pair_gate_m,
-                      links)
+        _vehicle_line(
+            units, number, (float(stamp) - origin) if stamp is not None else number / rate_hz, ids, pair_gate_m, links
+        )
         for number, stamp, units, links in frames
     ]
 
@@ -285,18 +301,23 @@ def _openlabel_units(frame: dict, static: dict, file: Path, transform) -> list[d
         attrs = cuboid.get("attributes") or {}
         points = _attribute(attrs, "num", "num_points")
         unit = {
-            "kind": kind, "key": key, "center": val[0:3], "dimensions": val[7:10],
+            "kind": kind,
+            "key": key,
+            "center": val[0:3],
+            "dimensions": val[7:10],
             "yaw_deg": yaw_from_quaternion_deg(*val[3:7]),
             "points": int(points) if points is not None else None,
-            "vehicle": _attribute(attrs, "text", "vehicle") or _attribute(fixed.get("object_data") or {}, "text", "vehicle"),
+            "vehicle": _attribute(attrs, "text", "vehicle")
+            or _attribute(fixed.get("object_data") or {}, "text", "vehicle"),
             "maneuver": _attribute(attrs, "text", "maneuver"),
         }
         units.append(_apply_transform(unit, transform))
     return units
 
 
-def load_labelcloud(path: str | Path, rate_hz: float = 10.0, rotation_unit: str = "auto", transform=None,
-                    pair_gate_m: float = 8.0) -> list[dict]:
+def load_labelcloud(
+    path: str | Path, rate_hz: float = 10.0, rotation_unit: str = "auto", transform=None, pair_gate_m: float = 8.0
+) -> list[dict]:
     """GT lines from labelCloud's JSON export: one file per point cloud (a folder, or one file).
 
     Formats: ``centroid_abs`` (rotations in degrees, 0..360), ``centroid_rel`` (radians, -pi..pi)
@@ -354,11 +375,20 @@ def _labelcloud_unit(obj: dict, file: Path, rotation_unit: str, transform) -> di
             dims = [float(obj["dimensions"][k]) for k in ("length", "width", "height")]
             rot_z = float(obj["rotations"]["z"])
         except (KeyError, TypeError, ValueError) as err:
-            raise GroundTruthError(f"{file}: object {name!r}: needs centroid x/y/z, dimensions length/width/height and rotations z") from err
+            raise GroundTruthError(
+                f"{file}: object {name!r}: needs centroid x/y/z, dimensions length/width/height and rotations z"
+            ) from err
         radians = rotation_unit == "rad" or (rotation_unit == "auto" and rot_z < 0)
         yaw = math.degrees(rot_z) if radians else rot_z
-    unit = {"kind": kind, "center": center, "dimensions": dims, "yaw_deg": yaw, "points": None,
-            "vehicle": vehicle, "maneuver": None}
+    unit = {
+        "kind": kind,
+        "center": center,
+        "dimensions": dims,
+        "yaw_deg": yaw,
+        "points": None,
+        "vehicle": vehicle,
+        "maneuver": None,
+    }
     return _apply_transform(unit, transform)
 
 

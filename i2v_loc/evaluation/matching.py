@@ -75,10 +75,7 @@ def _hitch(vehicle: dict | None) -> float:
 
 
 def _both_posed(vehicle: dict | None) -> bool:
-    return bool(
-        vehicle
-        and all(vehicle.get(u) is not None and vehicle[u].get("yaw_deg") is not None for u in UNITS)
-    )
+    return bool(vehicle and all(vehicle.get(u) is not None and vehicle[u].get("yaw_deg") is not None for u in UNITS))
 
 
 def _front_to_rear(vehicle: dict, config) -> np.ndarray:
@@ -89,11 +86,21 @@ def _front_to_rear(vehicle: dict, config) -> np.ndarray:
 
 def _dcap_fields(prefix: str, estimate: np.ndarray | None, truth: np.ndarray | None) -> dict:
     if estimate is None or truth is None:
-        return {f"{prefix}_dx_m": NAN, f"{prefix}_dy_m": NAN, f"{prefix}_dz_m": NAN,
-                f"{prefix}_dT_m": NAN, f"{prefix}_rra_rad": NAN}
+        return {
+            f"{prefix}_dx_m": NAN,
+            f"{prefix}_dy_m": NAN,
+            f"{prefix}_dz_m": NAN,
+            f"{prefix}_dT_m": NAN,
+            f"{prefix}_rra_rad": NAN,
+        }
     d = estimate[:3, 3] - truth[:3, 3]
-    return {f"{prefix}_dx_m": float(d[0]), f"{prefix}_dy_m": float(d[1]), f"{prefix}_dz_m": float(d[2]),
-            f"{prefix}_dT_m": float(np.linalg.norm(d)), f"{prefix}_rra_rad": rotation_angle_rad(estimate[:3, :3], truth[:3, :3])}
+    return {
+        f"{prefix}_dx_m": float(d[0]),
+        f"{prefix}_dy_m": float(d[1]),
+        f"{prefix}_dz_m": float(d[2]),
+        f"{prefix}_dT_m": float(np.linalg.norm(d)),
+        f"{prefix}_rra_rad": rotation_angle_rad(estimate[:3, :3], truth[:3, :3]),
+    }
 
 
 def _success_fields(rec: dict) -> dict:
@@ -102,9 +109,14 @@ def _success_fields(rec: dict) -> dict:
     hitch within its threshold (metrics.within_success)."""
     both = all(rec[f"{u}_reported"] for u in UNITS)
     success = both and within_success(
-        [rec[f"{u}_pos_err_m"] for u in UNITS], [rec[f"{u}_yaw_err_deg"] for u in UNITS], rec["hitch_err_deg"])
-    return {"visible": all(rec[f"{u}_eligible"] for u in UNITS),
-            "both_in_gt": all(rec[f"{u}_in_gt"] for u in UNITS), "both_reported": both, "success": bool(success)}
+        [rec[f"{u}_pos_err_m"] for u in UNITS], [rec[f"{u}_yaw_err_deg"] for u in UNITS], rec["hitch_err_deg"]
+    )
+    return {
+        "visible": all(rec[f"{u}_eligible"] for u in UNITS),
+        "both_in_gt": all(rec[f"{u}_in_gt"] for u in UNITS),
+        "both_reported": both,
+        "success": bool(success),
+    }
 
 
 def vehicle_record(gt: dict | None, est: dict | None, params: Params) -> dict:
@@ -160,8 +172,12 @@ def match_frame(state: dict, gt_line: dict, params: Params, gate_m: float, perio
 
 
 def frame_row(state: dict, n_gt: int) -> dict:
-    row = {"frame": state.get("frame"), "stamp_s": state.get("stamp_s"),
-           "n_gt_vehicles": n_gt, "n_est_vehicles": len(state.get("vehicles") or [])}
+    row = {
+        "frame": state.get("frame"),
+        "stamp_s": state.get("stamp_s"),
+        "n_gt_vehicles": n_gt,
+        "n_est_vehicles": len(state.get("vehicles") or []),
+    }
     for stage, ms in (state.get("latency_ms") or {}).items():
         row[f"latency_{stage}_ms"] = float(ms) if ms is not None else NAN
     return row
@@ -176,7 +192,9 @@ def frame_period_s(gt_times: np.ndarray, state_stamps: list) -> float:
     return NAN
 
 
-def match_states(states: list[dict], gt_lines: list[dict], params: Params, gate_m: float = 4.0) -> tuple[list[dict], list[dict]]:
+def match_states(
+    states: list[dict], gt_lines: list[dict], params: Params, gate_m: float = 4.0
+) -> tuple[list[dict], list[dict]]:
     """Records and frame rows of a whole run. Each state is compared with the truth interpolated
     to its ``stamp_s`` (falling back to the GT line of the same frame when it has no stamp)."""
     records, frames = [], []

@@ -62,8 +62,11 @@ def within_success(position_errors_m, yaw_errors_deg, hitch_error_deg) -> bool:
     pos = np.abs(np.asarray(position_errors_m, float))
     yaw = np.abs(np.asarray(yaw_errors_deg, float))
     hitch = abs(float(hitch_error_deg))
-    return bool(np.all(pos <= SUCCESS_POSITION_M + _TOLERANCE) and np.all(yaw <= SUCCESS_YAW_DEG + _TOLERANCE)
-                and hitch <= SUCCESS_HITCH_DEG + _TOLERANCE)
+    return bool(
+        np.all(pos <= SUCCESS_POSITION_M + _TOLERANCE)
+        and np.all(yaw <= SUCCESS_YAW_DEG + _TOLERANCE)
+        and hitch <= SUCCESS_HITCH_DEG + _TOLERANCE
+    )
 
 
 def flip_count(yaw_errors_deg) -> int:

@@ -18,8 +18,20 @@ from i2v_loc.evaluation.summary import MANEUVERS, summarize_groups
 from i2v_loc.geometry import box_corners
 
 STAGE_ORDER = ["concatenation", "region", "clustering", "classification", "centroid", "tracking", "orientation"]
-LEAD_COLUMNS = ["method", "subset", "recording", "tag", "frame", "stamp_s", "kind", "gt_id", "vehicle", "maneuver",
-                "est_id", "est_vehicle"]
+LEAD_COLUMNS = [
+    "method",
+    "subset",
+    "recording",
+    "tag",
+    "frame",
+    "stamp_s",
+    "kind",
+    "gt_id",
+    "vehicle",
+    "maneuver",
+    "est_id",
+    "est_vehicle",
+]
 
 
 # --------------------------------------------------------------------------- results
@@ -39,8 +51,9 @@ def collect(task_results: list[dict]) -> dict:
             if value not in seq:
                 seq.append(value)
     subsets.sort(key=lambda s: (s == "all", s.count("+"), s))
-    results = {m: {s: summarize_groups(records[(m, s)], frames[(m, s)]) for s in subsets if (m, s) in records}
-               for m in methods}
+    results = {
+        m: {s: summarize_groups(records[(m, s)], frames[(m, s)]) for s in subsets if (m, s) in records} for m in methods
+    }
     primary = subsets[-1]
     return {
         "recordings": recordings,
@@ -99,8 +112,9 @@ def _write_csv(path: Path, rows: list[dict]) -> None:
         writer = csv.DictWriter(fh, fieldnames=keys, extrasaction="ignore")
         writer.writeheader()
         for row in rows:
-            writer.writerow({k: ("" if v is None or (isinstance(v, float) and math.isnan(v)) else v)
-                             for k, v in row.items()})
+            writer.writerow(
+                {k: ("" if v is None or (isinstance(v, float) and math.isnan(v)) else v) for k, v in row.items()}
+            )
 
 
 # --------------------------------------------------------------------------- markdown
@@ -176,20 +190,28 @@ def render_markdown(summary: dict, plot_files: list[Path]) -> str:
 
 
 _COMPARE_ROWS = [
-    ("success rate", "success_rate", None), ("truck coverage", "truck_coverage", None),
-    ("trailer coverage", "trailer_coverage", None), ("both units (hitch coverage)", "both_units_rate", None),
+    ("success rate", "success_rate", None),
+    ("truck coverage", "truck_coverage", None),
+    ("trailer coverage", "trailer_coverage", None),
+    ("both units (hitch coverage)", "both_units_rate", None),
     ("truck position RMSE [m], reported frames only", "truck_pos_rmse_m", 3),
     ("truck yaw RMSE [deg], reported frames only", "truck_yaw_rmse_deg", 2),
     ("trailer position RMSE [m], reported frames only", "trailer_pos_rmse_m", 3),
     ("trailer yaw RMSE [deg], reported frames only", "trailer_yaw_rmse_deg", 2),
     ("hitch angle RMSE [deg], both-reported frames only", "hitch_rmse_deg", 2),
-    ("heading flips", "heading_flip_rate", None), ("truck flip frames", "truck_flip_frames", 0),
+    ("heading flips", "heading_flip_rate", None),
+    ("truck flip frames", "truck_flip_frames", 0),
     ("trailer flip frames", "trailer_flip_frames", 0),
-    ("truck detection rate", "truck_detection_rate", None), ("trailer detection rate", "trailer_detection_rate", None),
-    ("ΔT [m]", "delta_T_m", 3), ("RRA [rad]", "rra_rad", 4), ("false vehicles", "false_vehicles", 0),
-    ("false vehicle-seconds", "false_vehicle_s", 1), ("  of which wrong type", "wrong_type_vehicle_s", 1),
+    ("truck detection rate", "truck_detection_rate", None),
+    ("trailer detection rate", "trailer_detection_rate", None),
+    ("ΔT [m]", "delta_T_m", 3),
+    ("RRA [rad]", "rra_rad", 4),
+    ("false vehicles", "false_vehicles", 0),
+    ("false vehicle-seconds", "false_vehicle_s", 1),
+    ("  of which wrong type", "wrong_type_vehicle_s", 1),
     ("  of which in the first 5 s", "false_vehicle_s_first_5s", 1),
-    ("vehicle id switches", "vehicle_id_switches", 0), ("latency mean [ms]", "latency_ms_mean", 1),
+    ("vehicle id switches", "vehicle_id_switches", 0),
+    ("latency mean [ms]", "latency_ms_mean", 1),
     ("latency p95 [ms]", "latency_ms_p95", 1),
 ]
 
@@ -199,10 +221,16 @@ def _extrinsics_banner(calibration: dict) -> list[str]:
         return []
     entries = list(calibration.values())
     if all(c["status"] == TRUE for c in entries):
-        return ["**Sensor extrinsics: the recordings' TRUE extrinsics and clock offsets (`--true-extrinsics`,",
-                "diagnosis only; a deployment calibrates).**", ""]
-    lines = ["Sensor extrinsics: each recording calibrated from its `sensors_guess.yaml` as a deployment would",
-             "(`i2v-loc calibrate`, clock offsets as in the guess); errors against the truth below the first table.", ""]
+        return [
+            "**Sensor extrinsics: the recordings' TRUE extrinsics and clock offsets (`--true-extrinsics`,",
+            "diagnosis only; a deployment calibrates).**",
+            "",
+        ]
+    lines = [
+        "Sensor extrinsics: each recording calibrated from its `sensors_guess.yaml` as a deployment would",
+        "(`i2v-loc calibrate`, clock offsets as in the guess); errors against the truth below the first table.",
+        "",
+    ]
     for c in entries:
         if c["status"] in LOUD:
             lines += [f"> **WARNING — {c['recording']}: {c['message']}**", ""]
@@ -229,8 +257,9 @@ def _headline_table(res, methods, primary) -> list[str]:
     ]
     for vehicle, m, s in _vehicle_summaries(res, methods, primary):
         if not s["gt_vehicle_frames"]:
-            lines.append(f"| {_name(vehicle)} (not in the truth) | {m} | – | – | – | – | – | – "
-                         f"| {_f(s['false_vehicle_s'], 1)} |")
+            lines.append(
+                f"| {_name(vehicle)} (not in the truth) | {m} | – | – | – | – | – | – | {_f(s['false_vehicle_s'], 1)} |"
+            )
             continue
         lines.append(
             f"| {_name(vehicle)} | {m} | {_pct_of(s, 'success_rate')} ({s['success_frames']}/{s['visible_frames']}) "
@@ -255,11 +284,15 @@ def _calibration_table(calibration: dict) -> list[str]:
     entries = [c for c in calibration.values() if c["status"] != TRUE]
     if not entries:
         return []
-    lines = ["## Calibration: each sensor's error against the truth", "",
-             "Used = the extrinsics the evaluation ran with (the calibrated ones, or the guess when refused).", "",
-             "| Recording | Status | Sensor | Fitness | Used: error [cm] / [deg] | Calibrated [cm] / [deg] "
-             "| Guess [cm] / [deg] | Clock offset error [ms] |",
-             "|---|---|---|---|---|---|---|---|"]
+    lines = [
+        "## Calibration: each sensor's error against the truth",
+        "",
+        "Used = the extrinsics the evaluation ran with (the calibrated ones, or the guess when refused).",
+        "",
+        "| Recording | Status | Sensor | Fitness | Used: error [cm] / [deg] | Calibrated [cm] / [deg] "
+        "| Guess [cm] / [deg] | Clock offset error [ms] |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
     for c in entries:
         status = c["status"] + (" (cached)" if c.get("cached") else "")
         if c["status"] in LOUD:
@@ -277,8 +310,12 @@ def _calibration_table(calibration: dict) -> list[str]:
 
 
 def _method_comparison(res, methods, primary) -> list[str]:
-    lines = ["## Methods side by side (all vehicles)", "", "| metric | " + " | ".join(methods) + " |",
-             "|---|" + "---|" * len(methods)]
+    lines = [
+        "## Methods side by side (all vehicles)",
+        "",
+        "| metric | " + " | ".join(methods) + " |",
+        "|---|" + "---|" * len(methods),
+    ]
     for label, key, digits in _COMPARE_ROWS:
         cells = []
         for m in methods:
@@ -364,15 +401,25 @@ def _dcap_table(res, methods, primary) -> list[str]:
     ]
     first = res[methods[0]][primary]["overall"]
     keys = ("delta_T_m", "delta_x_m", "delta_y_m", "delta_z_m", "rra_rad")
-    lines.append(f"| ours: static calibration (hitch 0) | {first['static_dcap_frames']} | "
-                 + " | ".join(_f(first[f"static_{k}"], 3) for k in keys) + " |")
+    lines.append(
+        f"| ours: static calibration (hitch 0) | {first['static_dcap_frames']} | "
+        + " | ".join(_f(first[f"static_{k}"], 3) for k in keys)
+        + " |"
+    )
     for m in methods:
         s = res[m][primary]["overall"]
         lines.append(f"| ours: {m} | {s['dcap_frames']} | " + " | ".join(_f(s[k], 3) for k in keys) + " |")
     for label, values in pub.DCAP_TABLE2.items():
-        lines.append(f"| *published (dCAP, CARLA cameras)*: {label} | – | " + " | ".join(_f(v, 3) for v in values) + " |")
-    lines += ["", "Per vehicle (ours):", "", "| Vehicle | Method | ΔT [m] | Δx [m] | Δy [m] | Δz [m] | RRA [rad] |",
-              "|---|---|---|---|---|---|---|"]
+        lines.append(
+            f"| *published (dCAP, CARLA cameras)*: {label} | – | " + " | ".join(_f(v, 3) for v in values) + " |"
+        )
+    lines += [
+        "",
+        "Per vehicle (ours):",
+        "",
+        "| Vehicle | Method | ΔT [m] | Δx [m] | Δy [m] | Δz [m] | RRA [rad] |",
+        "|---|---|---|---|---|---|---|",
+    ]
     for vehicle in _vehicles(res, methods, primary):
         s0 = res[methods[0]][primary]["by_vehicle"].get(vehicle)
         if s0:
@@ -414,7 +461,9 @@ def _latency_table(res, methods, primary) -> list[str]:
     lines = ["## Latency per stage [ms] (mean / p50 / p95)", ""]
     for m in methods:
         s = res[m][primary]["overall"]
-        found = {k[len("latency_"):-len("_ms_mean")] for k in s if k.startswith("latency_") and k.endswith("_ms_mean")}
+        found = {
+            k[len("latency_") : -len("_ms_mean")] for k in s if k.startswith("latency_") and k.endswith("_ms_mean")
+        }
         found.discard("")  # latency_ms_mean is the total
         stages = sorted(found, key=lambda st: (STAGE_ORDER.index(st) if st in STAGE_ORDER else len(STAGE_ORDER), st))
         if not stages and "latency_ms_mean" not in s:
@@ -424,8 +473,10 @@ def _latency_table(res, methods, primary) -> list[str]:
         for stage in stages:
             p = f"latency_{stage}_ms"
             lines.append(f"| {stage} | {_f(s.get(p + '_mean'))} | {_f(s.get(p + '_p50'))} | {_f(s.get(p + '_p95'))} |")
-        lines.append(f"| **total** | {_f(s.get('latency_ms_mean'))} | {_f(s.get('latency_ms_p50'))} "
-                     f"| {_f(s.get('latency_ms_p95'))} |")
+        lines.append(
+            f"| **total** | {_f(s.get('latency_ms_mean'))} | {_f(s.get('latency_ms_p50'))} "
+            f"| {_f(s.get('latency_ms_p95'))} |"
+        )
         lines.append("")
     return lines
 
@@ -433,28 +484,37 @@ def _latency_table(res, methods, primary) -> list[str]:
 def _subset_tables(res, methods, subsets) -> list[str]:
     sensors = sorted({name for s in subsets if s != "all" for name in s.split("+")})
     lines = ["## Tables 3-5 layout: sensor subsets", ""]
-    vehicles = sorted({v for m in methods for s in subsets for v in res[m].get(s, {}).get("by_vehicle", {})},
-                      key=lambda v: (list(pub.PAPER_NAMES).index(v) if v in pub.PAPER_NAMES else 9, v))
+    vehicles = sorted(
+        {v for m in methods for s in subsets for v in res[m].get(s, {}).get("by_vehicle", {})},
+        key=lambda v: (list(pub.PAPER_NAMES).index(v) if v in pub.PAPER_NAMES else 9, v),
+    )
     for vehicle in vehicles:
         number = pub.SUBSET_TABLE_NUMBER.get(vehicle)
         title = f"Table {number} layout" if number else "Sensor subsets"
-        lines += [f"### {title}: {_name(vehicle)}", "",
-                  "| " + " | ".join(sensors) + " | Source | Truck pos / orient | Trailer pos / orient | RMSE HAE [deg] "
-                  "| Inference time [ms] |",
-                  "|" + "---|" * (len(sensors) + 5)]
+        lines += [
+            f"### {title}: {_name(vehicle)}",
+            "",
+            "| " + " | ".join(sensors) + " | Source | Truck pos / orient | Trailer pos / orient | RMSE HAE [deg] "
+            "| Inference time [ms] |",
+            "|" + "---|" * (len(sensors) + 5),
+        ]
         for subset in subsets:
             members = set(subset.split("+")) if subset != "all" else set(sensors)
             marks = " | ".join("✓" if s in members else "-" for s in sensors)
             for m in methods:
                 s = res[m].get(subset, {}).get("by_vehicle", {}).get(vehicle)
                 if s and s["gt_vehicle_frames"]:
-                    lines.append(f"| {marks} | ours: {m} | {_pair(s['truck_pos_rmse_m'], s['truck_yaw_rmse_deg'])} "
-                                 f"| {_pair(s['trailer_pos_rmse_m'], s['trailer_yaw_rmse_deg'])} "
-                                 f"| {_f(s['hitch_rmse_deg'])} | {_f(s.get('latency_ms_mean'), 1)} |")
+                    lines.append(
+                        f"| {marks} | ours: {m} | {_pair(s['truck_pos_rmse_m'], s['truck_yaw_rmse_deg'])} "
+                        f"| {_pair(s['trailer_pos_rmse_m'], s['trailer_yaw_rmse_deg'])} "
+                        f"| {_f(s['hitch_rmse_deg'])} | {_f(s.get('latency_ms_mean'), 1)} |"
+                    )
             p = pub.SUBSET_TABLES.get(vehicle, {}).get(tuple(sorted(members)))
             if p:
-                lines.append(f"| {marks} | *published (real data)* | {_pair(p['truck_pos'], p['truck_yaw'])} "
-                             f"| {_pair(p['trailer_pos'], p['trailer_yaw'])} | {_f(p['hitch'])} | {p['ms']} |")
+                lines.append(
+                    f"| {marks} | *published (real data)* | {_pair(p['truck_pos'], p['truck_yaw'])} "
+                    f"| {_pair(p['trailer_pos'], p['trailer_yaw'])} | {_f(p['hitch'])} | {p['ms']} |"
+                )
         lines.append("")
     return lines
 
@@ -501,18 +561,29 @@ def _plot_bev(plt, records: list[dict], path: Path, title: str) -> Path:
                 if not math.isfinite(length):
                     continue
                 corners = box_corners((x, y), length, width, math.radians(r[f"{unit}_yaw_{tag}"]))
-                ax.add_patch(Polygon(corners, closed=True, fill=False, edgecolor=styles[(unit, tag)],
-                                     lw=1.6 if tag == "gt" else 1.0))
+                ax.add_patch(
+                    Polygon(
+                        corners, closed=True, fill=False, edgecolor=styles[(unit, tag)], lw=1.6 if tag == "gt" else 1.0
+                    )
+                )
     for unit, colour in (("truck", "green"), ("trailer", "gold")):
         xs = [r[f"{unit}_x_gt"] for r in gt]
         ys = [r[f"{unit}_y_gt"] for r in gt]
         ax.plot(xs, ys, color="red", lw=0.6, alpha=0.6)
-        ax.plot([r[f"{unit}_x_est"] for r in gt], [r[f"{unit}_y_est"] for r in gt], ".", color=colour, ms=2,
-                label=f"{unit} estimate")
+        ax.plot(
+            [r[f"{unit}_x_est"] for r in gt],
+            [r[f"{unit}_y_est"] for r in gt],
+            ".",
+            color=colour,
+            ms=2,
+            label=f"{unit} estimate",
+        )
     ax.plot([], [], color="red", label="ground truth")
     falses = [r for r in records if r["kind"] == "false"]
     if falses:
-        ax.plot([r["truck_x_est"] for r in falses], [r["truck_y_est"] for r in falses], "kx", ms=4, label="false vehicle")
+        ax.plot(
+            [r["truck_x_est"] for r in falses], [r["truck_y_est"] for r in falses], "kx", ms=4, label="false vehicle"
+        )
     ax.set_aspect("equal", adjustable="datalim")
     ax.set_xlabel("x east [m]")
     ax.set_ylabel("y north [m]")
@@ -548,9 +619,14 @@ def _plot_histograms(plt, records: list[dict], path: Path, title: str) -> Path:
     from i2v_loc.evaluation.summary import column
 
     gt = [r for r in records if r["kind"] == "gt"]
-    panels = [("truck_pos_err_m", "truck position error [m]"), ("trailer_pos_err_m", "trailer position error [m]"),
-              ("truck_yaw_err_deg", "truck yaw error [deg]"), ("trailer_yaw_err_deg", "trailer yaw error [deg]"),
-              ("hitch_err_deg", "hitch angle error [deg]"), ("dcap_dT_m", "dCAP ΔT [m]")]
+    panels = [
+        ("truck_pos_err_m", "truck position error [m]"),
+        ("trailer_pos_err_m", "trailer position error [m]"),
+        ("truck_yaw_err_deg", "truck yaw error [deg]"),
+        ("trailer_yaw_err_deg", "trailer yaw error [deg]"),
+        ("hitch_err_deg", "hitch angle error [deg]"),
+        ("dcap_dT_m", "dCAP ΔT [m]"),
+    ]
     fig, axes = plt.subplots(2, 3, figsize=(11, 6))
     for ax, (key, label) in zip(axes.ravel(), panels):
         v = column(gt, key)

@@ -63,8 +63,8 @@ def recording_params(patch: dict, recording: str, sensors: Sequence[str] | None)
 
 def run_pipeline(task: Task) -> list[dict]:
     """State lines of the pipeline on every frame of the task's recording."""
-    from i2v_loc.pipeline import Pipeline
     from i2v_loc.formats import open_recording
+    from i2v_loc.pipeline import Pipeline
 
     rec = open_recording(task.recording)
     params = recording_params(task.params, task.recording, task.sensors)
@@ -96,8 +96,15 @@ def run_task(task: Task) -> dict:
     return {"task": tags, "records": records, "frames": frames}
 
 
-def run_tasks(tasks: Sequence, func: Callable = run_task, workers: int = 1, executor: str = "local",
-              address: str | None = None, progress: bool = True, desc: str = "evaluating") -> list:
+def run_tasks(
+    tasks: Sequence,
+    func: Callable = run_task,
+    workers: int = 1,
+    executor: str = "local",
+    address: str | None = None,
+    progress: bool = True,
+    desc: str = "evaluating",
+) -> list:
     """``func`` over ``tasks``, results in task order, with a tqdm progress bar."""
     from tqdm import tqdm
 
@@ -135,7 +142,8 @@ DASK_CONNECT_TIMEOUT = "10s"
 
 def _run_dask(tasks, func, workers, address, bar) -> list:
     try:
-        from distributed import Client, LocalCluster, as_completed as dask_completed
+        from distributed import Client, LocalCluster
+        from distributed import as_completed as dask_completed
     except ImportError as err:
         raise EvaluationError("the dask executor needs Dask distributed: pip install 'i2v-loc[distributed]'") from err
     cluster = None

@@ -10,8 +10,16 @@ from i2v_loc.evaluation import metrics as m
 
 TASK_KEYS = ("method", "subset", "recording")
 EARLY_S = 5.0  # false vehicles cluster in the first seconds (no background, no track history yet)
-MANEUVERS = ("straight", "single_turn", "long_curve", "u_turn", "lane_change", "roundabout",
-             "reverse_docking", "standstill")
+MANEUVERS = (
+    "straight",
+    "single_turn",
+    "long_curve",
+    "u_turn",
+    "lane_change",
+    "roundabout",
+    "reverse_docking",
+    "standstill",
+)
 
 
 def column(records: list[dict], key: str) -> np.ndarray:
@@ -48,16 +56,22 @@ def _false_seconds(false: list[dict]) -> dict[str, float]:
     seconds = column(false, "false_s")
     wrong = np.array([r.get("wrong_type_of") is not None for r in false], bool)
     early = column(false, "since_start_s") < EARLY_S
-    total = (lambda mask: float(seconds[mask].sum()) if mask.any() else 0.0)
-    return {"false_vehicle_s": total(np.ones(len(false), bool)), "wrong_type_vehicle_s": total(wrong),
-            "false_vehicle_s_first_5s": total(early)}
+
+    def total(mask):
+        return float(seconds[mask].sum()) if mask.any() else 0.0
+
+    return {
+        "false_vehicle_s": total(np.ones(len(false), bool)),
+        "wrong_type_vehicle_s": total(wrong),
+        "false_vehicle_s_first_5s": total(early),
+    }
 
 
 def _latency(frame_rows: list[dict]) -> dict[str, float]:
     stages = sorted({k for row in frame_rows for k in row if k.startswith("latency_")})
     out = {}
     for key in stages:
-        stage = key[len("latency_"):-len("_ms")]
+        stage = key[len("latency_") : -len("_ms")]
         stats = m.latency_stats(column(frame_rows, key))
         prefix = "latency_ms" if stage == "total" else f"latency_{stage}_ms"
         for stat, value in stats.items():
@@ -94,7 +108,10 @@ def summarize(records: list[dict], frame_rows: list[dict]) -> dict:
         dt = column(gt, f"{prefix}_dT_m")
         ok = np.isfinite(dt)
         out[f"{label}dcap_frames"] = int(ok.sum())
-        mean = (lambda a: float(np.mean(np.abs(a[ok]))) if ok.any() else float("nan"))
+
+        def mean(a, ok=ok):
+            return float(np.mean(np.abs(a[ok]))) if ok.any() else float("nan")
+
         out[f"{label}delta_T_m"] = mean(dt)
         for axis in "xyz":
             out[f"{label}delta_{axis}_m"] = mean(column(gt, f"{prefix}_d{axis}_m"))
@@ -135,5 +152,7 @@ def summarize_groups(records: list[dict], frame_rows: list[dict]) -> dict:
         "overall": summarize(records, frame_rows),
         "by_vehicle": group("vehicle"),
         "by_maneuver": group("maneuver"),
-        "by_recording": {str(k): summarize(recs_by_recording.get(k, []), rows) for k, rows in sorted(by_recording.items())},
+        "by_recording": {
+            str(k): summarize(recs_by_recording.get(k, []), rows) for k, rows in sorted(by_recording.items())
+        },
     }

@@ -10,14 +10,28 @@ import math
 from collections import defaultdict
 from pathlib import Path
 
-from i2v_loc.params import ParamsError, Params, apply_patch, dump_yaml, read_yaml
+from i2v_loc.params import Params, ParamsError, apply_patch, dump_yaml, read_yaml
 
 RANK_KEYS = {"hitch_rmse_deg": 1.0, "success_rate": -1.0}  # the rank key and its sign (ascending order)
 RANK_KEY = "hitch_rmse_deg"
 TIE_KEYS = ("hitch_rmse_deg", "trailer_yaw_rmse_deg", "truck_yaw_rmse_deg")
-SHOWN = ("hitch_rmse_deg", "success_rate", "both_units_rate", "false_vehicle_s", "truck_pos_rmse_m", "trailer_pos_rmse_m", "truck_yaw_rmse_deg", "trailer_yaw_rmse_deg",
-         "heading_flip_rate", "truck_detection_rate", "trailer_detection_rate", "delta_T_m", "rra_rad",
-         "false_vehicles", "latency_ms_p50")
+SHOWN = (
+    "hitch_rmse_deg",
+    "success_rate",
+    "both_units_rate",
+    "false_vehicle_s",
+    "truck_pos_rmse_m",
+    "trailer_pos_rmse_m",
+    "truck_yaw_rmse_deg",
+    "trailer_yaw_rmse_deg",
+    "heading_flip_rate",
+    "truck_detection_rate",
+    "trailer_detection_rate",
+    "delta_T_m",
+    "rra_rad",
+    "false_vehicles",
+    "latency_ms_p50",
+)
 
 
 def load_grid(path: str | Path, base: Params) -> dict[str, list]:
@@ -66,8 +80,10 @@ def combinations(grid: dict[str, list], base: Params) -> list[tuple[dict, Params
 def rank(combos: list[tuple[dict, Params]], summaries: list[dict], by: str = RANK_KEY) -> list[dict]:
     """Rows sorted by ``by`` (hitch RMSE ascending or success rate descending; missing values
     last), ties broken by the hitch and yaw RMSEs."""
-    rows = [{"combination": i, "values": flat, "metrics": summary}
-            for i, ((flat, _), summary) in enumerate(zip(combos, summaries))]
+    rows = [
+        {"combination": i, "values": flat, "metrics": summary}
+        for i, ((flat, _), summary) in enumerate(zip(combos, summaries))
+    ]
     sign = RANK_KEYS[by]
 
     def key(row):
@@ -95,8 +111,14 @@ def summarize_by_tag(task_results: list[dict], n_combos: int) -> list[dict]:
     return [summarize(records[f"c{i}"], frames[f"c{i}"]) for i in range(n_combos)]
 
 
-def write_sweep(rows: list[dict], combos: list[tuple[dict, Params]], out_dir: str | Path, recordings: list[str],
-                with_sensors: bool = False, ranked_by: str = RANK_KEY) -> dict:
+def write_sweep(
+    rows: list[dict],
+    combos: list[tuple[dict, Params]],
+    out_dir: str | Path,
+    recordings: list[str],
+    with_sensors: bool = False,
+    ranked_by: str = RANK_KEY,
+) -> dict:
     """sweep.csv, sweep.json, sweep.md and best_params.yaml. The best parameters leave the sensors
     out unless ``with_sensors`` (the --params files set them): each recording brings its own."""
     out = Path(out_dir)
@@ -106,22 +128,43 @@ def write_sweep(rows: list[dict], combos: list[tuple[dict, Params]], out_dir: st
         writer = csv.writer(fh)
         writer.writerow(["rank", "combination"] + keys + list(SHOWN))
         for row in rows:
-            writer.writerow([row["rank"], row["combination"]] + [row["values"][k] for k in keys]
-                            + [_cell(row["metrics"].get(k)) for k in SHOWN])
-    (out / "sweep.json").write_text(json.dumps(
-        {"recordings": recordings, "ranked_by": ranked_by,
-         "rows": [{k: row[k] for k in ("rank", "combination", "values")} |
-                  {"metrics": {k: _json(v) for k, v in row["metrics"].items()}} for row in rows]}, indent=1))
+            writer.writerow(
+                [row["rank"], row["combination"]]
+                + [row["values"][k] for k in keys]
+                + [_cell(row["metrics"].get(k)) for k in SHOWN]
+            )
+    (out / "sweep.json").write_text(
+        json.dumps(
+            {
+                "recordings": recordings,
+                "ranked_by": ranked_by,
+                "rows": [
+                    {k: row[k] for k in ("rank", "combination", "values")}
+                    | {"metrics": {k: _json(v) for k, v in row["metrics"].items()}}
+                    for row in rows
+                ],
+            },
+            indent=1,
+        )
+    )
     best = combos[rows[0]["combination"]][1] if rows else None
     if best is not None:
         sections = [k for k in best.model_dump(mode="json") if with_sensors or k != "sensors"]
         (out / "best_params.yaml").write_text(dump_yaml(best, sections))
-    lines = [f"# Parameter sweep ({len(rows)} combinations x {len(recordings)} recordings), ranked by {ranked_by}", "",
-             "| rank | " + " | ".join(keys) + " | " + " | ".join(SHOWN) + " |",
-             "|---|" + "---|" * (len(keys) + len(SHOWN))]
+    lines = [
+        f"# Parameter sweep ({len(rows)} combinations x {len(recordings)} recordings), ranked by {ranked_by}",
+        "",
+        "| rank | " + " | ".join(keys) + " | " + " | ".join(SHOWN) + " |",
+        "|---|" + "---|" * (len(keys) + len(SHOWN)),
+    ]
     for row in rows:
-        lines.append(f"| {row['rank']} | " + " | ".join(str(row["values"][k]) for k in keys) + " | "
-                     + " | ".join(_cell(row["metrics"].get(k)) for k in SHOWN) + " |")
+        lines.append(
+            f"| {row['rank']} | "
+            + " | ".join(str(row["values"][k]) for k in keys)
+            + " | "
+            + " | ".join(_cell(row["metrics"].get(k)) for k in SHOWN)
+            + " |"
+        )
     (out / "sweep.md").write_text("\n".join(lines) + "\n")
     return {"best_params": out / "best_params.yaml", "csv": out / "sweep.csv", "md": out / "sweep.md"}
 

@@ -18,7 +18,15 @@ from i2v_loc.recording import Recording, RecordingError
 LAYOUTS = ("recording", "ouster-pcap", "rosbag2", "rosbag1", "pcd", "ply", "npy", "kitti-bin", "nuscenes-bin")
 WRITE_FORMATS = ("native", "pcap", "rosbag2", "mcap", "pcd")
 
-__all__ = ["FormatError", "PointRecording", "open_recording", "looks_like_recording", "convert_recording", "LAYOUTS", "WRITE_FORMATS"]
+__all__ = [
+    "FormatError",
+    "PointRecording",
+    "open_recording",
+    "looks_like_recording",
+    "convert_recording",
+    "LAYOUTS",
+    "WRITE_FORMATS",
+]
 
 
 def open_recording(path: str | Path, bin_layout: str | None = None, topics: dict[str, str] | None = None):
@@ -47,7 +55,8 @@ def open_recording(path: str | Path, bin_layout: str | None = None, topics: dict
         return recording
     raise RecordingError(
         f"{path}: not a recording in any known layout (a recording folder with meta.yaml, Ouster <sensor>.pcap + .json, "
-        f"a ROS bag, or a folder of .pcd/.ply/.npy/.bin clouds; see `i2v-loc sources --help`)")
+        f"a ROS bag, or a folder of .pcd/.ply/.npy/.bin clouds; see `i2v-loc sources --help`)"
+    )
 
 
 def looks_like_recording(path: str | Path) -> bool:
@@ -61,9 +70,13 @@ def looks_like_recording(path: str | Path) -> bool:
         return False
     if (path / "meta.yaml").is_file() or (path / "metadata.yaml").is_file() or any(path.glob("*.pcap")):
         return True
+
     def has_clouds(folder: Path) -> bool:
         return any(p.suffix.lower() in SUFFIXES for p in folder.iterdir() if p.is_file())
-    return has_clouds(path) or any(has_clouds(d) for d in path.iterdir() if d.is_dir() and not (d / "meta.yaml").is_file())
+
+    return has_clouds(path) or any(
+        has_clouds(d) for d in path.iterdir() if d.is_dir() and not (d / "meta.yaml").is_file()
+    )
 
 
 def convert_recording(recording, out: str | Path, fmt: str) -> Path:

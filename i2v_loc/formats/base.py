@@ -34,8 +34,12 @@ class PointRecording(RecordingFiles):
         self.sensor_names = list(sensor_names)
         self._n_frames = int(n_frames)
         self._rate_hz = float(rate_hz)
-        self.meta: dict = {"layout": self.layout, "rate_hz": self._rate_hz, "n_frames": self._n_frames,
-                           "sensors": [{"name": n} for n in self.sensor_names]}
+        self.meta: dict = {
+            "layout": self.layout,
+            "rate_hz": self._rate_hz,
+            "n_frames": self._n_frames,
+            "sensors": [{"name": n} for n in self.sensor_names],
+        }
         self.counters: dict[str, int] = {}
         self.damaged: dict[str, str] = {}  # as the native layout's: decoding errors stop the opening instead
         self._ground_truth: list[dict] | None = None

@@ -15,7 +15,7 @@ A per-point time field ``t`` (uint32 ns after the sweep start, Ouster) gives the
 from __future__ import annotations
 
 import re
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from pathlib import Path
 
 import numpy as np
@@ -50,7 +50,9 @@ def read_cloud_file(path: Path, bin_layout: str | None = None) -> tuple[np.ndarr
     except FormatError:
         raise
     except Exception as err:  # the readers raise many kinds on corrupt files
-        raise FormatError(f"{path}: cannot read the {suffix} file: {str(err).splitlines()[0] if str(err) else type(err).__name__}") from None
+        raise FormatError(
+            f"{path}: cannot read the {suffix} file: {str(err).splitlines()[0] if str(err) else type(err).__name__}"
+        ) from None
     finite = np.isfinite(xyz).all(axis=1)
     return xyz[finite].astype(np.float32), (t[finite] if t is not None else None)
 
@@ -118,13 +120,17 @@ def _read_bin(path: Path, layout: str | None) -> np.ndarray:
     if layout is None:
         layout = bin_layout_of(path, data)
         if layout is None:
-            raise FormatError(f"{path}: unknown .bin layout ({size} bytes fits neither or both of KITTI (4 float32 per point) "
-                              f"and nuScenes (5 float32 per point) by its content); set it with {BIN_OPTION}")
+            raise FormatError(
+                f"{path}: unknown .bin layout ({size} bytes fits neither or both of KITTI (4 float32 per point) "
+                f"and nuScenes (5 float32 per point) by its content); set it with {BIN_OPTION}"
+            )
     if layout not in BIN_LAYOUTS:
         raise FormatError(f"{path}: unknown .bin layout {layout!r}; known: {', '.join(BIN_LAYOUTS)}")
     width = BIN_LAYOUTS[layout]
     if len(data) % width:
-        raise FormatError(f"{path}: {size} bytes is not a multiple of {4 * width} ({layout}: {width} float32 per point)")
+        raise FormatError(
+            f"{path}: {size} bytes is not a multiple of {4 * width} ({layout}: {width} float32 per point)"
+        )
     return data.reshape(-1, width)[:, :3].astype(np.float64)
 
 
@@ -154,7 +160,7 @@ def _read_timestamps(file: Path, n: int) -> list[float]:
         except ValueError:
             try:  # KITTI raw: 2011-09-26 13:02:25.964389445 (nanoseconds cut to microseconds)
                 head, _, frac = line.partition(".")
-                base = datetime.strptime(head, "%Y-%m-%d %H:%M:%S").replace(tzinfo=timezone.utc).timestamp()
+                base = datetime.strptime(head, "%Y-%m-%d %H:%M:%S").replace(tzinfo=UTC).timestamp()
                 stamps.append(base + (int(frac) / 10 ** len(frac) if frac else 0.0))
             except ValueError:
                 raise FormatError(f"{file}:{i + 1}: not a timestamp: {line[:40]!r}") from None
@@ -171,11 +177,16 @@ def _sensor_name(text: str) -> str:
 
 def _group_files(path: Path) -> dict[str, list[Path]] | None:
     """Sensor name → its sorted cloud files, or None when ``path`` holds no cloud files."""
+
     def clouds(folder: Path) -> list[Path]:
         return sorted(p for p in folder.iterdir() if p.is_file() and p.suffix.lower() in SUFFIXES)
 
     if path.is_file():
-        return {_sensor_name(_stamp_from_name(path.stem)[1] or path.parent.name): [path]} if path.suffix.lower() in SUFFIXES else None
+        return (
+            {_sensor_name(_stamp_from_name(path.stem)[1] or path.parent.name): [path]}
+            if path.suffix.lower() in SUFFIXES
+            else None
+        )
     groups: dict[str, list[Path]] = {}
     for sub in sorted(p for p in path.iterdir() if p.is_dir()):
         files = clouds(sub)
@@ -221,11 +232,15 @@ class CloudFolderRecording(PointRecording):
         else:
             stamps = [_stamp_from_name(f.stem)[0] for f in files]
             if any(s is None for s in stamps):
-                return [k / DEFAULT_RATE_HZ for k in range(len(files))], f"no timestamps: frame number / {DEFAULT_RATE_HZ:g} Hz"
+                return [
+                    k / DEFAULT_RATE_HZ for k in range(len(files))
+                ], f"no timestamps: frame number / {DEFAULT_RATE_HZ:g} Hz"
         if len(stamps) > 1 and _rate_from(stamps) is None:
             period = float(np.median(np.diff(stamps)))
-            return ([k / DEFAULT_RATE_HZ for k in range(len(files))],
-                    f"stamps {period:.6g} s apart are not a sweep period: frame number / {DEFAULT_RATE_HZ:g} Hz")
+            return (
+                [k / DEFAULT_RATE_HZ for k in range(len(files))],
+                f"stamps {period:.6g} s apart are not a sweep period: frame number / {DEFAULT_RATE_HZ:g} Hz",
+            )
         return stamps, None
 
     def _scan(self, sensor: str, index: int) -> SensorScan | None:
@@ -270,10 +285,16 @@ def write_pcd_folder(recording, out: str | Path, encoding: str = "binary_compres
         for k in range(scans.n_frames):
             points, offsets = scans.points(k)
             t = np.rint(offsets.astype(np.float64) * 1e9).astype(np.uint32)
-            cloud = PointCloud.from_points([points[:, 0], points[:, 1], points[:, 2], t], ("x", "y", "z", "t"),
-                                           (np.float32, np.float32, np.float32, np.uint32))
+            cloud = PointCloud.from_points(
+                [points[:, 0], points[:, 1], points[:, 2], t],
+                ("x", "y", "z", "t"),
+                (np.float32, np.float32, np.float32, np.uint32),
+            )
             cloud.save(folder / f"{k:06d}.pcd", encoding=Encoding(encoding))
-        (folder / "timestamps.txt").write_text("".join(f"{int(s) // 10**9}.{int(s) % 10**9:09d}\n" if s >= 0 else f"{s * 1e-9:.9f}\n"
-                                                       for s in scans.stamp_ns))
+        (folder / "timestamps.txt").write_text(
+            "".join(
+                f"{int(s) // 10**9}.{int(s) % 10**9:09d}\n" if s >= 0 else f"{s * 1e-9:.9f}\n" for s in scans.stamp_ns
+            )
+        )
     copy_side_files(recording, out)
     return out

@@ -28,8 +28,15 @@ KEEP_SWEEPS = 50  # sweeps kept per sensor for frame(k) (5 s at 10 Hz)
 
 
 class OusterUdpSource:
-    def __init__(self, metadata_dir: str | Path, ports: list[int] | None = None, host: str = "127.0.0.1",
-                 timeout_s: float = 1.0, label: str | None = None, in_order: bool = False):
+    def __init__(
+        self,
+        metadata_dir: str | Path,
+        ports: list[int] | None = None,
+        host: str = "127.0.0.1",
+        timeout_s: float = 1.0,
+        label: str | None = None,
+        in_order: bool = False,
+    ):
         core, _ = _sdk()
         self._core = core
         folder = Path(metadata_dir)
@@ -60,7 +67,9 @@ class OusterUdpSource:
                 sock.bind((host, port))
             except OSError as err:
                 self.close()
-                raise FormatError(f"ouster-udp: cannot listen on {host}:{port} for sensor {name}: {err.strerror}") from None
+                raise FormatError(
+                    f"ouster-udp: cannot listen on {host}:{port} for sensor {name}: {err.strerror}"
+                ) from None
             sock.setblocking(False)
             self.ports[name] = sock.getsockname()[1]
             self._selector.register(sock, selectors.EVENT_READ, name)
@@ -130,8 +139,14 @@ class OusterUdpSource:
         return scans
 
     def describe(self) -> dict:
-        return {"source": self.label, "ports": dict(self.ports), "frames": None, "rate_hz": self.rate_hz,
-                "loop": False, "counters": self.counters}
+        return {
+            "source": self.label,
+            "ports": dict(self.ports),
+            "frames": None,
+            "rate_hz": self.rate_hz,
+            "loop": False,
+            "counters": self.counters,
+        }
 
     def close(self) -> None:
         stop = getattr(self, "_stop", None)

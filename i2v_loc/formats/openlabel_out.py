@@ -21,12 +21,17 @@ def _quaternion_z(yaw_deg: float) -> list[float]:
 
 
 def _cuboid(unit: dict, vehicle: dict) -> dict:
-    attributes = {"num": [{"name": "num_points", "val": unit.get("points")}],
-                  "text": [{"name": "vehicle", "val": vehicle.get("vehicle")}]}
+    attributes = {
+        "num": [{"name": "num_points", "val": unit.get("points")}],
+        "text": [{"name": "vehicle", "val": vehicle.get("vehicle")}],
+    }
     if vehicle.get("hitch_deg") is not None:
         attributes["num"].append({"name": "hitch_deg", "val": vehicle["hitch_deg"]})
-    return {"name": "shape3D", "val": [*unit["center"], *_quaternion_z(unit["yaw_deg"]), *unit["dimensions"]],
-            "attributes": attributes}
+    return {
+        "name": "shape3D",
+        "val": [*unit["center"], *_quaternion_z(unit["yaw_deg"]), *unit["dimensions"]],
+        "attributes": attributes,
+    }
 
 
 def states_to_openlabel(states: Iterable[dict], annotator: str = "i2v-loc run") -> dict:
@@ -46,28 +51,44 @@ def states_to_openlabel(states: Iterable[dict], annotator: str = "i2v-loc run") 
                     continue
                 uid = str(2 * int(v["id"]) - (1 if unit == "truck" else 0))
                 uids[unit] = uid
-                objects.setdefault(uid, {"name": f"{kind}_{v['id']}", "type": kind,
-                                         "object_data": {"text": [{"name": "vehicle", "val": v.get("vehicle")}]}})
-                frame_objects[uid] = {"object_data": {"name": f"{kind}_{v['id']}", "type": kind, "cuboid": _cuboid(v[unit], v)}}
+                objects.setdefault(
+                    uid,
+                    {
+                        "name": f"{kind}_{v['id']}",
+                        "type": kind,
+                        "object_data": {"text": [{"name": "vehicle", "val": v.get("vehicle")}]},
+                    },
+                )
+                frame_objects[uid] = {
+                    "object_data": {"name": f"{kind}_{v['id']}", "type": kind, "cuboid": _cuboid(v[unit], v)}
+                }
             if len(uids) == 2:
                 rid = str(v["id"])
-                relations.setdefault(rid, {"name": f"towing_{v['id']}", "type": RELATION,
-                                           "rdf_subjects": [{"uid": uids["truck"], "type": "object"}],
-                                           "rdf_objects": [{"uid": uids["trailer"], "type": "object"}]})
+                relations.setdefault(
+                    rid,
+                    {
+                        "name": f"towing_{v['id']}",
+                        "type": RELATION,
+                        "rdf_subjects": [{"uid": uids["truck"], "type": "object"}],
+                        "rdf_objects": [{"uid": uids["trailer"], "type": "object"}],
+                    },
+                )
                 frame_relations[rid] = {}
         frame = {"frame_properties": {"timestamp": line["stamp_s"]}, "objects": frame_objects}
         if frame_relations:
             frame["relations"] = frame_relations
         frames[str(line["frame"])] = frame
         numbers.append(int(line["frame"]))
-    return {"openlabel": {
-        "metadata": {"schema_version": SCHEMA_VERSION, "annotator": annotator},
-        "coordinate_systems": {"yard": {"type": "scene_cs", "parent": "", "children": []}},
-        "objects": objects,
-        "relations": relations,
-        "frames": frames,
-        "frame_intervals": [{"frame_start": min(numbers), "frame_end": max(numbers)}] if numbers else [],
-    }}
+    return {
+        "openlabel": {
+            "metadata": {"schema_version": SCHEMA_VERSION, "annotator": annotator},
+            "coordinate_systems": {"yard": {"type": "scene_cs", "parent": "", "children": []}},
+            "objects": objects,
+            "relations": relations,
+            "frames": frames,
+            "frame_intervals": [{"frame_start": min(numbers), "frame_end": max(numbers)}] if numbers else [],
+        }
+    }
 
 
 def write_openlabel(states: Iterable[dict], out: str | Path) -> Path:

@@ -115,11 +115,20 @@ def write_ouster(recording, out: str | Path) -> Path:
     for position, name in enumerate(recording.sensor_names):
         scans = recording.scans(name)
         columns = scans.range_mm.shape[2]
-        info = sensor_info(scans.beam_altitude_deg, scans.beam_azimuth_offset_deg, columns, recording.rate_hz,
-                           serial=SERIAL_BASE + position + 1, init_id=1000 + position)
+        info = sensor_info(
+            scans.beam_altitude_deg,
+            scans.beam_azimuth_offset_deg,
+            columns,
+            recording.rate_hz,
+            serial=SERIAL_BASE + position + 1,
+            init_id=1000 + position,
+        )
         (out / f"{name}.json").write_text(info.to_json_string())
-        packets = [p for k in range(scans.n_frames)
-                   for p in frame_packets(info, scans.range_mm[k], scans.stamp_ns[k] + scans.column_time_ns, k)]
+        packets = [
+            p
+            for k in range(scans.n_frames)
+            for p in frame_packets(info, scans.range_mm[k], scans.stamp_ns[k] + scans.column_time_ns, k)
+        ]
         pcap.record(packets, str(out / f"{name}.pcap"), lidar_port=LIDAR_PORT, imu_port=IMU_PORT)
     copy_side_files(recording, out)
     return out
@@ -200,7 +209,9 @@ def _pcap_packets(path: Path, info, rejected: dict):
     try:
         source = pcap.PcapPacketSource(str(path), sensor_info=[info])
     except (RuntimeError, ValueError) as err:
-        raise FormatError(f"{path}: not a readable pcap: {str(err).splitlines()[0] if str(err) else type(err).__name__}") from None
+        raise FormatError(
+            f"{path}: not a readable pcap: {str(err).splitlines()[0] if str(err) else type(err).__name__}"
+        ) from None
     try:
         try:
             for _, packet in source:
@@ -222,17 +233,26 @@ def _check_pcap_complete(path: Path) -> None:
         magic = fh.read(4)
         if size < 24:
             raise FormatError(f"{path}: truncated pcap ({size} bytes, shorter than the 24-byte file header)")
-        order = {b"\xd4\xc3\xb2\xa1": "<", b"\xa1\xb2\xc3\xd4": ">", b"\x4d\x3c\xb2\xa1": "<", b"\xa1\xb2\x3c\x4d": ">"}.get(magic)
+        order = {
+            b"\xd4\xc3\xb2\xa1": "<",
+            b"\xa1\xb2\xc3\xd4": ">",
+            b"\x4d\x3c\xb2\xa1": "<",
+            b"\xa1\xb2\x3c\x4d": ">",
+        }.get(magic)
         if order is None:
             raise FormatError(f"{path}: not a pcap file (magic {magic.hex()})")
         offset, records = 24, 0
         while offset < size:
             if offset + 16 > size:
-                raise FormatError(f"{path}: truncated pcap: the file ends inside the header of packet {records + 1} (byte {offset})")
+                raise FormatError(
+                    f"{path}: truncated pcap: the file ends inside the header of packet {records + 1} (byte {offset})"
+                )
             fh.seek(offset + 8)
             (caplen,) = struct.unpack(f"{order}I", fh.read(4))
             if offset + 16 + caplen > size:
-                raise FormatError(f"{path}: truncated pcap: packet {records + 1} needs {caplen} bytes, {size - offset - 16} are left")
+                raise FormatError(
+                    f"{path}: truncated pcap: packet {records + 1} needs {caplen} bytes, {size - offset - 16} are left"
+                )
             offset += 16 + caplen
             records += 1
 
@@ -259,8 +279,10 @@ class OusterRecording(PointRecording):
         n_frames = max((max(s) + 1 for s in self._sweeps.values() if s), default=0)
         super().__init__(path, list(pairs), n_frames, float(rates.pop()))
         self.counters = counters
-        self.meta["ouster"] = {name: {"serial": int(i.sn), "prod_line": i.prod_line, "mode": f"{i.w}x{i.format.fps}"}
-                               for name, i in self.infos.items()}
+        self.meta["ouster"] = {
+            name: {"serial": int(i.sn), "prod_line": i.prod_line, "mode": f"{i.w}x{i.format.fps}"}
+            for name, i in self.infos.items()
+        }
 
     def _decode(self, name: str, pcap_file: Path, json_file: Path, info) -> tuple[dict[int, SensorScan], dict]:
         _check_pcap_complete(pcap_file)
@@ -278,10 +300,14 @@ class OusterRecording(PointRecording):
         counters["foreign_packets"] += rejected["id"]
         if not sweeps:
             if counters["foreign_packets"]:
-                raise FormatError(f"{pcap_file}: its {counters['foreign_packets']} lidar packets are from another sensor "
-                                  f"than {json_file.name} describes (serial {info.sn}, init id {info.init_id})")
-            raise FormatError(f"{pcap_file}: no lidar packet matches {json_file.name} "
-                              f"({info.prod_line}, {info.h} beams, {info.format.udp_profile_lidar}, port {info.config.udp_port_lidar})")
+                raise FormatError(
+                    f"{pcap_file}: its {counters['foreign_packets']} lidar packets are from another sensor "
+                    f"than {json_file.name} describes (serial {info.sn}, init id {info.init_id})"
+                )
+            raise FormatError(
+                f"{pcap_file}: no lidar packet matches {json_file.name} "
+                f"({info.prod_line}, {info.h} beams, {info.format.udp_profile_lidar}, port {info.config.udp_port_lidar})"
+            )
         return sweeps, counters
 
     def _scan(self, sensor: str, index: int) -> SensorScan | None:
@@ -296,7 +322,9 @@ def ouster_pairs(path: Path) -> dict[str, tuple[Path, Path]] | None:
         candidates = [path.with_suffix(".json"), *sorted(path.parent.glob("*.json"))]
         meta = next((c for c in candidates if c.is_file() and _looks_like_ouster_json(c)), None)
         if meta is None:
-            raise FormatError(f"{path}: an Ouster pcap needs its sensor metadata: {path.with_suffix('.json').name} is missing")
+            raise FormatError(
+                f"{path}: an Ouster pcap needs its sensor metadata: {path.with_suffix('.json').name} is missing"
+            )
         return {path.stem: (path, meta)}
     pcaps = sorted(path.glob("*.pcap"))
     if not pcaps:

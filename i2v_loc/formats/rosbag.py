@@ -59,11 +59,21 @@ def cloud_message(store, sensor: str, stamp_ns: int, points: np.ndarray, offsets
     data["x"], data["y"], data["z"] = points[:, 0], points[:, 1], points[:, 2]
     data["t"] = np.rint(np.asarray(offsets_s, dtype=np.float64) * 1e9).astype(np.uint32)
     sec, nanosec = divmod(int(stamp_ns), 1_000_000_000)
-    fields = [PointField(name=n, offset=o, datatype=d, count=1) for n, o, d in (("x", 0, 7), ("y", 4, 7), ("z", 8, 7), ("t", 12, 6))]
+    fields = [
+        PointField(name=n, offset=o, datatype=d, count=1)
+        for n, o, d in (("x", 0, 7), ("y", 4, 7), ("z", 8, 7), ("t", 12, 6))
+    ]
     return PointCloud2(
-        header=Header(stamp=Time(sec=sec, nanosec=nanosec), frame_id=sensor), height=1, width=len(points),
-        fields=fields, is_bigendian=False, point_step=16, row_step=16 * len(points),
-        data=data.view(np.uint8).reshape(-1), is_dense=True)
+        header=Header(stamp=Time(sec=sec, nanosec=nanosec), frame_id=sensor),
+        height=1,
+        width=len(points),
+        fields=fields,
+        is_bigendian=False,
+        point_step=16,
+        row_step=16 * len(points),
+        data=data.view(np.uint8).reshape(-1),
+        is_dense=True,
+    )
 
 
 def tf_static_message(store, sensors: list[dict]):
@@ -74,12 +84,21 @@ def tf_static_message(store, sensors: list[dict]):
     transforms = []
     for sensor in sensors:
         e = sensor.get("extrinsics") or {}
-        q = Rotation.from_euler("ZYX", [e.get("yaw_deg", 0.0), e.get("pitch_deg", 0.0), e.get("roll_deg", 0.0)], degrees=True).as_quat()
-        transforms.append(msgs["geometry_msgs/msg/TransformStamped"](
-            header=Header(stamp=Time(sec=0, nanosec=0), frame_id=WORLD_FRAME), child_frame_id=sensor["name"],
-            transform=msgs["geometry_msgs/msg/Transform"](
-                translation=msgs["geometry_msgs/msg/Vector3"](x=e.get("x_m", 0.0), y=e.get("y_m", 0.0), z=e.get("z_m", 0.0)),
-                rotation=msgs["geometry_msgs/msg/Quaternion"](x=q[0], y=q[1], z=q[2], w=q[3]))))
+        q = Rotation.from_euler(
+            "ZYX", [e.get("yaw_deg", 0.0), e.get("pitch_deg", 0.0), e.get("roll_deg", 0.0)], degrees=True
+        ).as_quat()
+        transforms.append(
+            msgs["geometry_msgs/msg/TransformStamped"](
+                header=Header(stamp=Time(sec=0, nanosec=0), frame_id=WORLD_FRAME),
+                child_frame_id=sensor["name"],
+                transform=msgs["geometry_msgs/msg/Transform"](
+                    translation=msgs["geometry_msgs/msg/Vector3"](
+                        x=e.get("x_m", 0.0), y=e.get("y_m", 0.0), z=e.get("z_m", 0.0)
+                    ),
+                    rotation=msgs["geometry_msgs/msg/Quaternion"](x=q[0], y=q[1], z=q[2], w=q[3]),
+                ),
+            )
+        )
     return msgs["tf2_msgs/msg/TFMessage"](transforms=transforms)
 
 
@@ -96,7 +115,14 @@ def _bag_messages(recording):
         for k in range(scans.n_frames):
             points, offsets = scans.points(k)
             stamp = int(scans.stamp_ns[k])
-            items.append((topic_of(name), POINTCLOUD2, max(stamp + period_ns, 1), cloud_message(store, name, stamp, points, offsets)))
+            items.append(
+                (
+                    topic_of(name),
+                    POINTCLOUD2,
+                    max(stamp + period_ns, 1),
+                    cloud_message(store, name, stamp, points, offsets),
+                )
+            )
     items.sort(key=lambda item: item[2])
     return store, items
 
@@ -120,7 +146,9 @@ def write_states_bag(states: list[dict], out: str | Path, storage: str = "sqlite
     for line in states:
         if line.get("stamp_s") is not None:
             last_ns = max(int(round(line["stamp_s"] * 1e9)), 1)
-        items.append((STATES_TOPIC, "std_msgs/msg/String", last_ns, String(data=json.dumps(line, separators=(",", ":")))))
+        items.append(
+            (STATES_TOPIC, "std_msgs/msg/String", last_ns, String(data=json.dumps(line, separators=(",", ":"))))
+        )
     write_items(out, store, items, storage)
     return Path(out)
 
@@ -148,9 +176,11 @@ def write_items(out: str | Path, store, items, storage: str) -> None:
         _sqlite_to_mcap(out, store, items)
 
 
-_LATCHED_QOS = ("- history: 3\n  depth: 0\n  reliability: 1\n  durability: 1\n  deadline:\n    sec: 2147483647\n"
-                "    nsec: 4294967295\n  lifespan:\n    sec: 2147483647\n    nsec: 4294967295\n  liveliness: 1\n"
-                "  liveliness_lease_duration:\n    sec: 2147483647\n    nsec: 4294967295\n  avoid_ros_namespace_conventions: false")
+_LATCHED_QOS = (
+    "- history: 3\n  depth: 0\n  reliability: 1\n  durability: 1\n  deadline:\n    sec: 2147483647\n"
+    "    nsec: 4294967295\n  lifespan:\n    sec: 2147483647\n    nsec: 4294967295\n  liveliness: 1\n"
+    "  liveliness_lease_duration:\n    sec: 2147483647\n    nsec: 4294967295\n  avoid_ros_namespace_conventions: false"
+)
 
 
 def _sqlite_to_mcap(out: Path, store, items) -> None:
@@ -171,11 +201,17 @@ def _sqlite_to_mcap(out: Path, store, items) -> None:
                 continue
             schema = writer.register_schema(name=msgtype, encoding="ros2msg", data=_msgdef(store, msgtype).encode())
             qos = _LATCHED_QOS if topic == TF_STATIC else ""
-            channels[topic] = writer.register_channel(topic=topic, message_encoding="cdr", schema_id=schema,
-                                                      metadata={"offered_qos_profiles": qos})
+            channels[topic] = writer.register_channel(
+                topic=topic, message_encoding="cdr", schema_id=schema, metadata={"offered_qos_profiles": qos}
+            )
         for sequence, (topic, msgtype, stamp, msg) in enumerate(items):
-            writer.add_message(channel_id=channels[topic], log_time=stamp, publish_time=stamp, sequence=sequence,
-                               data=bytes(store.serialize_cdr(msg, msgtype)))
+            writer.add_message(
+                channel_id=channels[topic],
+                log_time=stamp,
+                publish_time=stamp,
+                sequence=sequence,
+                data=bytes(store.serialize_cdr(msg, msgtype)),
+            )
         writer.finish()
     db3.unlink()
     info["storage_identifier"] = "mcap"
@@ -204,8 +240,14 @@ def cloud_points(msg, where: str) -> tuple[np.ndarray, np.ndarray]:
     for n in wanted:
         if names[n].datatype not in FIELD_DTYPES:
             raise FormatError(f"{where}: PointCloud2 field {n!r} has unknown datatype {names[n].datatype}")
-    dtype = np.dtype({"names": wanted, "formats": [order + FIELD_DTYPES[names[n].datatype] for n in wanted],
-                      "offsets": [names[n].offset for n in wanted], "itemsize": msg.point_step})
+    dtype = np.dtype(
+        {
+            "names": wanted,
+            "formats": [order + FIELD_DTYPES[names[n].datatype] for n in wanted],
+            "offsets": [names[n].offset for n in wanted],
+            "itemsize": msg.point_step,
+        }
+    )
     count = msg.width * msg.height
     raw = np.asarray(msg.data, dtype=np.uint8)
     if len(raw) < count * msg.point_step:
@@ -234,7 +276,9 @@ class BagRecording(PointRecording):
         from rosbags.highlevel import AnyReader, AnyReaderError
 
         path = Path(path)
-        bag_path = path.parent if path.suffix in (".db3", ".mcap") and (path.parent / "metadata.yaml").is_file() else path
+        bag_path = (
+            path.parent if path.suffix in (".db3", ".mcap") and (path.parent / "metadata.yaml").is_file() else path
+        )
         self.layout = "rosbag2" if bag_path.is_dir() else "rosbag1"
         self._sweeps: dict[str, list[SensorScan]] = {}
         self._tf: dict[str, dict] = {}
@@ -242,7 +286,7 @@ class BagRecording(PointRecording):
             with AnyReader([bag_path], default_typestore=_typestore()) as reader:
                 clouds = {c.topic: c for c in reader.connections if c.msgtype == POINTCLOUD2}
                 wanted = self._choose_topics(bag_path, sorted(clouds), topics)
-                for name, topic in wanted.items():
+                for name in wanted:
                     self._sweeps[name] = []
                 for conn, _, raw in reader.messages(connections=[clouds[t] for t in wanted.values()]):
                     msg = reader.deserialize(raw, conn.msgtype)
@@ -256,7 +300,10 @@ class BagRecording(PointRecording):
                         self._tf[tf.child_frame_id] = _tf_extrinsics(tf)
         except FormatError:
             raise
-        except (AnyReaderError, Exception) as err:  # rosbags, sqlite3 and the MCAP parser raise many kinds on corrupt bags
+        except (
+            AnyReaderError,
+            Exception,
+        ) as err:  # rosbags, sqlite3 and the MCAP parser raise many kinds on corrupt bags
             raise FormatError(f"{bag_path}: cannot read the bag: {' '.join(str(err).split())[:300]}") from None
         for name, sweeps in self._sweeps.items():
             if not sweeps:
@@ -273,14 +320,18 @@ class BagRecording(PointRecording):
             missing = {n: t for n, t in topics.items() if t not in clouds}
             if missing:
                 name, topic = next(iter(missing.items()))
-                raise FormatError(f"{bag_path}: no PointCloud2 topic {topic} (sensor {name}); the bag has {', '.join(clouds)}")
+                raise FormatError(
+                    f"{bag_path}: no PointCloud2 topic {topic} (sensor {name}); the bag has {', '.join(clouds)}"
+                )
             return dict(topics)
         configured = _configured_sensors(bag_path)
         if configured:
             missing = [n for n in configured if topic_of(n) not in clouds]
             if missing:
-                raise FormatError(f"{bag_path}: no PointCloud2 topic {topic_of(missing[0])} for sensor {missing[0]} of "
-                                  f"sensors.yaml; the bag has {', '.join(clouds)}")
+                raise FormatError(
+                    f"{bag_path}: no PointCloud2 topic {topic_of(missing[0])} for sensor {missing[0]} of "
+                    f"sensors.yaml; the bag has {', '.join(clouds)}"
+                )
             return {n: topic_of(n) for n in configured}
         return {sensor_of(t): t for t in clouds}
 
@@ -309,8 +360,14 @@ def _tf_extrinsics(tf) -> dict:
 
     r, t = tf.transform.rotation, tf.transform.translation
     yaw, pitch, roll = Rotation.from_quat([r.x, r.y, r.z, r.w]).as_euler("ZYX", degrees=True)
-    return {"x_m": float(t.x), "y_m": float(t.y), "z_m": float(t.z),
-            "roll_deg": round(float(roll), 9), "pitch_deg": round(float(pitch), 9), "yaw_deg": round(float(yaw), 9)}
+    return {
+        "x_m": float(t.x),
+        "y_m": float(t.y),
+        "z_m": float(t.z),
+        "roll_deg": round(float(roll), 9),
+        "pitch_deg": round(float(pitch), 9),
+        "yaw_deg": round(float(yaw), 9),
+    }
 
 
 def _rate_hz(stamps: list[float]) -> float:

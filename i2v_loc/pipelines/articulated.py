@@ -36,8 +36,14 @@ class ArticulatedVehicleResult(VehicleResult):
 
     def to_json(self) -> dict:
         out = super().to_json()
-        out.update({"kind": self.kind, "speed_m_s": _r(self.speed_m_s, 3), "jackknife": self.jackknife,
-                    "hitch_std_deg": None if self.hitch_std_deg is None else _r(self.hitch_std_deg, 3)})
+        out.update(
+            {
+                "kind": self.kind,
+                "speed_m_s": _r(self.speed_m_s, 3),
+                "jackknife": self.jackknife,
+                "hitch_std_deg": None if self.hitch_std_deg is None else _r(self.hitch_std_deg, 3),
+            }
+        )
         return out
 
 
@@ -63,8 +69,11 @@ class ArticulatedPipeline(ParameterHandoff):
         self.tracker.params = params.articulated  # vehicles survive a parameter change
         if not params.background.enabled:  # the user turned the map off: vehicles start at once
             self.background = None
-        elif self.background is None or self.background.params != params.background \
-                or self.background.region_box != region_box(params.region):
+        elif (
+            self.background is None
+            or self.background.params != params.background
+            or self.background.region_box != region_box(params.region)
+        ):
             self.background = BackgroundMap(params.background, params.region)  # else the learned map survives
 
     def save_background(self, path) -> None:
@@ -105,21 +114,43 @@ class ArticulatedPipeline(ParameterHandoff):
         timer.lap("vehicles")
         vehicles = [self._result(r, ground) for r in self._reports]
         self._count(merged, region)
-        return FrameResult(frame.index, merged.stamp_s, timer.total(), merged.faults,
-                           {k: v for k, v in merged.dropped.items() if k != "missing"},
-                           [], vehicles, region.ground_found, len(merged.points), points)
+        return FrameResult(
+            frame.index,
+            merged.stamp_s,
+            timer.total(),
+            merged.faults,
+            {k: v for k, v in merged.dropped.items() if k != "missing"},
+            [],
+            vehicles,
+            region.ground_found,
+            len(merged.points),
+            points,
+        )
 
     def _result(self, report: VehicleReport, ground) -> ArticulatedVehicleResult:
         s, model = report.state, report.model
         tractor_xy, trailer_xy = model.box_centers(s.x_m, s.y_m, s.yaw_rad, s.hitch_rad)
         truck = self._unit(report.id, tractor_xy, s.yaw_rad, model.tractor, report.tractor_points, ground)
         if model.trailer is None:
-            return ArticulatedVehicleResult(report.id, model.name, truck, None, None, None, "rigid", None, False, s.speed_m_s)
-        trailer = self._unit(report.id, trailer_xy, s.yaw_rad + s.hitch_rad, model.trailer, report.trailer_points, ground)
+            return ArticulatedVehicleResult(
+                report.id, model.name, truck, None, None, None, "rigid", None, False, s.speed_m_s
+            )
+        trailer = self._unit(
+            report.id, trailer_xy, s.yaw_rad + s.hitch_rad, model.trailer, report.trailer_points, ground
+        )
         t_truck, t_trailer = box_poses([truck.center, trailer.center], [truck.yaw_deg, trailer.yaw_deg])
-        return ArticulatedVehicleResult(report.id, model.name, truck, trailer, float(np.degrees(s.hitch_rad)),
-                                        np.linalg.inv(t_trailer) @ t_truck, "articulated",
-                                        float(np.degrees(s.hitch_std_rad)), s.jackknife, s.speed_m_s)
+        return ArticulatedVehicleResult(
+            report.id,
+            model.name,
+            truck,
+            trailer,
+            float(np.degrees(s.hitch_rad)),
+            np.linalg.inv(t_trailer) @ t_truck,
+            "articulated",
+            float(np.degrees(s.hitch_std_rad)),
+            s.jackknife,
+            s.speed_m_s,
+        )
 
     @staticmethod
     def _unit(vehicle_id: int, center_xy: np.ndarray, yaw_rad: float, box: Box, points: int, ground) -> UnitResult:
@@ -136,7 +167,14 @@ class ArticulatedPipeline(ParameterHandoff):
             axle_velocity = s.speed_m_s * np.array([np.cos(s.yaw_rad), np.sin(s.yaw_rad)])
             omega = s.speed_m_s * s.curvature_1_m
             # each box moves with the velocity of its centre (a turning cab's centre moves sideways)
-            yield centers[0], s.yaw_rad, model.tractor, axle_velocity + _turn(omega, centers[0] - axle), omega, r.travel_m
+            yield (
+                centers[0],
+                s.yaw_rad,
+                model.tractor,
+                axle_velocity + _turn(omega, centers[0] - axle),
+                omega,
+                r.travel_m,
+            )
             if model.trailer is not None:
                 kingpin = model.kingpin_xy(s.x_m, s.y_m, s.yaw_rad)
                 kingpin_velocity = axle_velocity + _turn(omega, kingpin - axle)
@@ -146,12 +184,20 @@ class ArticulatedPipeline(ParameterHandoff):
 
     def _protected_boxes(self) -> list[ProtectedBox]:
         min_travel = self._active.background.protect_min_travel_m
-        return [ProtectedBox(tuple(c), yaw, box.length_m / 2, box.width_m / 2)
-                for c, yaw, box, _, _, travel in self._unit_boxes() if travel >= min_travel]
+        return [
+            ProtectedBox(tuple(c), yaw, box.length_m / 2, box.width_m / 2)
+            for c, yaw, box, _, _, travel in self._unit_boxes()
+            if travel >= min_travel
+        ]
 
     def _motion_hints(self) -> list[MotionHint]:
-        return [MotionHint(tuple(c), yaw, box.length_m / 2 + MOTION_MARGIN_M, box.width_m / 2 + MOTION_MARGIN_M, tuple(v), rate)
-                for c, yaw, box, v, rate, _ in self._unit_boxes() if np.hypot(*v) >= MIN_MOTION_SPEED_M_S]
+        return [
+            MotionHint(
+                tuple(c), yaw, box.length_m / 2 + MOTION_MARGIN_M, box.width_m / 2 + MOTION_MARGIN_M, tuple(v), rate
+            )
+            for c, yaw, box, v, rate, _ in self._unit_boxes()
+            if np.hypot(*v) >= MIN_MOTION_SPEED_M_S
+        ]
 
     def _count(self, merged, region) -> None:
         self.counters["frames"] += 1

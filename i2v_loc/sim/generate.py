@@ -77,8 +77,14 @@ class PlacedVehicle:
     def footprint(self, step_s: float = 0.5) -> np.ndarray:
         t = np.arange(0.0, self.trajectory.time_s[-1], step_s)
         truck, trailer, _ = self.unit_poses(t)
-        return np.vstack([footprint_points(poses[:, :2, 3], unit.length_m, unit.width_m, np.arctan2(poses[:, 1, 0], poses[:, 0, 0]), 1.0)
-                          for poses, unit in ((truck, self.config.truck), (trailer, self.config.trailer))])
+        return np.vstack(
+            [
+                footprint_points(
+                    poses[:, :2, 3], unit.length_m, unit.width_m, np.arctan2(poses[:, 1, 0], poses[:, 0, 0]), 1.0
+                )
+                for poses, unit in ((truck, self.config.truck), (trailer, self.config.trailer))
+            ]
+        )
 
 
 def _poses(x, y, yaw, center_axle) -> np.ndarray:
@@ -111,11 +117,15 @@ def load_vehicles_file(path, known=()) -> dict[str, VehicleConfig]:
     file defines vehicles the pipeline does not know."""
     data = read_yaml(path)
     if set(data) != {"vehicles"} or not isinstance(data["vehicles"], dict) or not data["vehicles"]:
-        raise ParamsError(f"{path}: expected one non-empty 'vehicles' mapping as in params/vehicles.yaml, got keys {sorted(data)}")
+        raise ParamsError(
+            f"{path}: expected one non-empty 'vehicles' mapping as in params/vehicles.yaml, got keys {sorted(data)}"
+        )
     vehicles = validate_params({"vehicles": data["vehicles"]}, source=str(path)).vehicles
     clash = sorted(set(vehicles) & set(known))
     if clash:
-        raise ParamsError(f"{path}: vehicles.{clash[0]} is a configured vehicle; name simulator-only vehicles differently")
+        raise ParamsError(
+            f"{path}: vehicles.{clash[0]} is a configured vehicle; name simulator-only vehicles differently"
+        )
     return dict(vehicles)
 
 
@@ -139,8 +149,16 @@ def place_vehicles(cfg: SimConfig, tail_s: float) -> list[PlacedVehicle]:
         raw = mv.build_trajectory(cfg.scenario, art, cfg.start_s + cfg.duration_s, tail_s)
         if cfg.start_s > 0:
             keep = raw.time_s >= cfg.start_s - 1e-9
-            raw = mv.Trajectory(art, raw.time_s[keep] - cfg.start_s, raw.rear_axle_xy[keep], raw.yaw_rad[keep],
-                                raw.trailer_yaw_rad[keep], raw.speed_mps[keep], raw.steer_rad[keep], raw.label_index[keep])
+            raw = mv.Trajectory(
+                art,
+                raw.time_s[keep] - cfg.start_s,
+                raw.rear_axle_xy[keep],
+                raw.yaw_rad[keep],
+                raw.trailer_yaw_rad[keep],
+                raw.speed_mps[keep],
+                raw.steer_rad[keep],
+                raw.label_index[keep],
+            )
         options = []
         for variant in (raw, raw.mirrored()):
             options.append(_fit(PlacedVehicle(i + 1, name, vcfg, variant), occupied, allow_dock=i == 0))
@@ -168,7 +186,9 @@ def _fit(probe: PlacedVehicle, occupied: np.ndarray, allow_dock: bool):
     return yaw, centering + shift, rotated + centering + shift, probe.trajectory, float(np.hypot(*shift))
 
 
-def _free_offset(points: np.ndarray, occupied: np.ndarray, clearance_m: float = 2.0, along_x_only: bool = False) -> np.ndarray:
+def _free_offset(
+    points: np.ndarray, occupied: np.ndarray, clearance_m: float = 2.0, along_x_only: bool = False
+) -> np.ndarray:
     """The smallest shift that keeps ``points`` ``clearance_m`` away from ``occupied``."""
     tree = cKDTree(occupied)
     dys = [0.0] if along_x_only else np.arange(-30, 31, 1.0)
@@ -188,18 +208,21 @@ def make_lidars(cfg: SimConfig, rng: np.random.Generator) -> list[LidarModel]:
         if cfg.columns is not None:
             sensor = sensor.model_copy(update={"columns": cfg.columns})
         returns = None if cfg.returns is None else replace(cfg.returns, min_range_m=sensor.min_range_m)
-        lidars.append(LidarModel.from_config(
-            sensor, returns=returns,
-            phase_s=float(rng.uniform(0.0, cfg.max_phase_s)),
-            clock_offset_s=float(rng.uniform(-cfg.max_clock_offset_s, cfg.max_clock_offset_s)),
-        ))
+        lidars.append(
+            LidarModel.from_config(
+                sensor,
+                returns=returns,
+                phase_s=float(rng.uniform(0.0, cfg.max_phase_s)),
+                clock_offset_s=float(rng.uniform(-cfg.max_clock_offset_s, cfg.max_clock_offset_s)),
+            )
+        )
     return lidars
 
 
 def with_true_time_offsets(params: Params, lidars: list[LidarModel]) -> Params:
     """The sensors with ``time_offset_s`` undoing each LiDAR's clock offset: a sweep stamped
     ``t + clock_offset_s`` started at ``t`` on the common clock, and the offset is added to stamps."""
-    offsets = {l.name: -round(l.clock_offset_s, 9) for l in lidars}
+    offsets = {lidar.name: -round(lidar.clock_offset_s, 9) for lidar in lidars}
     sensors = [s.model_copy(update={"time_offset_s": offsets[s.name]}) for s in params.sensors]
     return params.model_copy(update={"sensors": sensors})
 
@@ -219,7 +242,9 @@ def guessed_sensors(cfg: SimConfig, rng: np.random.Generator) -> Params:
         e = sensor.extrinsics
         d, a = cfg.guess_offset_m, cfg.guess_angle_deg
         ext = Extrinsics(
-            x_m=e.x_m + signs[0] * d, y_m=e.y_m + signs[1] * d, z_m=e.z_m + signs[2] * d,
+            x_m=e.x_m + signs[0] * d,
+            y_m=e.y_m + signs[1] * d,
+            z_m=e.z_m + signs[2] * d,
             roll_deg=float(wrap_deg(e.roll_deg + signs[3] * a)),
             pitch_deg=float(np.clip(e.pitch_deg + signs[4] * a, -90, 90)),
             yaw_deg=float(wrap_deg(e.yaw_deg + signs[5] * a)),
@@ -273,9 +298,12 @@ def build_simulation(cfg: SimConfig) -> Simulation:
     vehicles = place_vehicles(cfg, tail_s)
     tilt = pose_matrix(0, 0, 0, 0, -cfg.slope_deg, 0)  # ground rising along +x for a positive grade
     occupied = np.vstack([v.footprint() for v in vehicles])
-    sensor_xyz = np.array([l.pose[:3, 3] for l in lidars])
+    sensor_xyz = np.array([lidar.pose[:3, 3] for lidar in lidars])
     dock = next((d for d in (_dock_pose(v) for v in vehicles) if d is not None), None)
-    semitrailer = next((v.config.trailer for v in vehicles if v.config.trailer.hitch_to_front_m >= 0), cfg.params.vehicles["man_tgx"].trailer if "man_tgx" in cfg.params.vehicles else None)
+    semitrailer = next(
+        (v.config.trailer for v in vehicles if v.config.trailer.hitch_to_front_m >= 0),
+        cfg.params.vehicles["man_tgx"].trailer if "man_tgx" in cfg.params.vehicles else None,
+    )
     yard = build_yard(rng_yard, occupied, sensor_xyz, dock, semitrailer, cfg.distractors, cfg.clutter_near)
     objects = []
     rng_paint = np.random.default_rng(np.random.SeedSequence(cfg.seed).spawn(5)[4])
@@ -339,19 +367,37 @@ def ground_truth_line(sim: Simulation, frame: int, counts: dict[int, int]) -> di
         truck, trailer, s = v.unit_poses([t - dt, t, t + dt])
         truck, trailer = sim.tilt @ truck, sim.tilt @ trailer
         t_truck, t_trailer = truck[1], trailer[1]
-        truck_gt = _unit_gt(t_truck, (truck[2, :2, 3] - truck[0, :2, 3]) / (2 * dt), v.config.truck, counts.get(2 * v.vehicle_id, 0))
-        trailer_gt = _unit_gt(t_trailer, (trailer[2, :2, 3] - trailer[0, :2, 3]) / (2 * dt), v.config.trailer, counts.get(2 * v.vehicle_id + 1, 0))
-        vehicles.append({
-            "id": v.vehicle_id, "vehicle": v.name, "maneuver": str(s["label"][1]),
-            "hitch_deg": _rounded(wrap_deg(trailer_gt["yaw_deg"] - truck_gt["yaw_deg"]), 4),
-            "truck": truck_gt, "trailer": trailer_gt,
-            "tractor_to_trailer": _rounded(np.linalg.inv(t_trailer) @ t_truck, 6),
-        })
+        truck_gt = _unit_gt(
+            t_truck, (truck[2, :2, 3] - truck[0, :2, 3]) / (2 * dt), v.config.truck, counts.get(2 * v.vehicle_id, 0)
+        )
+        trailer_gt = _unit_gt(
+            t_trailer,
+            (trailer[2, :2, 3] - trailer[0, :2, 3]) / (2 * dt),
+            v.config.trailer,
+            counts.get(2 * v.vehicle_id + 1, 0),
+        )
+        vehicles.append(
+            {
+                "id": v.vehicle_id,
+                "vehicle": v.name,
+                "maneuver": str(s["label"][1]),
+                "hitch_deg": _rounded(wrap_deg(trailer_gt["yaw_deg"] - truck_gt["yaw_deg"]), 4),
+                "truck": truck_gt,
+                "trailer": trailer_gt,
+                "tractor_to_trailer": _rounded(np.linalg.inv(t_trailer) @ t_truck, 6),
+            }
+        )
     distractors = []
     for d in sim.yard.distractors:
         pose = sim.tilt @ _distractor_poses(d, [t])[0]
-        distractors.append({"kind": d.kind, "center": _rounded(pose[:3, 3], 4),
-                            "dimensions": list(d.dimensions), "yaw_deg": _rounded(_yaw_deg(pose), 4)})
+        distractors.append(
+            {
+                "kind": d.kind,
+                "center": _rounded(pose[:3, 3], 4),
+                "dimensions": list(d.dimensions),
+                "yaw_deg": _rounded(_yaw_deg(pose), 4),
+            }
+        )
     return {"frame": frame, "stamp_s": round(t, 6), "vehicles": vehicles, "distractors": distractors}
 
 
@@ -359,8 +405,8 @@ def simulate(cfg: SimConfig, progress=None) -> tuple[Simulation, dict[str, Senso
     """Run the simulation: range images per sensor and one ground-truth line per frame."""
     sim = build_simulation(cfg)
     rng_noise = np.random.default_rng(np.random.SeedSequence(cfg.seed).spawn(3)[2])
-    ranges = {l.name: np.zeros((sim.n_frames, l.beams, l.columns), dtype=np.uint16) for l in sim.lidars}
-    stamps = {l.name: np.zeros(sim.n_frames, dtype=np.int64) for l in sim.lidars}
+    ranges = {lidar.name: np.zeros((sim.n_frames, lidar.beams, lidar.columns), dtype=np.uint16) for lidar in sim.lidars}
+    stamps = {lidar.name: np.zeros(sim.n_frames, dtype=np.int64) for lidar in sim.lidars}
     gt = []
     for k in range(sim.n_frames):
         counts: dict[int, int] = {}
@@ -377,8 +423,14 @@ def simulate(cfg: SimConfig, progress=None) -> tuple[Simulation, dict[str, Senso
         if progress is not None:
             progress(1)
     scans = {
-        l.name: SensorScans(ranges[l.name], stamps[l.name], l.column_time_ns, l.beam_altitude_deg, l.beam_azimuth_offset_deg)
-        for l in sim.lidars
+        lidar.name: SensorScans(
+            ranges[lidar.name],
+            stamps[lidar.name],
+            lidar.column_time_ns,
+            lidar.beam_altitude_deg,
+            lidar.beam_azimuth_offset_deg,
+        )
+        for lidar in sim.lidars
     }
     return sim, scans, gt
 
@@ -393,23 +445,41 @@ def openlabel(gt: list[dict], rate_hz: float) -> dict:
         for v in line["vehicles"]:
             for unit, kind in (("truck", "TRUCK"), ("trailer", "TRAILER")):
                 uid = str(2 * v["id"] - (1 if unit == "truck" else 0))
-                objects.setdefault(uid, {"name": f"{kind}_{v['id']}", "type": kind,
-                                         "object_data": {"text": [{"name": "vehicle", "val": v["vehicle"]}]}})
+                objects.setdefault(
+                    uid,
+                    {
+                        "name": f"{kind}_{v['id']}",
+                        "type": kind,
+                        "object_data": {"text": [{"name": "vehicle", "val": v["vehicle"]}]},
+                    },
+                )
                 u = v[unit]
                 q = Rotation.from_euler("z", u["yaw_deg"], degrees=True).as_quat()  # x, y, z, w
-                frame_objects[uid] = {"object_data": {"cuboid": {
-                    "name": "shape3D", "val": [*u["center"], *_rounded(q, 8), *u["dimensions"]],
-                    "attributes": {"num": [{"name": "num_points", "val": u["points"]}, {"name": "hitch_deg", "val": v["hitch_deg"]}],
-                                   "text": [{"name": "maneuver", "val": v["maneuver"]}]},
-                }}}
+                frame_objects[uid] = {
+                    "object_data": {
+                        "cuboid": {
+                            "name": "shape3D",
+                            "val": [*u["center"], *_rounded(q, 8), *u["dimensions"]],
+                            "attributes": {
+                                "num": [
+                                    {"name": "num_points", "val": u["points"]},
+                                    {"name": "hitch_deg", "val": v["hitch_deg"]},
+                                ],
+                                "text": [{"name": "maneuver", "val": v["maneuver"]}],
+                            },
+                        }
+                    }
+                }
         frames[str(line["frame"])] = {"frame_properties": {"timestamp": line["stamp_s"]}, "objects": frame_objects}
-    return {"openlabel": {
-        "metadata": {"schema_version": "1.0.0", "annotator": GENERATOR},
-        "coordinate_systems": {"yard": {"type": "scene_cs", "parent": "", "children": []}},
-        "objects": objects,
-        "frames": frames,
-        "frame_intervals": [{"frame_start": 0, "frame_end": len(gt) - 1}],
-    }}
+    return {
+        "openlabel": {
+            "metadata": {"schema_version": "1.0.0", "annotator": GENERATOR},
+            "coordinate_systems": {"yard": {"type": "scene_cs", "parent": "", "children": []}},
+            "objects": objects,
+            "frames": frames,
+            "frame_intervals": [{"frame_start": 0, "frame_end": len(gt) - 1}],
+        }
+    }
 
 
 def run(cfg: SimConfig, out: str | Path, progress=None) -> tuple[Simulation, Path]:
@@ -418,15 +488,27 @@ def run(cfg: SimConfig, out: str | Path, progress=None) -> tuple[Simulation, Pat
     rng_guess = np.random.default_rng(np.random.SeedSequence(cfg.seed).spawn(4)[3])
     sensors = cfg.params
     if cfg.columns is not None:
-        sensors = sensors.model_copy(update={"sensors": [s.model_copy(update={"columns": cfg.columns}) for s in sensors.sensors]})
-    guess = guessed_sensors(SimConfig(**{**cfg.__dict__, "params": sensors}), rng_guess)  # clocks uncalibrated: offsets 0
+        sensors = sensors.model_copy(
+            update={"sensors": [s.model_copy(update={"columns": cfg.columns}) for s in sensors.sensors]}
+        )
+    guess = guessed_sensors(
+        SimConfig(**{**cfg.__dict__, "params": sensors}), rng_guess
+    )  # clocks uncalibrated: offsets 0
     sensors = with_true_time_offsets(sensors, sim.lidars)
     meta = {
-        "generator": GENERATOR, "seed": cfg.seed, "scenario": cfg.scenario, "vehicles": [v.name for v in sim.vehicles],
-        "rate_hz": sim.rate_hz, "duration_s": cfg.duration_s, "start_s": cfg.start_s, "slope_deg": cfg.slope_deg,
-        "sensors": [l.meta() for l in sim.lidars],
+        "generator": GENERATOR,
+        "seed": cfg.seed,
+        "scenario": cfg.scenario,
+        "vehicles": [v.name for v in sim.vehicles],
+        "rate_hz": sim.rate_hz,
+        "duration_s": cfg.duration_s,
+        "start_s": cfg.start_s,
+        "slope_deg": cfg.slope_deg,
+        "sensors": [lidar.meta() for lidar in sim.lidars],
         "static_objects": sim.yard.static_objects,
         "vehicle_surfaces": {str(i): {"cab": cab, "trailer": body} for i, (cab, body) in sim.surfaces.items()},
     }
-    path = write_recording(out, meta, scans, gt, dump_yaml(sensors, ["sensors"]), dump_yaml(guess, ["sensors"]), openlabel(gt, sim.rate_hz))
+    path = write_recording(
+        out, meta, scans, gt, dump_yaml(sensors, ["sensors"]), dump_yaml(guess, ["sensors"]), openlabel(gt, sim.rate_hz)
+    )
     return sim, path

@@ -36,7 +36,7 @@ class Articulation:
     max_hitch_deg: float = 60.0
 
     @classmethod
-    def from_vehicle(cls, vehicle) -> "Articulation":
+    def from_vehicle(cls, vehicle) -> Articulation:
         """From an ``i2v_loc.params.VehicleConfig``."""
         return cls(
             wheelbase_m=vehicle.truck.wheelbase_m,
@@ -73,7 +73,9 @@ def hitch_point(state: np.ndarray, art: Articulation) -> np.ndarray:
 def trailer_axle_point(state: np.ndarray, art: Articulation) -> np.ndarray:
     hx, hy = hitch_point(state, art)
     yaw2 = state[3]
-    return np.array([hx - art.trailer_hitch_to_axle_m * math.cos(yaw2), hy - art.trailer_hitch_to_axle_m * math.sin(yaw2)])
+    return np.array(
+        [hx - art.trailer_hitch_to_axle_m * math.cos(yaw2), hy - art.trailer_hitch_to_axle_m * math.sin(yaw2)]
+    )
 
 
 def yaw_rate_for_hitch_rate(hitch_rad: float, speed_mps: float, hitch_rate_rad_s: float, art: Articulation) -> float:
@@ -83,7 +85,9 @@ def yaw_rate_for_hitch_rate(hitch_rad: float, speed_mps: float, hitch_rate_rad_s
     return (-speed_mps * math.sin(hitch_rad) / l2 - hitch_rate_rad_s) / denominator
 
 
-def steer_for_hitch(state: np.ndarray, speed_mps: float, hitch_ref_rad: float, art: Articulation, gain_1pm: float = 1.0) -> float:
+def steer_for_hitch(
+    state: np.ndarray, speed_mps: float, hitch_ref_rad: float, art: Articulation, gain_1pm: float = 1.0
+) -> float:
     """Steering that makes the hitch angle approach ``hitch_ref_rad`` (φ̇ = k (φ_ref - φ), k = gain·|v|).
 
     Used for reversing, where the hitch angle is unstable on its own. Returns the unclipped angle.

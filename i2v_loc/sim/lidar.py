@@ -33,7 +33,7 @@ class LidarModel:
     clock_offset_s: float = 0.0  # sensor clock minus true clock
 
     @classmethod
-    def from_config(cls, cfg, **kwargs) -> "LidarModel":
+    def from_config(cls, cfg, **kwargs) -> LidarModel:
         """From an ``i2v_loc.params.SensorConfig``: its metadata file's beam table, else its model's."""
         if cfg.metadata:
             table = metadata_beam_table(cfg.metadata)
@@ -45,8 +45,15 @@ class LidarModel:
         else:
             table = model_beam_table(cfg.model, cfg.columns, cfg.beam_config)
         kwargs.setdefault("returns", ReturnModel(min_range_m=cfg.min_range_m))
-        return cls(name=cfg.name, model=cfg.model, rate_hz=cfg.rate_hz, pose=extrinsics_matrix(cfg.extrinsics),
-                   beam_table=table, max_range_m=cfg.max_range_m, **kwargs)
+        return cls(
+            name=cfg.name,
+            model=cfg.model,
+            rate_hz=cfg.rate_hz,
+            pose=extrinsics_matrix(cfg.extrinsics),
+            beam_table=table,
+            max_range_m=cfg.max_range_m,
+            **kwargs,
+        )
 
     @property
     def beams(self) -> int:
@@ -79,11 +86,16 @@ class LidarModel:
 
     def meta(self) -> dict:
         return {
-            "name": self.name, "model": self.model, "beams": self.beams, "columns": self.columns,
-            "rate_hz": self.rate_hz, "beam_table": self.beam_table.source,
+            "name": self.name,
+            "model": self.model,
+            "beams": self.beams,
+            "columns": self.columns,
+            "rate_hz": self.rate_hz,
+            "beam_table": self.beam_table.source,
             "beam_altitude_deg": [round(float(a), 4) for a in self.beam_altitude_deg],
             "beam_azimuth_offset_deg": [round(float(a), 4) for a in self.beam_azimuth_offset_deg],
-            "phase_s": round(self.phase_s, 9), "clock_offset_s": round(self.clock_offset_s, 9),
+            "phase_s": round(self.phase_s, 9),
+            "clock_offset_s": round(self.clock_offset_s, 9),
             "return_model": self.returns.meta() if self.returns else "ideal (every ray returns, no noise)",
             "max_range_m": self.max_range_m,
         }
@@ -105,7 +117,9 @@ class MovingObject:
 
 def _scene(mesh: Mesh) -> o3d.t.geometry.RaycastingScene:
     scene = o3d.t.geometry.RaycastingScene()
-    scene.add_triangles(o3d.core.Tensor(mesh.vertices.astype(np.float32)), o3d.core.Tensor(mesh.triangles.astype(np.uint32)))
+    scene.add_triangles(
+        o3d.core.Tensor(mesh.vertices.astype(np.float32)), o3d.core.Tensor(mesh.triangles.astype(np.uint32))
+    )
     return scene
 
 
@@ -119,15 +133,19 @@ class Hits:
     reflectivity: np.ndarray
     cos_incidence: np.ndarray
 
-    def reshaped(self, shape) -> "Hits":
+    def reshaped(self, shape) -> Hits:
         return Hits(*(a.reshape(shape) for a in (self.range_m, self.hit_id, self.reflectivity, self.cos_incidence)))
 
-    def take_closer(self, other: "Hits", index) -> None:
+    def take_closer(self, other: Hits, index) -> None:
         """Where ``other`` (hits of the rays at ``index``) is closer, it wins."""
         closer = other.range_m < self.range_m[index]
         target = tuple(i[closer] for i in index)
-        for mine, theirs in ((self.range_m, other.range_m), (self.hit_id, other.hit_id),
-                             (self.reflectivity, other.reflectivity), (self.cos_incidence, other.cos_incidence)):
+        for mine, theirs in (
+            (self.range_m, other.range_m),
+            (self.hit_id, other.hit_id),
+            (self.reflectivity, other.reflectivity),
+            (self.cos_incidence, other.cos_incidence),
+        ):
             mine[target] = theirs[closer]
 
 
@@ -138,8 +156,12 @@ def _cast(scene, mesh: Mesh, hit_id: int, origins: np.ndarray, directions: np.nd
     hit = np.isfinite(t_hit)
     primitive = np.where(hit, result["primitive_ids"].numpy(), 0).astype(np.int64)
     cos = np.abs(np.einsum("ij,ij->i", result["primitive_normals"].numpy(), directions.astype(np.float32)))
-    return Hits(t_hit, np.where(hit, hit_id, NO_HIT), np.where(hit, mesh.reflectivity[primitive], 0.0).astype(np.float32),
-                np.where(hit, cos, 0.0).astype(np.float32))
+    return Hits(
+        t_hit,
+        np.where(hit, hit_id, NO_HIT),
+        np.where(hit, mesh.reflectivity[primitive], 0.0).astype(np.float32),
+        np.where(hit, cos, 0.0).astype(np.float32),
+    )
 
 
 STATIC = -1  # hit id of the static yard
@@ -179,7 +201,9 @@ class YardCaster:
     def cast_sweep(self, lidar: LidarModel, sweep_start_s: float) -> Hits:
         """True hits (beams, columns) of one sweep, moving objects at each slice's mid time."""
         static = self.static_hits(lidar)
-        hits = Hits(static.range_m.copy(), static.hit_id.copy(), static.reflectivity.copy(), static.cos_incidence.copy())
+        hits = Hits(
+            static.range_m.copy(), static.hit_id.copy(), static.reflectivity.copy(), static.cos_incidence.copy()
+        )
         directions = self._directions(lidar)
         origin = lidar.pose[:3, 3]
         bounds = np.linspace(0, lidar.columns, self.slices + 1).astype(int)
@@ -208,12 +232,16 @@ class YardCaster:
                 hits.take_closer(obj_hits, (beam, col + c0))
         return hits
 
-    def measure(self, lidar: LidarModel, sweep_start_s: float, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    def measure(
+        self, lidar: LidarModel, sweep_start_s: float, rng: np.random.Generator
+    ) -> tuple[np.ndarray, np.ndarray]:
         """Measured ranges (NaN = no return) by the sensor's return model, and hit ids (-2 where none)."""
         hits = self.cast_sweep(lidar, sweep_start_s)
         if lidar.returns is None:
             valid = np.isfinite(hits.range_m) & (hits.range_m <= lidar.max_range_m)
             measured = np.where(valid, hits.range_m, np.nan)
         else:
-            measured = lidar.returns.measure(hits.range_m, hits.reflectivity, hits.cos_incidence, rng, lidar.max_range_m)
+            measured = lidar.returns.measure(
+                hits.range_m, hits.reflectivity, hits.cos_incidence, rng, lidar.max_range_m
+            )
         return measured, np.where(np.isfinite(measured), hits.hit_id, NO_HIT)

@@ -17,7 +17,14 @@ from i2v_loc.geometry import rotate_xy
 from i2v_loc.sim import kinematics as kin
 
 LABELS = (
-    "straight", "single_turn", "long_curve", "u_turn", "lane_change", "roundabout", "reverse_docking", "standstill",
+    "straight",
+    "single_turn",
+    "long_curve",
+    "u_turn",
+    "lane_change",
+    "roundabout",
+    "reverse_docking",
+    "standstill",
 )
 SCENARIOS = LABELS + ("docking",)
 DT_S = 0.005
@@ -69,17 +76,35 @@ class Trajectory:
         out["label"] = np.array([self.labels[i] for i in self.label_index[nearest]])
         return out
 
-    def mirrored(self) -> "Trajectory":
+    def mirrored(self) -> Trajectory:
         """The mirror image about the x axis (left turns become right turns; still a valid motion)."""
         xy = self.rear_axle_xy * [1.0, -1.0]
-        return Trajectory(self.art, self.time_s, xy, -self.yaw_rad, -self.trailer_yaw_rad,
-                          self.speed_mps, -self.steer_rad, self.label_index, self.labels)
+        return Trajectory(
+            self.art,
+            self.time_s,
+            xy,
+            -self.yaw_rad,
+            -self.trailer_yaw_rad,
+            self.speed_mps,
+            -self.steer_rad,
+            self.label_index,
+            self.labels,
+        )
 
-    def moved(self, yaw_rad: float, offset_xy) -> "Trajectory":
+    def moved(self, yaw_rad: float, offset_xy) -> Trajectory:
         """The same motion rotated about the origin by ``yaw_rad`` and then shifted."""
         xy = rotate_xy(self.rear_axle_xy, yaw_rad) + np.asarray(offset_xy, dtype=float)
-        return Trajectory(self.art, self.time_s, xy, self.yaw_rad + yaw_rad, self.trailer_yaw_rad + yaw_rad,
-                          self.speed_mps, self.steer_rad, self.label_index, self.labels)
+        return Trajectory(
+            self.art,
+            self.time_s,
+            xy,
+            self.yaw_rad + yaw_rad,
+            self.trailer_yaw_rad + yaw_rad,
+            self.speed_mps,
+            self.steer_rad,
+            self.label_index,
+            self.labels,
+        )
 
 
 @dataclass
@@ -108,7 +133,9 @@ class Integrator:
                 record_start = t
             if record_start is not None and t - record_start > duration_s + tail_s:
                 break
-            t = self._run_phase(phase, t, rows, stop_time=None if record_start is None else record_start + duration_s + tail_s)
+            t = self._run_phase(
+                phase, t, rows, stop_time=None if record_start is None else record_start + duration_s + tail_s
+            )
         if record_start is None:
             record_start = t
         standstill = LABELS.index("standstill")
@@ -180,7 +207,9 @@ class Integrator:
             # Heading still gained while the steering winds back to zero at the rate limit.
             unwind_s = abs(self.steer_rad) / math.radians(art.max_steer_rate_deg_s)
             unwind_gain = abs(self.speed_mps * math.tan(self.steer_rad) / art.wheelbase_m) * unwind_s / 2.0
-            if abs(remaining) <= unwind_gain + 1e-4 or math.copysign(1.0, remaining) != math.copysign(1.0, math.radians(phase.heading_deg) - p.start_state[2]):
+            if abs(remaining) <= unwind_gain + 1e-4 or math.copysign(1.0, remaining) != math.copysign(
+                1.0, math.radians(phase.heading_deg) - p.start_state[2]
+            ):
                 p.unwinding = True
             if p.unwinding:
                 return self._braking_speed(phase, 0.0), 0.0, abs(self.steer_rad) < 1e-3

@@ -21,28 +21,48 @@ class Mesh(NamedTuple):
 def _surface(n_triangles: int, surface: str) -> np.ndarray:
     return np.full(n_triangles, REFLECTIVITY[surface], dtype=np.float32)
 
+
 _BOX_TRIANGLES = np.array(
-    [[0, 2, 1], [1, 2, 3], [4, 5, 6], [5, 7, 6], [0, 1, 4], [1, 5, 4],
-     [2, 6, 3], [3, 6, 7], [0, 4, 2], [2, 4, 6], [1, 3, 5], [3, 7, 5]], dtype=np.int32,
+    [
+        [0, 2, 1],
+        [1, 2, 3],
+        [4, 5, 6],
+        [5, 7, 6],
+        [0, 1, 4],
+        [1, 5, 4],
+        [2, 6, 3],
+        [3, 6, 7],
+        [0, 4, 2],
+        [2, 4, 6],
+        [1, 3, 5],
+        [3, 7, 5],
+    ],
+    dtype=np.int32,
 )
 
 
 def box(center, size, yaw_rad: float = 0.0, surface: str = "paint") -> Mesh:
     """Axis-aligned box (rotated by ``yaw_rad`` about its centre's vertical axis)."""
-    corners = np.array([[x, y, z] for x in (-0.5, 0.5) for y in (-0.5, 0.5) for z in (-0.5, 0.5)]) * np.asarray(size, float)
+    corners = np.array([[x, y, z] for x in (-0.5, 0.5) for y in (-0.5, 0.5) for z in (-0.5, 0.5)]) * np.asarray(
+        size, float
+    )
     corners[:, :2] = rotate_xy(corners[:, :2], yaw_rad)
     return Mesh(corners + np.asarray(center, float), _BOX_TRIANGLES.copy(), _surface(len(_BOX_TRIANGLES), surface))
 
 
 def box_between(x0, x1, y0, y1, z0, z1, surface: str = "paint") -> Mesh:
-    return box(((x0 + x1) / 2, (y0 + y1) / 2, (z0 + z1) / 2), (abs(x1 - x0), abs(y1 - y0), abs(z1 - z0)), surface=surface)
+    return box(
+        ((x0 + x1) / 2, (y0 + y1) / 2, (z0 + z1) / 2), (abs(x1 - x0), abs(y1 - y0), abs(z1 - z0)), surface=surface
+    )
 
 
 def with_surface(mesh: Mesh, surface: str) -> Mesh:
     return mesh._replace(reflectivity=_surface(len(mesh.triangles), surface))
 
 
-def cylinder(center, radius_m: float, length_m: float, axis: str = "z", segments: int = 12, surface: str = "steel") -> Mesh:
+def cylinder(
+    center, radius_m: float, length_m: float, axis: str = "z", segments: int = 12, surface: str = "steel"
+) -> Mesh:
     """Closed cylinder along ``axis`` ('x', 'y' or 'z')."""
     a = np.linspace(0, 2 * np.pi, segments, endpoint=False)
     ring = np.stack([radius_m * np.cos(a), radius_m * np.sin(a)], axis=1)
@@ -51,10 +71,14 @@ def cylinder(center, radius_m: float, length_m: float, axis: str = "z", segments
     i = np.arange(segments)
     j = (i + 1) % segments
     bottom, top = 2 * segments, 2 * segments + 1
-    tris = np.vstack([
-        np.c_[i, j, i + segments], np.c_[j, j + segments, i + segments],
-        np.c_[np.full(segments, bottom), j, i], np.c_[np.full(segments, top), i + segments, j + segments],
-    ]).astype(np.int32)
+    tris = np.vstack(
+        [
+            np.c_[i, j, i + segments],
+            np.c_[j, j + segments, i + segments],
+            np.c_[np.full(segments, bottom), j, i],
+            np.c_[np.full(segments, top), i + segments, j + segments],
+        ]
+    ).astype(np.int32)
     order = {"x": [2, 0, 1], "y": [0, 2, 1], "z": [0, 1, 2]}[axis]
     return Mesh(local[:, order] + np.asarray(center, float), tris, _surface(len(tris), surface))
 
@@ -81,7 +105,9 @@ def wheel_radius_m(wheelbase_m: float) -> float:
 
 
 def wheel_pair(x_m: float, track_half_m: float, radius_m: float, width_m: float) -> list[Mesh]:
-    return [cylinder((x_m, side * track_half_m, radius_m), radius_m, width_m, axis="y", surface="tyre") for side in (-1, 1)]
+    return [
+        cylinder((x_m, side * track_half_m, radius_m), radius_m, width_m, axis="y", surface="tyre") for side in (-1, 1)
+    ]
 
 
 def cab(x_back: float, x_front: float, half_w: float, z0: float, z1: float, paint: str) -> list[Mesh]:
@@ -118,12 +144,26 @@ def truck_mesh(truck, paint: str = "paint") -> Mesh:
     if cab_back - rails_end > 0.3:
         # Chassis rails (two, 0.9 m apart) and the fifth-wheel plate on top at the hitch.
         for side in (-1, 1):
-            parts.append(box_between(rails_end, cab_back, side * 0.45 - 0.08, side * 0.45 + 0.08, rail_top - 0.3, rail_top, "steel"))
+            parts.append(
+                box_between(
+                    rails_end, cab_back, side * 0.45 - 0.08, side * 0.45 + 0.08, rail_top - 0.3, rail_top, "steel"
+                )
+            )
         parts.append(box_between(hitch_x - 0.5, hitch_x + 0.5, -0.5, 0.5, rail_top, rail_top + 0.15, "steel"))
         # Mudguards over the rear wheels.
         for side in (-1, 1):
             y = side * (half_w - wheel_w / 2 - 0.02)
-            parts.append(box_between(-r - 0.1, r + 0.1, y - wheel_w / 2 - 0.03, y + wheel_w / 2 + 0.03, 2 * r + 0.02, 2 * r + 0.08, "rubber"))
+            parts.append(
+                box_between(
+                    -r - 0.1,
+                    r + 0.1,
+                    y - wheel_w / 2 - 0.03,
+                    y + wheel_w / 2 + 0.03,
+                    2 * r + 0.02,
+                    2 * r + 0.08,
+                    "rubber",
+                )
+            )
     if hitch_x < cab_back:
         # Drawbar coupling behind the body.
         parts.append(box_between(hitch_x, cab_back + 0.2, -0.05, 0.05, 0.35, 0.45, "steel"))
@@ -150,7 +190,17 @@ def trailer_mesh(trailer, body: str = "trailer_panel") -> Mesh:
     if trailer.hitch_to_front_m >= 0:
         legs_x = hitch_x - min(2.5, 0.3 * trailer.hitch_to_axle_m)
         for side in (-1, 1):
-            parts.append(box_between(legs_x - 0.1, legs_x + 0.1, side * (half_w - 0.4) - 0.1, side * (half_w - 0.4) + 0.1, 0.0, floor, "steel"))
+            parts.append(
+                box_between(
+                    legs_x - 0.1,
+                    legs_x + 0.1,
+                    side * (half_w - 0.4) - 0.1,
+                    side * (half_w - 0.4) + 0.1,
+                    0.0,
+                    floor,
+                    "steel",
+                )
+            )
         parts.append(box_between(hitch_x - 0.4, hitch_x + 0.4, -0.4, 0.4, floor - 0.1, floor, "steel"))  # kingpin plate
     else:
         # A-frame drawbar from the eye to the body front.
@@ -180,8 +230,24 @@ def car_mesh(length_m: float = 4.5, width_m: float = 1.8, height_m: float = 1.5,
     """A car in its own box frame (origin at the box centre): painted body, glass cabin, painted roof."""
     bottom = -height_m / 2
     body = box_between(-length_m / 2, length_m / 2, -width_m / 2, width_m / 2, bottom + 0.3, bottom + 0.95, paint)
-    cabin = box_between(-length_m * 0.3, length_m * 0.2, -width_m / 2 + 0.1, width_m / 2 - 0.1, bottom + 0.95, bottom + height_m - 0.05, "glass")
-    roof = box_between(-length_m * 0.25, length_m * 0.15, -width_m / 2 + 0.15, width_m / 2 - 0.15, bottom + height_m - 0.05, bottom + height_m, paint)
+    cabin = box_between(
+        -length_m * 0.3,
+        length_m * 0.2,
+        -width_m / 2 + 0.1,
+        width_m / 2 - 0.1,
+        bottom + 0.95,
+        bottom + height_m - 0.05,
+        "glass",
+    )
+    roof = box_between(
+        -length_m * 0.25,
+        length_m * 0.15,
+        -width_m / 2 + 0.15,
+        width_m / 2 - 0.15,
+        bottom + height_m - 0.05,
+        bottom + height_m,
+        paint,
+    )
     wheels = []
     for x in (-length_m * 0.32, length_m * 0.32):
         wheels += [shifted(w, (0, 0, bottom)) for w in wheel_pair(x, width_m / 2 - 0.12, 0.32, 0.22)]

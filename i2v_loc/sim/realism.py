@@ -21,15 +21,22 @@ from scipy.spatial.transform import Rotation
 
 from i2v_loc.recording import beam_directions
 from i2v_loc.sim import meshes as m
-from i2v_loc.sim.lidar import NO_HIT, YardCaster
+from i2v_loc.sim.lidar import YardCaster
 from i2v_loc.sim.sensor_model import COLUMNS, BeamTable, ReturnModel
 
 GROUND_CELL_M = 1.0
 CUBOID_MARGIN_M = 0.3  # real points this close to a cuboid belong to its object, not to clutter
 BLOCKING_MARGIN_M = 0.5
 GROUND_PLANE_BAND_M = 2.0  # the ground may leave the fitted plane by this much (ramps, two carriageways)
-PAINTS = {"white": "white_paint", "gray": "silver_paint", "grey": "silver_paint", "silver": "silver_paint",
-          "red": "red_paint", "blue": "blue_paint", "black": "dark_paint"}
+PAINTS = {
+    "white": "white_paint",
+    "gray": "silver_paint",
+    "grey": "silver_paint",
+    "silver": "silver_paint",
+    "red": "red_paint",
+    "blue": "blue_paint",
+    "black": "dark_paint",
+}
 
 
 class RealismError(ValueError):
@@ -106,8 +113,12 @@ def read_labels(path: str | Path, frame: RealFrame) -> list[LabelledObject]:
             text = {a["name"]: a["val"] for a in attrs.get("text", [])}
             num = {a["name"]: a["val"] for a in attrs.get("num", [])}
             rotation = Rotation.from_quat(v[3:7]).as_matrix()
-            labelled = LabelledObject(str(data.get("type", "UNKNOWN")).upper(), v[:3], rotation, v[7:10], text.get("body_color"), 0)
-            labelled.real_points = int(num["num_points"]) if "num_points" in num else int(labelled.contains(frame.xyz).sum())
+            labelled = LabelledObject(
+                str(data.get("type", "UNKNOWN")).upper(), v[:3], rotation, v[7:10], text.get("body_color"), 0
+            )
+            labelled.real_points = (
+                int(num["num_points"]) if "num_points" in num else int(labelled.contains(frame.xyz).sum())
+            )
             objects.append(labelled)
     if not objects:
         raise RealismError(f"{path}: no labelled cuboids")
@@ -230,15 +241,29 @@ def object_mesh(obj: LabelledObject) -> m.Mesh:
         return m.car_mesh(length, width, height, paint)
     if obj.type == "TRAILER":
         floor = min(1.2, 0.3 * height)
-        body = m.box_between(-length / 2, length / 2, -width / 2, width / 2, -height / 2 + floor, height / 2, "trailer_panel")
-        wheels = [m.shifted(w, (-length / 2 + 1.5, 0, -height / 2)) for w in m.wheel_pair(0.0, width / 2 - 0.2, 0.5, 0.35)]
+        body = m.box_between(
+            -length / 2, length / 2, -width / 2, width / 2, -height / 2 + floor, height / 2, "trailer_panel"
+        )
+        wheels = [
+            m.shifted(w, (-length / 2 + 1.5, 0, -height / 2)) for w in m.wheel_pair(0.0, width / 2 - 0.2, 0.5, 0.35)
+        ]
         return m.merge([body, *wheels])
     # TRUCK, BUS and the rest: a cab (glass windscreen) over the whole box, on wheels
     bottom = -height / 2
     cab_length = length if obj.type == "BUS" or length < 4 else min(2.5, length)
     parts = m.cab(length / 2 - cab_length, length / 2, width / 2, bottom + 0.5, height / 2, paint)
     if cab_length < length:  # a tractor's chassis behind its cab
-        parts.append(m.box_between(-length / 2, length / 2 - cab_length, -width / 2 + 0.3, width / 2 - 0.3, bottom + 0.5, bottom + 1.3, "steel"))
+        parts.append(
+            m.box_between(
+                -length / 2,
+                length / 2 - cab_length,
+                -width / 2 + 0.3,
+                width / 2 - 0.3,
+                bottom + 0.5,
+                bottom + 1.3,
+                "steel",
+            )
+        )
     for x in (-length / 2 + 0.8, length / 2 - 1.0):
         parts += [m.shifted(w, (0, 0, bottom)) for w in m.wheel_pair(x, width / 2 - 0.25, 0.5, 0.35)]
     return m.merge(parts)
@@ -267,7 +292,9 @@ class ObjectResult:
         return self.sim_points / max(self.real_points, 1)
 
 
-def compare(cloud: str | Path, labels: str | Path, returns: ReturnModel | None = None) -> tuple[list[ObjectResult], BeamTable]:
+def compare(
+    cloud: str | Path, labels: str | Path, returns: ReturnModel | None = None
+) -> tuple[list[ObjectResult], BeamTable]:
     frame = read_real_frame(cloud)
     objects = read_labels(labels, frame)
     table, column = real_beam_table(frame)
@@ -287,8 +314,15 @@ def compare(cloud: str | Path, labels: str | Path, returns: ReturnModel | None =
     results = []
     for obj in objects:
         inside = obj.contains(points.reshape(-1, 3)).reshape(hits.range_m.shape) & np.isfinite(hits.range_m)
-        results.append(ObjectResult(obj.type, obj.range_m, obj.real_points,
-                                    float(expected[inside & ~blocked].sum()), float(expected[inside & blocked].sum())))
+        results.append(
+            ObjectResult(
+                obj.type,
+                obj.range_m,
+                obj.real_points,
+                float(expected[inside & ~blocked].sum()),
+                float(expected[inside & blocked].sum()),
+            )
+        )
     return results, table
 
 
@@ -306,8 +340,9 @@ def _real_range_image(frame: RealFrame, column: np.ndarray, table: BeamTable) ->
     return image
 
 
-def _blocked_by_clutter(frame: RealFrame, column: np.ndarray, objects: list[LabelledObject],
-                        sim_range: np.ndarray, table: BeamTable) -> np.ndarray:
+def _blocked_by_clutter(
+    frame: RealFrame, column: np.ndarray, objects: list[LabelledObject], sim_range: np.ndarray, table: BeamTable
+) -> np.ndarray:
     """Rays (beams, columns) whose real return, or a neighbouring column's, came from unlabelled
     structure nearer than what the simulated ray hit."""
     on_objects = np.any([o.contains(frame.xyz, CUBOID_MARGIN_M) for o in objects], axis=0)
@@ -326,9 +361,14 @@ def summary(results: list[ObjectResult]) -> dict:
         "median_ratio": float(np.median(ratios)),
         "share_within_half_to_double": float(np.mean((ratios >= 0.5) & (ratios <= 2.0))),
         "objects": [
-            {"type": r.type, "range_m": round(r.range_m, 2), "real_points": r.real_points,
-             "sim_points": round(r.sim_points, 1), "blocked_by_clutter": round(r.blocked_by_clutter, 1),
-             "ratio": round(r.ratio, 3)}
+            {
+                "type": r.type,
+                "range_m": round(r.range_m, 2),
+                "real_points": r.real_points,
+                "sim_points": round(r.sim_points, 1),
+                "blocked_by_clutter": round(r.blocked_by_clutter, 1),
+                "ratio": round(r.ratio, 3),
+            }
             for r in sorted(results, key=lambda r: r.range_m)
         ],
     }

@@ -144,8 +144,14 @@ class ReturnModel:
         snr = self.snr_at_detection_90 * np.maximum(signal, 1e-30) / self.detection_signal_90
         return np.maximum(self.min_noise_m, self.noise_at_unit_snr_m / np.sqrt(snr))
 
-    def measure(self, range_m: np.ndarray, reflectivity: np.ndarray, cos_incidence: np.ndarray,
-                rng: np.random.Generator, max_range_m: float) -> np.ndarray:
+    def measure(
+        self,
+        range_m: np.ndarray,
+        reflectivity: np.ndarray,
+        cos_incidence: np.ndarray,
+        rng: np.random.Generator,
+        max_range_m: float,
+    ) -> np.ndarray:
         """Measured ranges (NaN where no return) for true ranges (inf where the ray hit nothing)."""
         finite = np.isfinite(range_m)
         r = np.where(finite, range_m, 1.0)

@@ -55,7 +55,9 @@ def footprint_points(center_xy, length_m: float, width_m: float, yaw_rad, step_m
     xs = np.linspace(-length_m / 2, length_m / 2, max(2, int(length_m / step_m) + 1))
     ys = np.linspace(-width_m / 2, width_m / 2, max(2, int(width_m / step_m) + 1))
     local = np.array(np.meshgrid(xs, ys)).reshape(2, -1).T
-    return (rotate_xy(local, np.asarray(yaw_rad, float)[..., None]) + np.asarray(center_xy, float)[..., None, :]).reshape(-1, 2)
+    return (
+        rotate_xy(local, np.asarray(yaw_rad, float)[..., None]) + np.asarray(center_xy, float)[..., None, :]
+    ).reshape(-1, 2)
 
 
 def dock_wall(rear_center_xy, facing_yaw_rad: float, bays: int = 3, bay_width_m: float = 4.0) -> list[m.Mesh]:
@@ -64,13 +66,19 @@ def dock_wall(rear_center_xy, facing_yaw_rad: float, bays: int = 3, bay_width_m:
     height, door_w, door_h, recess, thickness = 6.0, 3.0, 3.6, 0.4, 0.5
     parts = []
     half = bays * bay_width_m / 2
-    edges = [-half] + [(-half + (i + 0.5) * bay_width_m) + s * door_w / 2 for i in range(bays) for s in (-1, 1)] + [half]
+    edges = (
+        [-half] + [(-half + (i + 0.5) * bay_width_m) + s * door_w / 2 for i in range(bays) for s in (-1, 1)] + [half]
+    )
     for y0, y1 in zip(edges[0::2], edges[1::2]):  # pillars between the doors
         parts.append(m.box_between(-thickness, 0.0, y0, y1, 0.0, height, "concrete"))
     for i in range(bays):
         yc = -half + (i + 0.5) * bay_width_m
-        parts.append(m.box_between(-thickness - recess, -recess, yc - door_w / 2, yc + door_w / 2, 0.0, height, "steel"))  # door
-        parts.append(m.box_between(-recess, 0.0, yc - door_w / 2, yc + door_w / 2, door_h, height, "concrete"))  # lintel
+        parts.append(
+            m.box_between(-thickness - recess, -recess, yc - door_w / 2, yc + door_w / 2, 0.0, height, "steel")
+        )  # door
+        parts.append(
+            m.box_between(-recess, 0.0, yc - door_w / 2, yc + door_w / 2, door_h, height, "concrete")
+        )  # lintel
         for s in (-1, 1):  # rubber bumpers at trailer-floor height
             parts.append(m.box_between(0.0, 0.15, yc + s * 1.1 - 0.15, yc + s * 1.1 + 0.15, 0.9, 1.3, "rubber"))
     # Local frame: x out of the wall, so rotate x onto the facing direction.
@@ -103,7 +111,9 @@ def build_yard(
     else:
         bays = 3
     yard.static_parts += dock_wall(dock[0], dock[1], bays=bays)
-    yard.static_objects.append({"kind": "dock_wall", "center": [float(v) for v in dock[0]], "yaw_deg": math.degrees(dock[1])})
+    yard.static_objects.append(
+        {"kind": "dock_wall", "center": [float(v) for v in dock[0]], "yaw_deg": math.degrees(dock[1])}
+    )
     behind = np.asarray(dock[0], float) - 0.5 * np.array([math.cos(dock[1]), math.sin(dock[1])])
     space.add(footprint_points(behind, 1.0, bays * 4.0, dock[1]))  # nothing stands in the wall
     for x, y, z in sensor_xyz:  # the sensors' poles, up to 0.3 m below the sensor
@@ -145,7 +155,9 @@ def build_yard(
                 xy, yaw = spot
                 size = CONTAINER_SIZE_M
                 yard.static_parts.append(m.box((xy[0], xy[1], size[2] / 2), size, yaw, surface="container"))
-                yard.static_objects.append({"kind": "container", "center": [float(xy[0]), float(xy[1])], "yaw_deg": math.degrees(yaw)})
+                yard.static_objects.append(
+                    {"kind": "container", "center": [float(xy[0]), float(xy[1])], "yaw_deg": math.degrees(yaw)}
+                )
 
     def add_poles():
         for _ in range(3):
@@ -165,10 +177,16 @@ def build_yard(
                 center = m.box_center_in_axle_frame(parked_trailer, is_truck=False)
                 mesh = m.shifted(m.trailer_mesh(parked_trailer), (-center[0], 0.0, 0.0))
                 yard.static_parts.append(m.transformed(mesh, planar_pose(xy[0], xy[1], yaw)))
-                yard.static_objects.append({"kind": "parked_trailer", "center": [float(xy[0]), float(xy[1])], "yaw_deg": math.degrees(yaw)})
+                yard.static_objects.append(
+                    {"kind": "parked_trailer", "center": [float(xy[0]), float(xy[1])], "yaw_deg": math.degrees(yaw)}
+                )
 
     # Packed beside the vehicles, the long trailers go first: they fit fewer gaps.
-    for add in (add_parked_trailers, add_containers, add_poles) if clutter_near else (add_containers, add_poles, add_parked_trailers):
+    for add in (
+        (add_parked_trailers, add_containers, add_poles)
+        if clutter_near
+        else (add_containers, add_poles, add_parked_trailers)
+    ):
         add()
     if distractors:
         _add_distractors(yard, rng, space)
@@ -183,7 +201,11 @@ def _add_distractors(yard: Yard, rng: np.random.Generator, space: FreeSpace) -> 
         ring = center + radius * np.c_[np.cos(np.linspace(0, 2 * np.pi, 40)), np.sin(np.linspace(0, 2 * np.pi, 40))]
         if space.is_free(ring):
             space.add(ring)
-            yard.distractors.append(Distractor("car", (4.5, 1.8, 1.5), m.car_mesh(), _circle_path(center, radius, 3.0, rng.uniform(0, 2 * np.pi))))
+            yard.distractors.append(
+                Distractor(
+                    "car", (4.5, 1.8, 1.5), m.car_mesh(), _circle_path(center, radius, 3.0, rng.uniform(0, 2 * np.pi))
+                )
+            )
             break
     # Pedestrians walking back and forth at 1.3 m/s.
     for _ in range(2):
@@ -194,7 +216,11 @@ def _add_distractors(yard: Yard, rng: np.random.Generator, space: FreeSpace) -> 
             line = a + np.linspace(0, 1, 25)[:, None] * (b - a)
             if space.is_free(line):
                 space.add(line)
-                yard.distractors.append(Distractor("pedestrian", (0.3, 0.5, 1.75), m.pedestrian_mesh(), _walk_path(a, b, 1.3, rng.uniform(0, 1))))
+                yard.distractors.append(
+                    Distractor(
+                        "pedestrian", (0.3, 0.5, 1.75), m.pedestrian_mesh(), _walk_path(a, b, 1.3, rng.uniform(0, 1))
+                    )
+                )
                 break
 
 

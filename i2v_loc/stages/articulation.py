@@ -25,8 +25,10 @@ def footprint_corners(vehicle: VehicleConfig, hitch_deg: float) -> np.ndarray:
     truck_ahead, hitch_ahead = centre_to_hitch_m(vehicle)
     h = np.radians(hitch_deg)
     corners = []
-    for center, yaw, dims in (((truck_ahead, 0.0), 0.0, vehicle.truck),
-                              ((-hitch_ahead * np.cos(h), -hitch_ahead * np.sin(h)), h, vehicle.trailer)):
+    for center, yaw, dims in (
+        ((truck_ahead, 0.0), 0.0, vehicle.truck),
+        ((-hitch_ahead * np.cos(h), -hitch_ahead * np.sin(h)), h, vehicle.trailer),
+    ):
         c, s = np.cos(yaw), np.sin(yaw)
         local = np.array([[1, 1], [1, -1], [-1, -1], [-1, 1]]) * [dims.length_m / 2, dims.width_m / 2]
         corners.append(local @ np.array([[c, s], [-s, c]]) + center)

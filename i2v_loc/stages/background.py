@@ -63,9 +63,11 @@ def check_grid(params: BackgroundParams, region: RegionParams) -> None:
     extent = np.ceil((box[3:] - box[:3]) / params.voxel_size_m - 1e-9) + 2  # float: no integer overflow
     cells = float(np.prod(extent)) if np.all(np.isfinite(extent)) else float("inf")
     if not cells <= params.max_voxels:
-        raise ValueError(f"background grid of {cells:.3g} cells (region {region_box(region)} at "
-                         f"{params.voxel_size_m} m) exceeds background.max_voxels {params.max_voxels}: "
-                         "enlarge background.voxel_size_m or shrink the region")
+        raise ValueError(
+            f"background grid of {cells:.3g} cells (region {region_box(region)} at "
+            f"{params.voxel_size_m} m) exceeds background.max_voxels {params.max_voxels}: "
+            "enlarge background.voxel_size_m or shrink the region"
+        )
 
 
 @dataclass
@@ -144,7 +146,9 @@ class BackgroundMap:
         columns = index // self.padded[2] if len(protected) else None
         if len(protected) and self.ready:
             # a tracked vehicle's points are never background, even where a standing vehicle was learned
-            result.foreground |= result.in_region & self._protected_columns(protected, self.params.keep_margin_m)[columns]
+            result.foreground |= (
+                result.in_region & self._protected_columns(protected, self.params.keep_margin_m)[columns]
+            )
         if self.frames_seen % self.params.learn_every_frames == 0:
             learn = result.in_region
             if len(protected):
@@ -210,7 +214,9 @@ class BackgroundMap:
             cx = self.origin[0] + (ii - 0.5) * voxel - box.center_xy[0]
             cy = self.origin[1] + (jj - 0.5) * voxel - box.center_xy[1]
             c, s = np.cos(box.yaw_rad), np.sin(box.yaw_rad)
-            inside = (np.abs(cx * c + cy * s) <= box.half_length_m + margin) & (np.abs(-cx * s + cy * c) <= box.half_width_m + margin)
+            inside = (np.abs(cx * c + cy * s) <= box.half_length_m + margin) & (
+                np.abs(-cx * s + cy * c) <= box.half_width_m + margin
+            )
             mask[(ii * ny + jj)[inside]] = True
         return mask
 
@@ -218,9 +224,14 @@ class BackgroundMap:
 
     def save(self, path: str | Path) -> None:
         """The learned map (background voxels and grid) as .npz; loaded maps start as a full window."""
-        np.savez_compressed(path, format_version=FORMAT_VERSION, origin=self.origin, shape=np.array(self.shape),
-                            voxel_size_m=self.params.voxel_size_m,
-                            background=np.flatnonzero(self.is_background).astype(np.int64))
+        np.savez_compressed(
+            path,
+            format_version=FORMAT_VERSION,
+            origin=self.origin,
+            shape=np.array(self.shape),
+            voxel_size_m=self.params.voxel_size_m,
+            background=np.flatnonzero(self.is_background).astype(np.int64),
+        )
 
     def load(self, path: str | Path) -> None:
         """Replace the map by a saved one; refuses a map of another grid (region or voxel size)."""
@@ -229,9 +240,14 @@ class BackgroundMap:
             raise ValueError(f"{path}: no such background map")
         with np.load(path) as data:
             if int(data["format_version"]) != FORMAT_VERSION:
-                raise ValueError(f"{path}: background map format {int(data['format_version'])}, expected {FORMAT_VERSION}")
-            same = (np.allclose(data["origin"], self.origin) and tuple(data["shape"]) == self.shape
-                    and np.isclose(float(data["voxel_size_m"]), self.params.voxel_size_m))
+                raise ValueError(
+                    f"{path}: background map format {int(data['format_version'])}, expected {FORMAT_VERSION}"
+                )
+            same = (
+                np.allclose(data["origin"], self.origin)
+                and tuple(data["shape"]) == self.shape
+                and np.isclose(float(data["voxel_size_m"]), self.params.voxel_size_m)
+            )
             if not same:
                 raise ValueError(f"{path}: background map of another grid (region or background.voxel_size_m changed)")
             cells = data["background"]

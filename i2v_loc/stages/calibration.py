@@ -83,9 +83,15 @@ class Calibrator:
             clouds[name] = clouds[name].transform(correction)
             target = target + clouds[name]
             x, y, z, roll, pitch, yaw = matrix_to_pose(done[name])
-            results.append(SensorCalibration(
-                name, Extrinsics(x_m=x, y_m=y, z_m=z, roll_deg=roll, pitch_deg=pitch, yaw_deg=yaw),
-                fitness, rmse, "+".join(n for n in done if n != name)))
+            results.append(
+                SensorCalibration(
+                    name,
+                    Extrinsics(x_m=x, y_m=y, z_m=z, roll_deg=roll, pitch_deg=pitch, yaw_deg=yaw),
+                    fitness,
+                    rmse,
+                    "+".join(n for n in done if n != name),
+                )
+            )
         return results
 
     # ----------------------------------------------------------------- internals
@@ -100,7 +106,6 @@ class Calibrator:
         return cloud
 
     def _overlap(self, source, target) -> int:
-        import open3d as o3d
 
         if len(source.points) == 0 or len(target.points) == 0:
             return 0

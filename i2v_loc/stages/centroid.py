@@ -41,8 +41,14 @@ class CentroidCorrector:
     def __init__(self, params: CentroidParams):
         self.params = params
 
-    def process(self, points: np.ndarray, dims: UnitDimensions, ground_z_m: float = 0.0,
-                yaw_hint_rad: float | None = None, front_anchor: bool = False) -> CorrectedUnit:
+    def process(
+        self,
+        points: np.ndarray,
+        dims: UnitDimensions,
+        ground_z_m: float = 0.0,
+        yaw_hint_rad: float | None = None,
+        front_anchor: bool = False,
+    ) -> CorrectedUnit:
         """``yaw_hint_rad``: the unit's axis (its heading when ``front_anchor``)."""
         pts = np.asarray(points, dtype=np.float64)
         centroid = pts.mean(axis=0)
@@ -60,8 +66,9 @@ class CentroidCorrector:
             shift[0] = high[0] - known[0] / 2
         center_xy = centroid[:2] + shift @ axes
         center_z = ground_z_m + dims.floor_m + dims.height_m / 2
-        return CorrectedUnit(np.array([*center_xy, center_z]), centroid, yaw, shape_yaw,
-                             (float(extent[0]), float(extent[1])), len(pts))
+        return CorrectedUnit(
+            np.array([*center_xy, center_z]), centroid, yaw, shape_yaw, (float(extent[0]), float(extent[1])), len(pts)
+        )
 
     @staticmethod
     def _from_face_plane(local: np.ndarray, low: np.ndarray, high: np.ndarray, known: np.ndarray) -> np.ndarray:

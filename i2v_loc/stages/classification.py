@@ -24,8 +24,14 @@ from dataclasses import dataclass
 import numpy as np
 
 from i2v_loc.params import ClassificationParams, VehicleConfig
-from i2v_loc.stages.primitives import (euclidean_labels, min_area_rect, oriented_box_volume, rect_along, split_by_label,
-                                       voxel_keys)
+from i2v_loc.stages.primitives import (
+    euclidean_labels,
+    min_area_rect,
+    oriented_box_volume,
+    rect_along,
+    split_by_label,
+    voxel_keys,
+)
 
 FOOTPRINT_MARGIN_M = 0.1
 HEADING_TRUST_DEG = 20.0  # a fitted rectangle further off the tracked heading is not the trailer's axis
@@ -48,8 +54,9 @@ class TruckTrailerClassifier:
         self.vehicles = vehicles
         self._cache: dict = {}
 
-    def process(self, points: np.ndarray, candidates: list[str], ground_z_m: float = 0.0,
-                heading_rad: float | None = None) -> Classification:
+    def process(
+        self, points: np.ndarray, candidates: list[str], ground_z_m: float = 0.0, heading_rad: float | None = None
+    ) -> Classification:
         """The candidate vehicle whose trailer gate fits best (error / tolerance) wins. ``heading_rad``:
         the trailer's heading when its track knows it: the footprint is laid along it (with
         ``complete_width``) and the truck is at its front end (with ``truck_one_end``)."""
@@ -64,8 +71,9 @@ class TruckTrailerClassifier:
             if found is None:
                 continue
             trailer_body, error = found
-            is_trailer, along_m = self._in_footprint(points, points[body[trailer_body]], vehicle.trailer.width_m,
-                                                     heading_rad)
+            is_trailer, along_m = self._in_footprint(
+                points, points[body[trailer_body]], vehicle.trailer.width_m, heading_rad
+            )
             is_truck = ~is_trailer
             if self.params.truck_one_end:
                 is_truck &= self._truck_end(along_m, is_truck, heading_rad is not None, self.params.min_truck_points)
@@ -87,8 +95,9 @@ class TruckTrailerClassifier:
             return front
         return front if in_front >= (rest & ~front).sum() else ~front
 
-    def _in_footprint(self, points: np.ndarray, body: np.ndarray, width_m: float,
-                      heading_rad: float | None = None) -> tuple[np.ndarray, np.ndarray]:
+    def _in_footprint(
+        self, points: np.ndarray, body: np.ndarray, width_m: float, heading_rad: float | None = None
+    ) -> tuple[np.ndarray, np.ndarray]:
         """Points whose xy falls inside the body's oriented rectangle (plus a small margin), and each
         point's coordinate along the rectangle's long axis from its centre (forward along
         ``heading_rad`` when given).
@@ -161,7 +170,9 @@ class TruckTrailerClassifier:
         labels = cell_labels[inverse.reshape(-1)]
         return [g for g in split_by_label(labels) if len(g) >= self.params.min_trailer_points]
 
-    def _best_trailer(self, points: np.ndarray, groups: list[np.ndarray], vehicle: VehicleConfig, ground_z_m: float = 0.0):
+    def _best_trailer(
+        self, points: np.ndarray, groups: list[np.ndarray], vehicle: VehicleConfig, ground_z_m: float = 0.0
+    ):
         """((indices, volume error) or None, whether a sub-cluster was too big or too long) of the
         sub-cluster closest to the trailer volume inside its gate, not too long and
         (``min_height_fraction``) reaching high enough: a car's body passes the Twizy trailer's
@@ -173,8 +184,10 @@ class TruckTrailerClassifier:
             volume, rect = oriented_box_volume(points[idx])
             error = abs(volume - expected)
             too_long = rect.length_m > vehicle.trailer.length_m + self.params.max_length_excess_m
-            too_low = self.params.min_height_fraction > 0 and \
-                np.percentile(points[idx, 2], TOP_PERCENTILE) - ground_z_m < min_top_m
+            too_low = (
+                self.params.min_height_fraction > 0
+                and np.percentile(points[idx, 2], TOP_PERCENTILE) - ground_z_m < min_top_m
+            )
             # a part's top percentile can be higher than the whole's (a trailer joined to a low cab)
             splittable |= too_long or too_low or volume > expected + vehicle.trailer_volume_tolerance_m3
             if error <= vehicle.trailer_volume_tolerance_m3 and not too_long and not too_low and error < best_error:

@@ -23,7 +23,6 @@ from i2v_loc.params import ClusteringParams, VehicleConfig
 from i2v_loc.stages.articulation import max_box_volume_m3
 from i2v_loc.stages.primitives import Rect, euclidean_labels, grid_labels, oriented_box_volume, split_by_label
 
-
 BOX_MARGIN = 1.15  # measured boxes exceed the kinematic one (mirrors, range noise, a person beside)
 
 

@@ -105,20 +105,42 @@ def _face_table(v: np.ndarray, model: VehicleModel, trailer_slack_m: float) -> n
         half_w, half_l = box.width_m / 2, box.length_m / 2 + slack / 2
         mid_x = box.center_x_m - slack / 2
         # (local normal, local face centre, half extent)
-        for nx, ny, mx, my, half in ((1.0, 0.0, box.front_m, 0.0, half_w), (-1.0, 0.0, box.rear_m, 0.0, half_w),
-                                     (0.0, 1.0, mid_x, half_w, half_l), (0.0, -1.0, mid_x, -half_w, half_l)):
+        for nx, ny, mx, my, half in (
+            (1.0, 0.0, box.front_m, 0.0, half_w),
+            (-1.0, 0.0, box.rear_m, 0.0, half_w),
+            (0.0, 1.0, mid_x, half_w, half_l),
+            (0.0, -1.0, mid_x, -half_w, half_l),
+        ):
             big_nx, big_ny = c * nx - s * ny, s * nx + c * ny
             cx, cy = ox + c * mx - s * my, oy + s * mx + c * my
             lever = model.kingpin_behind_axle_m * (-big_nx * s1 + big_ny * c1) if u == 1 else 0.0
-            rows.append((big_nx, big_ny, -big_ny, big_nx, big_nx * cx + big_ny * cy, -big_ny * cx + big_nx * cy,
-                         half, -ny * mx + nx * my, lever, u))
+            rows.append(
+                (
+                    big_nx,
+                    big_ny,
+                    -big_ny,
+                    big_nx,
+                    big_nx * cx + big_ny * cy,
+                    -big_ny * cx + big_nx * cy,
+                    half,
+                    -ny * mx + nx * my,
+                    lever,
+                    u,
+                )
+            )
     return np.array(rows)
 
 
-def faces(v: np.ndarray, xy: np.ndarray, z_rel: np.ndarray, model: VehicleModel, top_band_m: float,
-          trailer_slack_m: float = 0.0) -> _Faces:
+def faces(
+    v: np.ndarray,
+    xy: np.ndarray,
+    z_rel: np.ndarray,
+    model: VehicleModel,
+    top_band_m: float,
+    trailer_slack_m: float = 0.0,
+) -> _Faces:
     table = _face_table(v, model, trailer_slack_m)
-    n, n_faces = len(xy), len(table)
+    n = len(xy)
     perp = xy @ table[:, 0:2].T - table[:, 4]
     along = xy @ table[:, 2:4].T - table[:, 5]
     excess = np.maximum(np.abs(along) - table[:, 6], 0.0)
@@ -149,8 +171,13 @@ def faces(v: np.ndarray, xy: np.ndarray, z_rel: np.ndarray, model: VehicleModel,
     return _Faces(residual, jac, unit)
 
 
-def fit(points: np.ndarray, prior: Prior, params: ArticulatedParams, iterations: int | None = None,
-        start_scale_m: float | None = None) -> Measurement | None:
+def fit(
+    points: np.ndarray,
+    prior: Prior,
+    params: ArticulatedParams,
+    iterations: int | None = None,
+    start_scale_m: float | None = None,
+) -> Measurement | None:
     """The hinged model fitted to ``points`` (N, 3, yard frame) from ``prior`` in at most ``iterations``
     steps (default ``fit_iterations``), the loss scale starting at ``start_scale_m`` (default
     ``fit_start_scale_m``); None when fewer than ``fit_min_points`` remain after thinning."""
@@ -160,11 +187,11 @@ def fit(points: np.ndarray, prior: Prior, params: ArticulatedParams, iterations:
     xy, z_rel = sample[:, :2], sample[:, 2] - prior.ground_z_m
     v0 = prior.vector
     scale = params.fit_loss_scale_m
-    prior_info = np.diag((scale / WEAK_PRIOR_SIGMAS[:len(v0)]) ** 2)
+    prior_info = np.diag((scale / WEAK_PRIOR_SIGMAS[: len(v0)]) ** 2)
     v = v0.copy()
     for k in range(iterations or params.fit_iterations):
         # graduated: a wide loss first so that faces a prediction misses by decimetres still pull
-        c = max(scale, (start_scale_m or params.fit_start_scale_m) * 0.5 ** k)
+        c = max(scale, (start_scale_m or params.fit_start_scale_m) * 0.5**k)
         at = faces(v, xy, z_rel, prior.model, params.fit_top_band_m, prior.trailer_slack_m)
         w = 1.0 / (1.0 + (at.residual / c) ** 2)  # Cauchy weights: iteratively reweighted Gauss-Newton
         jw = at.jacobian * w[:, None]
@@ -172,7 +199,7 @@ def fit(points: np.ndarray, prior: Prior, params: ArticulatedParams, iterations:
         v = v + step
         if c == scale and np.abs(step[:2]).max() < 1e-3 and np.abs(step[2:]).max() < 1e-4:
             break  # residuals and faces of the last step stand for the solution (it moved < 1 mm)
-    cost = float(np.mean(np.log1p((at.residual / scale) ** 2))) * scale ** 2 / 2
+    cost = float(np.mean(np.log1p((at.residual / scale) ** 2))) * scale**2 / 2
     covariance = _covariance(at, v0, params)
     unit = np.where(np.abs(at.residual) <= params.fit_inlier_m, at.unit, -1).astype(np.int8)
     hitch = float(wrap_rad(v[3])) if prior.model.articulated else None
@@ -186,8 +213,12 @@ def _covariance(at: _Faces, v0: np.ndarray, params: ArticulatedParams) -> np.nda
     r = at.residual
     w = 1.0 / (1.0 + (r / scale) ** 2)
     inliers = np.abs(r) <= params.fit_inlier_m
-    sigma2 = max(float(np.median(r[inliers] ** 2)) / 0.455 if inliers.any() else scale ** 2, params.fit_noise_floor_m ** 2)
-    info = (at.jacobian * w[:, None]).T @ at.jacobian / sigma2 + np.diag(1.0 / WEAK_PRIOR_SIGMAS[:len(v0)] ** 2)
-    floor = np.r_[params.fit_position_floor_m, params.fit_position_floor_m,
-                  np.radians(params.fit_angle_floor_deg), np.radians(params.fit_angle_floor_deg)][:len(v0)]
-    return np.linalg.inv(info) + np.diag(floor ** 2)
+    sigma2 = max(float(np.median(r[inliers] ** 2)) / 0.455 if inliers.any() else scale**2, params.fit_noise_floor_m**2)
+    info = (at.jacobian * w[:, None]).T @ at.jacobian / sigma2 + np.diag(1.0 / WEAK_PRIOR_SIGMAS[: len(v0)] ** 2)
+    floor = np.r_[
+        params.fit_position_floor_m,
+        params.fit_position_floor_m,
+        np.radians(params.fit_angle_floor_deg),
+        np.radians(params.fit_angle_floor_deg),
+    ][: len(v0)]
+    return np.linalg.inv(info) + np.diag(floor**2)

@@ -38,7 +38,9 @@ def propagate(state: np.ndarray, dt_s: float, kingpin_m: float, trailer_axle_m: 
     steps = max(1, int(np.ceil(abs(dt_s) / MAX_STEP_S)))
     h = dt_s / steps
     for _ in range(steps):
-        s = s + h * _derivative(s + 0.5 * h * _derivative(s, kingpin_m, trailer_axle_m, articulated), kingpin_m, trailer_axle_m, articulated)
+        s = s + h * _derivative(
+            s + 0.5 * h * _derivative(s, kingpin_m, trailer_axle_m, articulated), kingpin_m, trailer_axle_m, articulated
+        )
     s[..., YAW], s[..., HITCH] = _wrap(s[..., YAW]), _wrap(s[..., HITCH])
     return s
 
@@ -138,24 +140,43 @@ class FilterState:
 class KinematicFilter:
     """One vehicle's UKF. ``predict(stamp)`` then ``update(z, R)``; ``state`` after either."""
 
-    def __init__(self, z: np.ndarray, r: np.ndarray, stamp_s: float, kingpin_m: float, trailer_axle_m: float,
-                 articulated: bool, params: ArticulatedParams, speed_m_s: float = 0.0):
+    def __init__(
+        self,
+        z: np.ndarray,
+        r: np.ndarray,
+        stamp_s: float,
+        kingpin_m: float,
+        trailer_axle_m: float,
+        articulated: bool,
+        params: ArticulatedParams,
+        speed_m_s: float = 0.0,
+    ):
         self.params = params
         self.articulated = articulated
         self.kingpin_m, self.trailer_axle_m = kingpin_m, trailer_axle_m
         self.stamp_s = stamp_s
         n_z = 4 if articulated else 3
         points = MerweScaledSigmaPoints(6, alpha=0.3, beta=2.0, kappa=0.0, sqrt_method=_sqrt)
-        self.ukf = _BatchUKF(6, n_z, 0.1, self._hx, self._fx, points, x_mean_fn=_mean_x,
-                                         z_mean_fn=_mean_z, residual_x=_residual_x, residual_z=_residual_z)
+        self.ukf = _BatchUKF(
+            6,
+            n_z,
+            0.1,
+            self._hx,
+            self._fx,
+            points,
+            x_mean_fn=_mean_x,
+            z_mean_fn=_mean_z,
+            residual_x=_residual_x,
+            residual_z=_residual_z,
+        )
         x = np.zeros(6)
         x[[X, Y, YAW]] = z[:3]
         x[SPEED] = speed_m_s
         x[HITCH] = z[3] if articulated else 0.0
         p = np.zeros((6, 6))
         p[:3, :3] = r[:3, :3]
-        p[SPEED, SPEED] = INITIAL_SPEED_SIGMA_M_S ** 2
-        p[CURVATURE, CURVATURE] = INITIAL_CURVATURE_SIGMA_1_M ** 2
+        p[SPEED, SPEED] = INITIAL_SPEED_SIGMA_M_S**2
+        p[CURVATURE, CURVATURE] = INITIAL_CURVATURE_SIGMA_1_M**2
         p[HITCH, HITCH] = r[3, 3] if articulated else 1e-12
         if articulated:
             p[:3, HITCH] = p[HITCH, :3] = r[:3, 3]
@@ -169,8 +190,8 @@ class KinematicFilter:
         self.ukf.x[idx] = z
         p = np.diag(np.diag(self.ukf.P)).copy()
         p[np.ix_(idx, idx)] = r
-        p[SPEED, SPEED] = max(p[SPEED, SPEED], INITIAL_SPEED_SIGMA_M_S ** 2)
-        p[CURVATURE, CURVATURE] = max(p[CURVATURE, CURVATURE], INITIAL_CURVATURE_SIGMA_1_M ** 2)
+        p[SPEED, SPEED] = max(p[SPEED, SPEED], INITIAL_SPEED_SIGMA_M_S**2)
+        p[CURVATURE, CURVATURE] = max(p[CURVATURE, CURVATURE], INITIAL_CURVATURE_SIGMA_1_M**2)
         self.ukf.P = p
         self._in_a_row = 0
 
@@ -183,9 +204,17 @@ class KinematicFilter:
     def _q(self, dt_s: float) -> np.ndarray:
         p = self.params
         dt = max(dt_s, 1e-3)
-        sig = np.array([p.position_sigma_m_s, p.position_sigma_m_s, np.radians(p.yaw_sigma_deg_s), p.accel_sigma_m_s2,
-                        p.curvature_rate_sigma_1_m_s, np.radians(p.hitch_sigma_deg_s) if self.articulated else 0.0])
-        return np.diag(sig ** 2 * dt) + np.eye(6) * 1e-12
+        sig = np.array(
+            [
+                p.position_sigma_m_s,
+                p.position_sigma_m_s,
+                np.radians(p.yaw_sigma_deg_s),
+                p.accel_sigma_m_s2,
+                p.curvature_rate_sigma_1_m_s,
+                np.radians(p.hitch_sigma_deg_s) if self.articulated else 0.0,
+            ]
+        )
+        return np.diag(sig**2 * dt) + np.eye(6) * 1e-12
 
     def predict(self, stamp_s: float) -> FilterState:
         dt = stamp_s - self.stamp_s if np.isfinite(stamp_s) else 0.1
@@ -201,7 +230,7 @@ class KinematicFilter:
         the pose and hitch restart from the fit (speed and curvature kept, their variance reset)."""
         x, p = self.ukf.x.copy(), self.ukf.P.copy()
         self.ukf.update(np.asarray(z, dtype=float), R=r)
-        if self.ukf.mahalanobis ** 2 > self.params.innovation_gate:
+        if self.ukf.mahalanobis**2 > self.params.innovation_gate:
             self.ukf.x, self.ukf.P = x, p
             self.rejected += 1
             self._in_a_row += 1
@@ -221,7 +250,13 @@ class KinematicFilter:
     @property
     def state(self) -> FilterState:
         x = self.ukf.x
-        rate = float(hitch_rate(x[SPEED], x[CURVATURE], x[HITCH], self.kingpin_m, self.trailer_axle_m)) if self.articulated else 0.0
-        jackknife = self.articulated and (abs(x[HITCH]) > np.radians(self.params.jackknife_hitch_deg)
-                                          or abs(rate) > np.radians(self.params.jackknife_rate_deg_s))
+        rate = (
+            float(hitch_rate(x[SPEED], x[CURVATURE], x[HITCH], self.kingpin_m, self.trailer_axle_m))
+            if self.articulated
+            else 0.0
+        )
+        jackknife = self.articulated and (
+            abs(x[HITCH]) > np.radians(self.params.jackknife_hitch_deg)
+            or abs(rate) > np.radians(self.params.jackknife_rate_deg_s)
+        )
         return FilterState(*(float(v) for v in x), self.ukf.P.copy(), rate, bool(jackknife))

@@ -75,7 +75,11 @@ class OrientationEstimator:
             if not recent:  # a re-acquired unit: its old centroids say nothing of its motion now
                 state.history.clear()
             # the rate bound covers the time since the unit's own last sighting (not just one frame)
-            dt = frame_dt if not recent or not np.isfinite(stamp_s) else float(np.clip(stamp_s - state.last_seen_s, 1e-3, 2.0))
+            dt = (
+                frame_dt
+                if not recent or not np.isfinite(stamp_s)
+                else float(np.clip(stamp_s - state.last_seen_s, 1e-3, 2.0))
+            )
             state.last_seen_s = stamp_s if np.isfinite(stamp_s) else state.last_seen_s
             state.history.append(np.asarray(unit.center[:2], dtype=float))
             measured, reliable = self._measure(state, unit, forwards.get((unit.vehicle_id, unit.kind)))
@@ -122,8 +126,9 @@ class OrientationEstimator:
             return state.last_seen_s is not None
         return stamp_s - state.last_seen_s <= self.params.history_gap_s
 
-    def _measure(self, state: _UnitState, unit: UnitObservation,
-                 forward: np.ndarray | None) -> tuple[float | None, bool]:
+    def _measure(
+        self, state: _UnitState, unit: UnitObservation, forward: np.ndarray | None
+    ) -> tuple[float | None, bool]:
         """(measured yaw or None to hold, whether it rests on travel or the partner unit)."""
         history = np.array(state.history)
         travel = history[-1] - history[0]
@@ -164,21 +169,25 @@ class OrientationEstimator:
         v = eigvecs[:, np.argmax(eigvals)]
         return float(np.degrees(np.arctan2(v[1], v[0])))
 
-    def _blend_with_shape(self, axis_deg: float, shape_axis_deg: float, period_deg: float = 180.0,
-                          reference_deg: float | None = None) -> float:
+    def _blend_with_shape(
+        self, axis_deg: float, shape_axis_deg: float, period_deg: float = 180.0, reference_deg: float | None = None
+    ) -> float:
         """The measured axis moved towards the shape axis: its equivalent (modulo 180 deg, or modulo
         90 deg for a nearly square unit such as a tractor cab) nearest ``reference_deg`` (default: the
         measured axis)."""
         w = self.params.shape_weight
         if w <= 0:
             return axis_deg
-        shape = self._nearest_equivalent(axis_deg if reference_deg is None else reference_deg, shape_axis_deg, period_deg)
+        shape = self._nearest_equivalent(
+            axis_deg if reference_deg is None else reference_deg, shape_axis_deg, period_deg
+        )
         shape = self._nearest_equivalent(axis_deg, shape, 180.0)
         return float(axis_deg + w * (shape - axis_deg))
 
     @staticmethod
-    def _resolve_direction(axis_deg: float, forward: np.ndarray | None, previous_deg: float | None,
-                           travel: np.ndarray) -> float:
+    def _resolve_direction(
+        axis_deg: float, forward: np.ndarray | None, previous_deg: float | None, travel: np.ndarray
+    ) -> float:
         axis = np.array([np.cos(np.radians(axis_deg)), np.sin(np.radians(axis_deg))])
         if forward is not None and np.hypot(*forward) > 1e-6:
             sign = 1.0 if axis @ forward >= 0 else -1.0

@@ -10,7 +10,6 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import ConvexHull, QhullError, cKDTree
 
-
 DENSE_KEYS_PER_POINT = 8  # voxel_centroids bins by key directly when the key range is this small
 DENSE_KEYS_MIN = 1 << 16
 
@@ -39,13 +38,15 @@ def voxel_centroids(points: np.ndarray, voxel_m: float, values: np.ndarray | Non
         # small key range: per-key sums straight from bincount, no sort (same order as np.unique)
         counts = np.bincount(keys, minlength=n_keys)
         occupied = np.flatnonzero(counts)
-        sums = np.column_stack([np.bincount(keys, weights=data[:, c], minlength=n_keys)[occupied]
-                                for c in range(data.shape[1])])
+        sums = np.column_stack(
+            [np.bincount(keys, weights=data[:, c], minlength=n_keys)[occupied] for c in range(data.shape[1])]
+        )
         counts = counts[occupied]
     else:
         _, inverse, counts = np.unique(keys, return_inverse=True, return_counts=True)
-        sums = np.column_stack([np.bincount(inverse, weights=data[:, c], minlength=len(counts))
-                                for c in range(data.shape[1])])
+        sums = np.column_stack(
+            [np.bincount(inverse, weights=data[:, c], minlength=len(counts)) for c in range(data.shape[1])]
+        )
     means = sums / counts[:, None]
     if values is None:
         return means[:, :3].astype(points.dtype), None

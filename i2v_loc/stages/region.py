@@ -53,8 +53,9 @@ class Region:
         self._plane: GroundPlane | None = None
         self._frames_since_fit = 0
 
-    def process(self, points: np.ndarray, in_region: np.ndarray | None = None,
-                candidates: np.ndarray | None = None) -> RegionResult:
+    def process(
+        self, points: np.ndarray, in_region: np.ndarray | None = None, candidates: np.ndarray | None = None
+    ) -> RegionResult:
         """Points inside the region and off the ground. ``in_region`` (bool mask) replaces the
         passthrough box; ``candidates`` (bool mask inside the region, e.g. the foreground) limits
         which points are kept, while the ground is still fitted on the whole region."""

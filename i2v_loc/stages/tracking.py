@@ -147,8 +147,11 @@ class Tracker:
         """The nearest lost track of the detection's kind within the gate, continued from the detection
         (ID, vehicle ID, confirmation and travel kept; the filter restarts at the detection)."""
         gate = self.params.reacquire_distance_m
-        near = [(float(np.hypot(*(t.last_detection.center[:2] - detection.center[:2]))), i)
-                for i, t in enumerate(self.lost) if t.kind == detection.kind]
+        near = [
+            (float(np.hypot(*(t.last_detection.center[:2] - detection.center[:2]))), i)
+            for i, t in enumerate(self.lost)
+            if t.kind == detection.kind
+        ]
         near = [(d, i) for d, i in near if d <= gate]
         if not near:
             return None
@@ -188,9 +191,18 @@ class Tracker:
 
     def _new_track(self, detection: Detection) -> Track:
         kf = self._new_filter(detection.center)
-        return Track(next(self._track_ids), 0, detection.kind, detection.vehicle, kf, float(detection.center[2]),
-                     confirmed=self.params.min_hits <= 1, detection=detection, last_detection=detection,
-                     origin_xy=np.asarray(detection.center[:2], dtype=float).copy())
+        return Track(
+            next(self._track_ids),
+            0,
+            detection.kind,
+            detection.vehicle,
+            kf,
+            float(detection.center[2]),
+            confirmed=self.params.min_hits <= 1,
+            detection=detection,
+            last_detection=detection,
+            origin_xy=np.asarray(detection.center[:2], dtype=float).copy(),
+        )
 
     def _set_dt(self, kf: KalmanFilter, dt: float) -> None:
         kf.F = np.array([[1.0, dt, 0, 0], [0, 1.0, 0, 0], [0, 0, 1.0, dt], [0, 0, 0, 1.0]])

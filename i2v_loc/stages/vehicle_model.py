@@ -57,23 +57,27 @@ class VehicleModel:
         return self.trailer is not None
 
     @classmethod
-    def from_config(cls, name: str, v: VehicleConfig) -> "VehicleModel":
+    def from_config(cls, name: str, v: VehicleConfig) -> VehicleModel:
         t, r = v.truck, v.trailer
         tractor = Box(t.wheelbase_m + t.front_overhang_m, t.length_m, t.width_m, t.floor_m, t.height_m)
         trailer = Box(r.hitch_to_front_m, r.length_m, r.width_m, r.floor_m, r.height_m)
         return cls(name, tractor, trailer, t.hitch_behind_rear_axle_m, r.hitch_to_axle_m)
 
     @classmethod
-    def rigid(cls, name: str, length_m: float, width_m: float, height_m: float, floor_m: float = 0.0) -> "VehicleModel":
+    def rigid(cls, name: str, length_m: float, width_m: float, height_m: float, floor_m: float = 0.0) -> VehicleModel:
         return cls(name, Box(length_m / 2, length_m, width_m, floor_m, height_m))
 
-    def with_boxes(self, tractor: Box, trailer: Box | None) -> "VehicleModel":
+    def with_boxes(self, tractor: Box, trailer: Box | None) -> VehicleModel:
         return replace(self, tractor=tractor, trailer=trailer)
 
     def kingpin_xy(self, x_m: float, y_m: float, yaw_rad: float) -> np.ndarray:
-        return np.array([x_m - self.kingpin_behind_axle_m * np.cos(yaw_rad), y_m - self.kingpin_behind_axle_m * np.sin(yaw_rad)])
+        return np.array(
+            [x_m - self.kingpin_behind_axle_m * np.cos(yaw_rad), y_m - self.kingpin_behind_axle_m * np.sin(yaw_rad)]
+        )
 
-    def box_centers(self, x_m: float, y_m: float, yaw_rad: float, hitch_rad: float = 0.0) -> tuple[np.ndarray, np.ndarray | None]:
+    def box_centers(
+        self, x_m: float, y_m: float, yaw_rad: float, hitch_rad: float = 0.0
+    ) -> tuple[np.ndarray, np.ndarray | None]:
         """xy centres of the tractor's and (or None) the trailer's boxes for a tractor pose and hitch."""
         e1 = np.array([np.cos(yaw_rad), np.sin(yaw_rad)])
         tractor = np.array([x_m, y_m]) + self.tractor.center_x_m * e1

@@ -116,8 +116,9 @@ class VehicleTracker:
 
     # ----------------------------------------------------------------- per frame
 
-    def process(self, points: np.ndarray, ground: Callable[[float, float], float], stamp_s: float,
-                allow_start: bool = True) -> list[VehicleReport]:
+    def process(
+        self, points: np.ndarray, ground: Callable[[float, float], float], stamp_s: float, allow_start: bool = True
+    ) -> list[VehicleReport]:
         """``points`` (N, 3): the foreground (off the ground and the background) in the yard frame;
         ``ground(x, y)``: the ground's height there."""
         priors = [self._prior(t, stamp_s, ground) for t in self.tracks]
@@ -136,7 +137,11 @@ class VehicleTracker:
         slack = 0.0
         if track.model.trailer is not None and track.trailer_length is not None:
             settled = len(track.trailer_length.values) >= LENGTH_CONVERGED_OBSERVATIONS
-            slack = SETTLED_SLACK_M if settled else max(MAX_TRAILER_LENGTH_M - track.model.trailer.length_m, SETTLED_SLACK_M)
+            slack = (
+                SETTLED_SLACK_M
+                if settled
+                else max(MAX_TRAILER_LENGTH_M - track.model.trailer.length_m, SETTLED_SLACK_M)
+            )
         return Prior(s.x_m, s.y_m, s.yaw_rad, s.hitch_rad, track.model, float(ground(s.x_m, s.y_m)), slack)
 
     def _claim(self, points: np.ndarray, priors: list[Prior]) -> np.ndarray:
@@ -246,8 +251,11 @@ class VehicleTracker:
         for name, c in self.catalogue.items():
             if c.trailer is None:
                 continue
-            err = max(abs(c.trailer.length_m - model.trailer.length_m), abs(c.trailer.width_m - model.trailer.width_m),
-                      abs(c.tractor.width_m - model.tractor.width_m))
+            err = max(
+                abs(c.trailer.length_m - model.trailer.length_m),
+                abs(c.trailer.width_m - model.trailer.width_m),
+                abs(c.tractor.width_m - model.tractor.width_m),
+            )
             if err <= best_err:
                 best, best_err = name, err
         return best
@@ -262,7 +270,11 @@ class VehicleTracker:
         for cluster in clusters:
             center = min_area_rect(cluster[:, :2]).center_xy
             seed = min(self.seeds, key=lambda s: float(np.hypot(*(s.center_xy - center))), default=None)
-            if seed is not None and not seed.seen and np.hypot(*(seed.center_xy - center)) <= self.params.start_max_step_m:
+            if (
+                seed is not None
+                and not seed.seen
+                and np.hypot(*(seed.center_xy - center)) <= self.params.start_max_step_m
+            ):
                 seed.center_xy, seed.frames, seed.seen = center, seed.frames + 1, True
             else:
                 seed = Seed(center, center)
@@ -289,8 +301,11 @@ class VehicleTracker:
         if len(points) == 0:
             return []
         p = self.params
-        parts = [points[idx] for idx in split_by_label(grid_labels(points, p.start_voxel_m))
-                 if len(idx) >= p.fit_min_points and _height(points[idx], ground) >= p.start_min_height_m]
+        parts = [
+            points[idx]
+            for idx in split_by_label(grid_labels(points, p.start_voxel_m))
+            if len(idx) >= p.fit_min_points and _height(points[idx], ground) >= p.start_min_height_m
+        ]
         out = []
         for group in _join_near(parts, p.start_join_m):
             cluster = np.vstack([parts[i] for i in group])
@@ -310,15 +325,24 @@ class VehicleTracker:
         if float(np.mean(m.unit >= 0)) < self.params.start_min_explained or not _supported(m, model, ground_z_m):
             return None
         # the seed's points are not de-skewed (no motion known yet): the first pose is a rough one
-        start_cov = m.covariance + np.diag(START_SIGMAS[:len(m.vector)] ** 2)
-        filt = KinematicFilter(m.vector, start_cov, stamp_s, model.kingpin_behind_axle_m, model.trailer_axle_m,
-                               model.articulated, self.params)
+        start_cov = m.covariance + np.diag(START_SIGMAS[: len(m.vector)] ** 2)
+        filt = KinematicFilter(
+            m.vector,
+            start_cov,
+            stamp_s,
+            model.kingpin_behind_axle_m,
+            model.trailer_axle_m,
+            model.articulated,
+            self.params,
+        )
         widths = [_Extent(model.tractor.width_m, self.params.dimension_window)]
         length = None
         if model.trailer is not None:
             widths.append(_Extent(model.trailer.width_m, self.params.dimension_window))
             length = _Extent(model.trailer.length_m, self.params.dimension_window)
-        return _Track(next(self._ids), model, filt, model.name, length, widths, 0, m, np.array(m.vector[:2]), ground_z_m)
+        return _Track(
+            next(self._ids), model, filt, model.name, length, widths, 0, m, np.array(m.vector[:2]), ground_z_m
+        )
 
     def _hypotheses(self, cluster: np.ndarray, ground_z_m: float) -> list[tuple[VehicleModel, float, Measurement]]:
         """(model, direction sign, fit) of every catalogue vehicle in both directions (best start hitch
@@ -328,8 +352,16 @@ class VehicleTracker:
         for model in self.catalogue.values():
             for sign in (1.0, -1.0):
                 slack = MAX_TRAILER_LENGTH_M - model.trailer.length_m
-                coarse = [fit(cluster, _placed(model, rect, sign, np.radians(h), ground_z_m, slack), self.params,
-                              COARSE_ITERATIONS, START_SCALE_M) for h in START_HITCHES_DEG]
+                coarse = [
+                    fit(
+                        cluster,
+                        _placed(model, rect, sign, np.radians(h), ground_z_m, slack),
+                        self.params,
+                        COARSE_ITERATIONS,
+                        START_SCALE_M,
+                    )
+                    for h in START_HITCHES_DEG
+                ]
                 coarse = [m for m in coarse if m is not None]
                 if coarse:  # the best start hitch, refined
                     m = min(coarse, key=lambda m: m.cost)
@@ -339,7 +371,13 @@ class VehicleTracker:
         rigid = VehicleModel.rigid("rigid", rect.length_m, rect.width_m, height)
         for sign in (1.0, -1.0):
             yaw = rect.yaw_rad + (0.0 if sign > 0 else np.pi)
-            m = fit(cluster, Prior(*rect.center_xy, yaw, 0.0, rigid, ground_z_m), self.params, START_ITERATIONS, START_SCALE_M)
+            m = fit(
+                cluster,
+                Prior(*rect.center_xy, yaw, 0.0, rigid, ground_z_m),
+                self.params,
+                START_ITERATIONS,
+                START_SCALE_M,
+            )
             if m is not None:
                 out.append((rigid, sign, m))
         return out
@@ -374,8 +412,11 @@ def _supported(m: Measurement, model: VehicleModel, ground_z_m: float) -> bool:
     z_rel = m.points[:, 2] - ground_z_m
     for u, (box, q) in enumerate(zip(boxes, unit_frames(m.points, m.vector, model))):
         mine = m.unit == u
-        if mine.sum() < 3 or np.ptp(q[mine, 0]) < UNIT_SUPPORT * box.length_m \
-                or z_rel[mine].max() < box.floor_m + UNIT_SUPPORT * box.height_m:
+        if (
+            mine.sum() < 3
+            or np.ptp(q[mine, 0]) < UNIT_SUPPORT * box.length_m
+            or z_rel[mine].max() < box.floor_m + UNIT_SUPPORT * box.height_m
+        ):
             return False
     return True
 
