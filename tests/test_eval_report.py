@@ -142,3 +142,56 @@ def test_local_processes_and_dask_give_the_same_results(items):
     assert _numbers(local) == _numbers(inline)
     assert _numbers(dask) == _numbers(inline)
     assert np.isfinite(dask["vehicles"]["paper"]["man_tgx"]["hitch_rmse_deg"])
+
+
+def _plot_records(method_offset_m: float) -> list[dict]:
+    rows = []
+    for frame in range(5):
+        row = {
+            "kind": "gt",
+            "frame": frame,
+            "recording": "rec",
+            "gt_id": 1,
+            "stamp_s": frame / 10,
+            "hitch_gt_deg": 10.0,
+            "hitch_est_deg": 10.0 + method_offset_m,
+        }
+        for unit, x in (("truck", 5.0), ("trailer", -3.0)):
+            row.update(
+                {
+                    f"{unit}_x_gt": x + frame,
+                    f"{unit}_y_gt": 0.0,
+                    f"{unit}_yaw_gt": 0.0,
+                    f"{unit}_length_gt": 4.0,
+                    f"{unit}_width_gt": 2.5,
+                    f"{unit}_x_est": x + frame + method_offset_m,
+                    f"{unit}_y_est": 0.0,
+                    f"{unit}_yaw_est": 0.0,
+                    f"{unit}_length_est": float("nan"),
+                    f"{unit}_width_est": float("nan"),
+                    f"{unit}_pos_err_m": method_offset_m,
+                    f"{unit}_yaw_err_deg": 0.0,
+                }
+            )
+        row.update({"hitch_err_deg": method_offset_m, "dcap_dT_m": float("nan")})
+        rows.append(row)
+    return rows
+
+
+def test_plots_draw_every_method_side_by_side(tmp_path):
+    from matplotlib.image import imread
+
+    from i2v_loc.evaluation.report import write_plots
+
+    def widths(methods):
+        summary = {
+            "methods": methods,
+            "primary_subset": "all",
+            "_records": {(m, "all"): _plot_records(0.1 * i) for i, m in enumerate(methods)},
+        }
+        files = write_plots(summary, tmp_path / "_".join(methods))
+        assert sorted(f.name for f in files) == ["error_histograms.png", "rec_bev.png", "rec_hitch.png"]
+        return {f.name: imread(f).shape[1] for f in files}
+
+    one, two = widths(["paper"]), widths(["paper", "default"])
+    assert two["rec_bev.png"] == 2 * one["rec_bev.png"] and two["rec_hitch.png"] == 2 * one["rec_hitch.png"]

@@ -523,29 +523,41 @@ def _subset_tables(res, methods, subsets) -> list[str]:
 
 
 def write_plots(summary: dict, out_dir: Path, max_recordings: int = 30) -> list[Path]:
+    """Per recording a bird's-eye view and a hitch plot with one panel per method side by side,
+    and the error histograms of every method overlaid."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     out_dir.mkdir(parents=True, exist_ok=True)
-    method, subset = summary["methods"][0], summary["primary_subset"]
-    records = summary["_records"].get((method, subset), [])
-    by_rec: dict[str, list[dict]] = defaultdict(list)
-    for r in records:
-        by_rec[r["recording"]].append(r)
+    methods, subset = summary["methods"], summary["primary_subset"]
+    by_method = {m: summary["_records"].get((m, subset), []) for m in methods}
+    by_rec: dict[str, dict[str, list[dict]]] = defaultdict(lambda: {m: [] for m in methods})
+    for m, records in by_method.items():
+        for r in records:
+            by_rec[r["recording"]][m].append(r)
     files = []
     for name in list(by_rec)[:max_recordings]:
-        files.append(_plot_bev(plt, by_rec[name], out_dir / f"{name}_bev.png", f"{name} ({method}, {subset})"))
-        files.append(_plot_hitch(plt, by_rec[name], out_dir / f"{name}_hitch.png", f"{name} ({method}, {subset})"))
-    files.append(_plot_histograms(plt, records, out_dir / "error_histograms.png", f"{method}, {subset}"))
+        for suffix, draw, size in (("bev", _draw_bev, (7, 6.5)), ("hitch", _draw_hitch, (7, 3.5))):
+            fig, axes = plt.subplots(1, len(methods), figsize=(size[0] * len(methods), size[1]), squeeze=False)
+            for ax, m in zip(axes[0], methods):
+                draw(ax, by_rec[name][m], f"{name} ({m}, {subset})")
+            files.append(_save(plt, fig, out_dir / f"{name}_{suffix}.png", 90))
+    files.append(_plot_histograms(plt, by_method, out_dir / "error_histograms.png", subset))
     return files
 
 
-def _plot_bev(plt, records: list[dict], path: Path, title: str) -> Path:
+def _save(plt, fig, path: Path, dpi: int) -> Path:
+    fig.tight_layout()
+    fig.savefig(path, dpi=dpi)
+    plt.close(fig)
+    return path
+
+
+def _draw_bev(ax, records: list[dict], title: str) -> None:
     from matplotlib.patches import Polygon
 
-    fig, ax = plt.subplots(figsize=(8, 7))
     gt = sorted((r for r in records if r["kind"] == "gt"), key=lambda r: r["frame"])
     step = max(1, len(gt) // 12)
     styles = {("truck", "gt"): "red", ("trailer", "gt"): "red", ("truck", "est"): "green", ("trailer", "est"): "gold"}
@@ -590,14 +602,9 @@ def _plot_bev(plt, records: list[dict], path: Path, title: str) -> Path:
     ax.set_title(title)
     ax.legend(loc="best", fontsize=8)
     ax.grid(alpha=0.3)
-    fig.tight_layout()
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
-    return path
 
 
-def _plot_hitch(plt, records: list[dict], path: Path, title: str) -> Path:
-    fig, ax = plt.subplots(figsize=(8, 3.5))
+def _draw_hitch(ax, records: list[dict], title: str) -> None:
     gt = [r for r in records if r["kind"] == "gt"]
     for gid in sorted({r["gt_id"] for r in gt}, key=str):
         rows = sorted((r for r in gt if r["gt_id"] == gid), key=lambda r: r["stamp_s"] or 0.0)
@@ -609,16 +616,11 @@ def _plot_hitch(plt, records: list[dict], path: Path, title: str) -> Path:
     ax.set_title(title)
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
-    return path
 
 
-def _plot_histograms(plt, records: list[dict], path: Path, title: str) -> Path:
+def _plot_histograms(plt, by_method: dict[str, list[dict]], path: Path, subset: str) -> Path:
     from i2v_loc.evaluation.summary import column
 
-    gt = [r for r in records if r["kind"] == "gt"]
     panels = [
         ("truck_pos_err_m", "truck position error [m]"),
         ("trailer_pos_err_m", "trailer position error [m]"),
@@ -629,16 +631,18 @@ def _plot_histograms(plt, records: list[dict], path: Path, title: str) -> Path:
     ]
     fig, axes = plt.subplots(2, 3, figsize=(11, 6))
     for ax, (key, label) in zip(axes.ravel(), panels):
-        v = column(gt, key)
-        v = v[np.isfinite(v)]
-        if v.size:
-            ax.hist(v, bins=40, color="steelblue")
+        drawn = False
+        for m, records in by_method.items():
+            v = column([r for r in records if r["kind"] == "gt"], key)
+            v = v[np.isfinite(v)]
+            if v.size:
+                ax.hist(v, bins=40, alpha=0.5, label=m)
+                drawn = True
+        if drawn:
+            ax.legend(fontsize=7)
         else:
             ax.text(0.5, 0.5, "no data", ha="center", va="center", transform=ax.transAxes)
         ax.set_xlabel(label)
         ax.set_ylabel("frames")
-    fig.suptitle(title)
-    fig.tight_layout()
-    fig.savefig(path, dpi=80)
-    plt.close(fig)
-    return path
+    fig.suptitle(f"every method, {subset} sensors")
+    return _save(plt, fig, path, 80)
