@@ -7,19 +7,11 @@ from collections import defaultdict
 import numpy as np
 
 from i2v_loc.evaluation import metrics as m
+from i2v_loc.sim.maneuvers import LABELS
 
 TASK_KEYS = ("method", "subset", "recording")
 EARLY_S = 5.0  # false vehicles cluster in the first seconds (no background, no track history yet)
-MANEUVERS = (
-    "straight",
-    "single_turn",
-    "long_curve",
-    "u_turn",
-    "lane_change",
-    "roundabout",
-    "reverse_docking",
-    "standstill",
-)
+MANEUVERS = LABELS  # the maneuver taxonomy, in the simulator's order
 
 
 def column(records: list[dict], key: str) -> np.ndarray:
