@@ -16,3 +16,17 @@ def realdata() -> Path:
     if not REALDATA.is_dir():
         pytest.skip(f"real LiDAR recordings not found at {REALDATA} (see the project README)")
     return REALDATA
+
+
+# metrics.json keys every evaluated vehicle carries (the paper's tables and dCAP)
+REQUIRED = (
+    "truck_pos_rmse_m",
+    "trailer_pos_rmse_m",
+    "truck_yaw_rmse_deg",
+    "trailer_yaw_rmse_deg",
+    "hitch_rmse_deg",
+    "heading_flip_rate",
+    "delta_T_m",
+    "rra_rad",
+    "latency_ms_p50",
+)

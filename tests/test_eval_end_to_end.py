@@ -9,21 +9,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
+from conftest import REQUIRED
 
 from i2v_loc.cli import main
 
 REPO = Path(__file__).resolve().parents[1]
-REQUIRED = (
-    "truck_pos_rmse_m",
-    "trailer_pos_rmse_m",
-    "truck_yaw_rmse_deg",
-    "trailer_yaw_rmse_deg",
-    "hitch_rmse_deg",
-    "heading_flip_rate",
-    "delta_T_m",
-    "rra_rad",
-    "latency_ms_p50",
-)
 NEW = ("both_units_rate", "success_rate", "false_vehicle_s", "truck_flip_frames", "trailer_flip_frames")
 
 

@@ -8,23 +8,12 @@ import math
 
 import numpy as np
 import pytest
+from conftest import REQUIRED
 
 from i2v_loc.evaluation.groundtruth import wrap_deg
 from i2v_loc.evaluation.report import collect, write_report
 from i2v_loc.evaluation.runner import compare_task, run_tasks
 from i2v_loc.params import Params
-
-REQUIRED = (
-    "truck_pos_rmse_m",
-    "trailer_pos_rmse_m",
-    "truck_yaw_rmse_deg",
-    "trailer_yaw_rmse_deg",
-    "hitch_rmse_deg",
-    "heading_flip_rate",
-    "delta_T_m",
-    "rra_rad",
-    "latency_ms_p50",
-)
 
 
 def _unit(x, y, yaw, z=1.5, dims=(3.0, 2.5, 2.5)):
