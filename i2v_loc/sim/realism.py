@@ -21,7 +21,7 @@ from scipy.spatial.transform import Rotation
 
 from i2v_loc.recording import beam_directions
 from i2v_loc.sim import meshes as m
-from i2v_loc.sim.lidar import YardCaster
+from i2v_loc.sim.lidar import LidarModel, YardCaster
 from i2v_loc.sim.sensor_model import COLUMNS, BeamTable, ReturnModel
 
 GROUND_CELL_M = 1.0
@@ -177,12 +177,16 @@ def _circular_median_deg(angles: np.ndarray) -> float:
 # --------------------------------------------------------------------------- the scene
 
 
-def ground_height_field(frame: RealFrame, objects: list[LabelledObject], extent_m: float) -> m.Mesh:
+def on_objects(frame: RealFrame, objects: list[LabelledObject]) -> np.ndarray:
+    """(N,) the real points within CUBOID_MARGIN_M of a labelled cuboid."""
+    return np.any([o.contains(frame.xyz, CUBOID_MARGIN_M) for o in objects], axis=0)
+
+
+def ground_height_field(frame: RealFrame, on_object: np.ndarray, extent_m: float) -> m.Mesh:
     """Ground as a height field: per 1 m cell the 10th percentile height of the points that are
-    not on labelled objects, cells standing out of their neighbourhood (walls, trees) dropped, holes
-    filled from the nearest cell."""
-    keep = ~np.any([o.contains(frame.xyz, CUBOID_MARGIN_M) for o in objects], axis=0)
-    xyz = frame.xyz[keep & (np.abs(frame.xyz[:, 0]) < extent_m) & (np.abs(frame.xyz[:, 1]) < extent_m)]
+    not on labelled objects (``on_object``), cells standing out of their neighbourhood (walls,
+    trees) dropped, holes filled from the nearest cell."""
+    xyz = frame.xyz[~on_object & (np.abs(frame.xyz[:, 0]) < extent_m) & (np.abs(frame.xyz[:, 1]) < extent_m)]
     n = int(np.ceil(2 * extent_m / GROUND_CELL_M))
     ij = np.clip(((xyz[:, :2] + extent_m) / GROUND_CELL_M).astype(int), 0, n - 1)
     cell = ij[:, 0] * n + ij[:, 1]
@@ -300,8 +304,9 @@ def compare(
     table, column = real_beam_table(frame)
     returns = returns or ReturnModel()
     extent = max(o.range_m for o in objects) + 20.0
-    sensor = _sensor_at_origin(table)
-    ground = YardCaster(ground_height_field(frame, objects, extent), []).static_hits(sensor)
+    sensor = LidarModel(name="real", model="real", rate_hz=10, pose=np.eye(4), beam_table=table, returns=None)
+    on_object = on_objects(frame, objects)
+    ground = YardCaster(ground_height_field(frame, on_object, extent), []).static_hits(sensor)
     hits = YardCaster(m.merge([_placed(o) for o in objects]), []).static_hits(sensor)
     directions = beam_directions(table.altitude_deg, table.azimuth_offset_deg, table.columns)
     points = directions * np.where(np.isfinite(hits.range_m), hits.range_m, 0.0)[..., None]
@@ -310,7 +315,7 @@ def compare(
     # The rebuilt ground blocks a ray unless the real ray went past it (then the real ground is lower).
     behind_ground = (ground.range_m < hits.range_m) & ~(real_range > ground.range_m + BLOCKING_MARGIN_M)
     expected = np.where(np.isfinite(hits.range_m) & ~behind_ground, expected, 0.0)
-    blocked = _blocked_by_clutter(frame, column, objects, hits.range_m, table)
+    blocked = _blocked_by_clutter(frame, column, on_object, hits.range_m, table)
     results = []
     for obj in objects:
         inside = obj.contains(points.reshape(-1, 3)).reshape(hits.range_m.shape) & np.isfinite(hits.range_m)
@@ -326,12 +331,6 @@ def compare(
     return results, table
 
 
-def _sensor_at_origin(table: BeamTable):
-    from i2v_loc.sim.lidar import LidarModel
-
-    return LidarModel(name="real", model="real", rate_hz=10, pose=np.eye(4), beam_table=table, returns=None)
-
-
 def _real_range_image(frame: RealFrame, column: np.ndarray, table: BeamTable) -> np.ndarray:
     """(beams, columns) range of the real return on each ray (0 where none)."""
     image = np.zeros((table.beams, table.columns))
@@ -341,12 +340,11 @@ def _real_range_image(frame: RealFrame, column: np.ndarray, table: BeamTable) ->
 
 
 def _blocked_by_clutter(
-    frame: RealFrame, column: np.ndarray, objects: list[LabelledObject], sim_range: np.ndarray, table: BeamTable
+    frame: RealFrame, column: np.ndarray, on_object: np.ndarray, sim_range: np.ndarray, table: BeamTable
 ) -> np.ndarray:
     """Rays (beams, columns) whose real return, or a neighbouring column's, came from unlabelled
     structure nearer than what the simulated ray hit."""
-    on_objects = np.any([o.contains(frame.xyz, CUBOID_MARGIN_M) for o in objects], axis=0)
-    clutter = ~on_objects & (frame.ring < table.beams)
+    clutter = ~on_object & (frame.ring < table.beams)
     nearest = np.full(sim_range.shape, np.inf)
     r = np.linalg.norm(frame.xyz[clutter], axis=1)
     np.minimum.at(nearest, (frame.ring[clutter], column[clutter]), r)

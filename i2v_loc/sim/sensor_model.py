@@ -81,9 +81,9 @@ def os1_channels(beams: int, config: str) -> np.ndarray:
 
 def _spread_unique(index: np.ndarray) -> np.ndarray:
     """Sorted indices made strictly increasing (pushing duplicates near the horizon apart)."""
-    out = np.sort(index).copy()
-    for i in range(1, len(out)):  # at most 128 entries, once per sensor
-        out[i] = max(out[i], out[i - 1] + 1)
+    steps = np.arange(len(index))
+    # out[i] = max(index[i], out[i-1] + 1)  <=>  out - i is the running maximum of index - i
+    out = np.maximum.accumulate(np.sort(index) - steps) + steps
     return np.clip(out, 0, OS1_CHANNELS - 1)
 
 
