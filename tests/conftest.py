@@ -29,4 +29,6 @@ REQUIRED = (
     "delta_T_m",
     "rra_rad",
     "latency_ms_p50",
+    "truck_length_error_m",
+    "trailer_length_error_m",
 )

@@ -168,14 +168,32 @@ def test_bus_is_one_rigid_unit():
     bus = VehicleModel.rigid("rigid", 11.6, 2.55, 3.1, 0.3)
     tracker = VehicleTracker(PARAMS.articulated, PARAMS.vehicles)
     reports = []
-    for k in range(5):
-        points = vehicle_points(bus, -5.0 + 0.2 * k, 4.0, 0.1, sensors=SENSORS, seed=k)
+    for k in range(8):  # 4 m/s: 1.2 m travelled in the 4th frame, 1.6 m (>= rigid_start_travel_m) in the 5th
+        points = vehicle_points(bus, -5.0 + 0.4 * k, 4.0, 0.1, sensors=SENSORS, seed=k)
         reports = tracker.process(points, flat, 0.1 * k)
-    assert len(reports) == 1
+        assert len(reports) == (k >= 4)
     r = reports[0]
     assert r.model.trailer is None and r.model.name == "rigid"
     assert abs(r.model.tractor.length_m - 11.6) < 0.3
-    assert np.hypot(r.state.x_m - (-5.0 + 0.8), r.state.y_m - 4.0) < 0.1
+    assert np.hypot(r.state.x_m - (-5.0 + 0.4 * 7), r.state.y_m - 4.0) < 0.1
+
+
+def test_a_box_that_never_moves_is_no_rigid_vehicle_but_a_standing_articulated_one_is():
+    """A container, or a parked trailer, is shaped like a rigid vehicle: only motion tells them
+    apart. A tractor with its trailer is two hinged units: it starts standing, before any background."""
+    container = VehicleModel.rigid("rigid", 12.2, 2.44, 2.6)
+    tracker = VehicleTracker(PARAMS.articulated, PARAMS.vehicles)
+    for k in range(30):
+        points = vehicle_points(container, 0.0, 4.0, 0.3, sensors=SENSORS, seed=k)
+        assert tracker.process(points, flat, 0.1 * k) == []
+    tracker = VehicleTracker(PARAMS.articulated, PARAMS.vehicles)
+    model = volvo()
+    for k in range(4):
+        points = vehicle_points(model, 2.0, 3.0, 0.3, np.radians(20.0), sensors=SENSORS, seed=k)
+        reports = tracker.process(points, flat, 0.1 * k, background_ready=False)
+    assert len(reports) == 1 and reports[0].model.articulated
+    assert abs(np.degrees(reports[0].state.hitch_rad) - 20.0) < 1.0
+    assert np.hypot(reports[0].state.x_m - 2.0, reports[0].state.y_m - 3.0) < 0.1
 
 
 def test_articulated_method_end_to_end():

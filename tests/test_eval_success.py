@@ -162,3 +162,26 @@ def test_sweep_ranks_by_success_rate_descending_or_hitch_rmse_ascending():
     ]
     assert [r["combination"] for r in rank(combos, summaries)] == [0, 2, 1]
     assert [r["combination"] for r in rank(combos, summaries, "success_rate")] == [2, 1, 0]
+
+
+def test_length_errors_are_medians_over_settled_tracks_only():
+    """Estimated minus true length, median over the frames of a track at least 10 s old: the
+    first 10 s (a wrong start length) do not count; a new track restarts the clock."""
+    n = 150  # 15 s at 10 Hz
+    truth, states = [], []
+    for k in range(n):
+        line = _truth()[0]
+        line["frame"], line["stamp_s"] = k, k / 10
+        truth.append(line)
+        state = _estimate(k)
+        v = state["vehicles"][0]
+        v["truck"]["dimensions"] = [6.0 + (1.0 if k < 100 else 0.2), 2.5, 3.5]  # true length 6.0
+        v["trailer"]["dimensions"] = [6.0 - (2.0 if k < 100 else 0.4 + 0.1 * (k % 2)), 2.5, 3.5]
+        states.append(state)
+    s = _summary(states, truth)
+    assert s["truck_length_error_m"] == pytest.approx(0.2)
+    assert s["trailer_length_error_m"] == pytest.approx(-0.45)
+    for state in states[100:]:
+        state["vehicles"][0]["id"] = 8  # a new track at 10 s: never 10 s old
+    s = _summary(states, truth)
+    assert math.isnan(s["truck_length_error_m"]) and math.isnan(s["trailer_length_error_m"])

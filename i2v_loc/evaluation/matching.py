@@ -192,6 +192,13 @@ def frame_period_s(gt_times: np.ndarray, state_stamps: list) -> float:
     return NAN
 
 
+def _track_age_s(est_id, stamp, first_seen: dict) -> float:
+    """Seconds since the estimated vehicle ``est_id`` was first reported (NaN: none, or no stamp)."""
+    if est_id is None or stamp is None:
+        return NAN
+    return float(stamp) - first_seen.setdefault(est_id, float(stamp))
+
+
 def match_states(
     states: list[dict], gt_lines: list[dict], params: Params, gate_m: float = 4.0
 ) -> tuple[list[dict], list[dict]]:
@@ -202,6 +209,7 @@ def match_states(
     times = np.array([line["stamp_s"] for line in gt_lines], float)
     period = frame_period_s(times, [s.get("stamp_s") for s in states])
     start = next((float(s["stamp_s"]) for s in states if s.get("stamp_s") is not None), NAN)
+    first_seen: dict = {}  # estimated vehicle id -> stamp of its first report
     for state in states:
         stamp = state.get("stamp_s")
         if stamp is not None and np.isfinite(stamp):
@@ -212,6 +220,7 @@ def match_states(
         since = float(stamp) - start if stamp is not None else NAN
         for rec in frame_records:
             rec["since_start_s"] = since
+            rec["track_age_s"] = _track_age_s(rec.get("est_id"), stamp, first_seen)
         records += frame_records
         frames.append(frame_row(state, len(gt.get("vehicles", []))))
     return records, frames

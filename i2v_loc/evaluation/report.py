@@ -252,32 +252,30 @@ def _headline_table(res, methods, primary) -> list[str]:
         "",
         "| Vehicle | Method | Success | Coverage truck / trailer / both | Hitch RMSE [deg] (reported only) "
         "| Yaw RMSE truck / trailer [deg] (reported only) | Position RMSE truck / trailer [m] (reported only) "
-        "| Flip frames truck / trailer | False vehicle-s |",
-        "|---|---|---|---|---|---|---|---|---|",
+        "| Flip frames truck / trailer | Length error truck / trailer [m] (track ≥ 10 s) | False vehicle-s |",
+        "|---|---|---|---|---|---|---|---|---|---|",
     ]
     for vehicle, m, s in _vehicle_summaries(res, methods, primary):
         if not s["gt_vehicle_frames"]:
             lines.append(
-                f"| {_name(vehicle)} (not in the truth) | {m} | – | – | – | – | – | – | {_f(s['false_vehicle_s'], 1)} |"
+                f"| {_name(vehicle)} (not in the truth) | {m} | – | – | – | – | – | – | – | {_f(s['false_vehicle_s'], 1)} |"
             )
             continue
-        lines.append(
-            f"| {_name(vehicle)} | {m} | {_pct_of(s, 'success_rate')} ({s['success_frames']}/{s['visible_frames']}) "
-            f"| {_pct_of(s, 'truck_coverage')} / {_pct_of(s, 'trailer_coverage')} / {_pct_of(s, 'both_units_rate')} "
-            f"| {_f(s['hitch_rmse_deg'])} | {_pair(s['truck_yaw_rmse_deg'], s['trailer_yaw_rmse_deg'])} "
-            f"| {_pair(s['truck_pos_rmse_m'], s['trailer_pos_rmse_m'], 3)} "
-            f"| {s['truck_flip_frames']} / {s['trailer_flip_frames']} | {_f(s['false_vehicle_s'], 1)} |"
-        )
+        lines.append(_headline_row(_name(vehicle), m, s))
     for m in methods:
-        s = res[m][primary]["overall"]
-        lines.append(
-            f"| **all** | {m} | {_pct_of(s, 'success_rate')} ({s['success_frames']}/{s['visible_frames']}) "
-            f"| {_pct_of(s, 'truck_coverage')} / {_pct_of(s, 'trailer_coverage')} / {_pct_of(s, 'both_units_rate')} "
-            f"| {_f(s['hitch_rmse_deg'])} | {_pair(s['truck_yaw_rmse_deg'], s['trailer_yaw_rmse_deg'])} "
-            f"| {_pair(s['truck_pos_rmse_m'], s['trailer_pos_rmse_m'], 3)} "
-            f"| {s['truck_flip_frames']} / {s['trailer_flip_frames']} | {_f(s['false_vehicle_s'], 1)} |"
-        )
+        lines.append(_headline_row("**all**", m, res[m][primary]["overall"]))
     return lines + [""]
+
+
+def _headline_row(name: str, method: str, s: dict) -> str:
+    return (
+        f"| {name} | {method} | {_pct_of(s, 'success_rate')} ({s['success_frames']}/{s['visible_frames']}) "
+        f"| {_pct_of(s, 'truck_coverage')} / {_pct_of(s, 'trailer_coverage')} / {_pct_of(s, 'both_units_rate')} "
+        f"| {_f(s['hitch_rmse_deg'])} | {_pair(s['truck_yaw_rmse_deg'], s['trailer_yaw_rmse_deg'])} "
+        f"| {_pair(s['truck_pos_rmse_m'], s['trailer_pos_rmse_m'], 3)} "
+        f"| {s['truck_flip_frames']} / {s['trailer_flip_frames']} "
+        f"| {_pair(s['truck_length_error_m'], s['trailer_length_error_m'], 2)} | {_f(s['false_vehicle_s'], 1)} |"
+    )
 
 
 def _calibration_table(calibration: dict) -> list[str]:

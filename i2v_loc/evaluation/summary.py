@@ -10,6 +10,7 @@ from i2v_loc.evaluation import metrics as m
 from i2v_loc.sim.maneuvers import LABELS
 
 TASK_KEYS = ("method", "subset", "recording")
+LENGTH_SETTLE_S = 10.0  # the learned lengths are scored after a vehicle's track is this old
 EARLY_S = 5.0  # false vehicles cluster in the first seconds (no background, no track history yet)
 MANEUVERS = LABELS  # the maneuver taxonomy, in the simulator's order
 
@@ -59,6 +60,15 @@ def _false_seconds(false: list[dict]) -> dict[str, float]:
     }
 
 
+def _length_error_m(gt: list[dict], unit: str) -> float:
+    """Median of estimated minus true length over the frames whose vehicle track is at least
+    ``LENGTH_SETTLE_S`` old (NaN when there are none)."""
+    error = column(gt, f"{unit}_length_est") - column(gt, f"{unit}_length_gt")
+    settled = column(gt, "track_age_s") >= LENGTH_SETTLE_S
+    ok = settled & np.isfinite(error)
+    return float(np.median(error[ok])) if ok.any() else float("nan")
+
+
 def _latency(frame_rows: list[dict]) -> dict[str, float]:
     stages = sorted({k for row in frame_rows for k in row if k.startswith("latency_")})
     out = {}
@@ -87,6 +97,7 @@ def summarize(records: list[dict], frame_rows: list[dict]) -> dict:
         out[f"{unit}_heading_flip_rate"] = m.heading_flip_rate(yaw_err)
         out[f"{unit}_flip_frames"] = m.flip_count(yaw_err)
         out[f"{unit}_coverage"] = _rate(_flag(gt, f"{unit}_reported"), _flag(gt, f"{unit}_in_gt"))
+        out[f"{unit}_length_error_m"] = _length_error_m(gt, unit)
     out["both_units_rate"] = _rate(_flag(gt, "both_reported"), _flag(gt, "both_in_gt"))
     visible = _flag(gt, "visible")
     out["visible_frames"] = int(visible.sum())

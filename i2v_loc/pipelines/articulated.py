@@ -108,9 +108,8 @@ class ArticulatedPipeline(ParameterHandoff):
         timer.lap("region")
         ground = region.ground.height_at if region.ground else (lambda x, y: 0.0)
         if np.isfinite(merged.stamp_s):
-            # no vehicle starts before the background is learned: the yard itself is no vehicle
             ready = self.background is None or self.background.ready
-            self._reports = self.tracker.process(points, ground, merged.stamp_s, allow_start=ready)
+            self._reports = self.tracker.process(points, ground, merged.stamp_s, background_ready=ready)
         timer.lap("vehicles")
         vehicles = [self._result(r, ground) for r in self._reports]
         self._count(merged, region)
@@ -159,7 +158,7 @@ class ArticulatedPipeline(ParameterHandoff):
         return UnitResult(vehicle_id, np.array([center_xy[0], center_xy[1], z]), yaw_deg, box.dims, points)
 
     def _unit_boxes(self):
-        """(centre xy, yaw, box, centre velocity xy, yaw rate, travel) of every unit of the vehicles of the last frame."""
+        """(centre xy, yaw, box, centre velocity xy, yaw rate, travel, articulated) of every unit of the vehicles of the last frame."""
         for r in self._reports:
             s, model = r.state, r.model
             centers = model.box_centers(s.x_m, s.y_m, s.yaw_rad, s.hitch_rad)
@@ -174,20 +173,23 @@ class ArticulatedPipeline(ParameterHandoff):
                 axle_velocity + _turn(omega, centers[0] - axle),
                 omega,
                 r.travel_m,
+                model.articulated,
             )
             if model.trailer is not None:
                 kingpin = model.kingpin_xy(s.x_m, s.y_m, s.yaw_rad)
                 kingpin_velocity = axle_velocity + _turn(omega, kingpin - axle)
                 trailer_rate = omega + s.hitch_rate_rad_s
                 velocity = kingpin_velocity + _turn(trailer_rate, centers[1] - kingpin)
-                yield centers[1], s.yaw_rad + s.hitch_rad, model.trailer, velocity, trailer_rate, r.travel_m
+                yield centers[1], s.yaw_rad + s.hitch_rad, model.trailer, velocity, trailer_rate, r.travel_m, True
 
     def _protected_boxes(self) -> list[ProtectedBox]:
+        """Every articulated vehicle's boxes (one standing from the start is no background), a rigid
+        one's once it travelled (a parked container that fooled the start becomes background)."""
         min_travel = self._active.background.protect_min_travel_m
         return [
             ProtectedBox(tuple(c), yaw, box.length_m / 2, box.width_m / 2)
-            for c, yaw, box, _, _, travel in self._unit_boxes()
-            if travel >= min_travel
+            for c, yaw, box, _, _, travel, articulated in self._unit_boxes()
+            if articulated or travel >= min_travel
         ]
 
     def _motion_hints(self) -> list[MotionHint]:
@@ -195,7 +197,7 @@ class ArticulatedPipeline(ParameterHandoff):
             MotionHint(
                 tuple(c), yaw, box.length_m / 2 + MOTION_MARGIN_M, box.width_m / 2 + MOTION_MARGIN_M, tuple(v), rate
             )
-            for c, yaw, box, v, rate, _ in self._unit_boxes()
+            for c, yaw, box, v, rate, _, _ in self._unit_boxes()
             if np.hypot(*v) >= MIN_MOTION_SPEED_M_S
         ]
 

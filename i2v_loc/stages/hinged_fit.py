@@ -74,9 +74,10 @@ class Measurement:
 class _Faces:
     """Nearest-face residuals and Jacobian rows of points for one parameter vector."""
 
-    residual: np.ndarray  # (N,)
+    residual: np.ndarray  # (N,) signed distance to the face's plane (what the fit minimises)
     jacobian: np.ndarray  # (N, P)
     unit: np.ndarray  # (N,) 0 / 1
+    distance: np.ndarray  # (N,) to the face itself (beyond its ends too; inf above every roof)
 
 
 def thin(points: np.ndarray, max_points: int) -> np.ndarray:
@@ -168,7 +169,7 @@ def faces(
     on_roof = roof[rows, unit]  # a roof point says nothing about the pose
     residual[on_roof] = 0.0
     jac[on_roof] = 0.0
-    return _Faces(residual, jac, unit)
+    return _Faces(residual, jac, unit, np.sqrt(dist2[rows, pick]))
 
 
 def fit(
@@ -201,7 +202,8 @@ def fit(
             break  # residuals and faces of the last step stand for the solution (it moved < 1 mm)
     cost = float(np.mean(np.log1p((at.residual / scale) ** 2))) * scale**2 / 2
     covariance = _covariance(at, v0, params)
-    unit = np.where(np.abs(at.residual) <= params.fit_inlier_m, at.unit, -1).astype(np.int8)
+    # explained: on a face, not only on its plane (a wall running on past a box's corner is no side of it)
+    unit = np.where(at.distance <= params.fit_inlier_m, at.unit, -1).astype(np.int8)
     hitch = float(wrap_rad(v[3])) if prior.model.articulated else None
     return Measurement(float(v[0]), float(v[1]), float(wrap_rad(v[2])), hitch, covariance, sample, unit, cost)
 

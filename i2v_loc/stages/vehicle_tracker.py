@@ -61,6 +61,11 @@ class Seed:
     first_xy: np.ndarray
     frames: int = 1
     seen: bool = True
+    rigid: bool = False  # best explained by one rigid box: fitted again once it has moved (and the map is ready)
+
+    @property
+    def travel_m(self) -> float:
+        return float(np.hypot(*(self.center_xy - self.first_xy)))
 
 
 @dataclass
@@ -117,10 +122,12 @@ class VehicleTracker:
     # ----------------------------------------------------------------- per frame
 
     def process(
-        self, points: np.ndarray, ground: Callable[[float, float], float], stamp_s: float, allow_start: bool = True
+        self, points: np.ndarray, ground: Callable[[float, float], float], stamp_s: float, background_ready: bool = True
     ) -> list[VehicleReport]:
         """``points`` (N, 3): the foreground (off the ground and the background) in the yard frame;
-        ``ground(x, y)``: the ground's height there."""
+        ``ground(x, y)``: the ground's height there. Until ``background_ready`` the foreground holds
+        the yard too: only articulated vehicles start then (two hinged units are no wall, container
+        or parked trailer); a rigid one needs the learned background to tell it from a container."""
         priors = [self._prior(t, stamp_s, ground) for t in self.tracks]
         owner = self._claim(points, priors)
         reports = []
@@ -128,8 +135,7 @@ class VehicleTracker:
             reports.append(self._step(track, prior, points[owner == i]))
         self.tracks = [t for t in self.tracks if t.missed < self.params.leave_frames]
         reports = [r for r in reports if any(t.id == r.id for t in self.tracks)]
-        if allow_start:
-            reports += self._start(points[owner < 0], ground, stamp_s)
+        reports += self._start(points[owner < 0], ground, stamp_s, rigid_allowed=background_ready)
         return reports
 
     def _prior(self, track: _Track, stamp_s: float, ground) -> Prior:
@@ -262,7 +268,7 @@ class VehicleTracker:
 
     # ----------------------------------------------------------------- start
 
-    def _start(self, points: np.ndarray, ground, stamp_s: float) -> list[VehicleReport]:
+    def _start(self, points: np.ndarray, ground, stamp_s: float, rigid_allowed: bool) -> list[VehicleReport]:
         clusters = self._seed_clusters(points, ground)
         for seed in self.seeds:
             seed.seen = False
@@ -279,20 +285,24 @@ class VehicleTracker:
             else:
                 seed = Seed(center, center)
                 self.seeds.append(seed)
-            if seed.frames >= self.params.start_frames:
+            if seed.frames >= self.params.start_frames and (not seed.rigid or self._may_start_rigid(seed, rigid_allowed)):
                 ready.append((seed, cluster))
         self.seeds = [s for s in self.seeds if s.seen]
         reports = []
         for seed, cluster in ready:
             center = seed.center_xy
-            track = self._new_track(cluster, seed, float(ground(center[0], center[1])), stamp_s)
-            if track is None:  # no vehicle (a wall, a car, a person): tried again after a while
-                seed.frames = -SEED_RETRY_FRAMES
+            track = self._new_track(cluster, seed, float(ground(center[0], center[1])), stamp_s, rigid_allowed)
+            if track is None:
+                if not seed.rigid:  # no vehicle (a wall, a car, a person): tried again after a while
+                    seed.frames = -SEED_RETRY_FRAMES
                 continue
             self.seeds.remove(seed)
             self.tracks.append(track)
             reports.append(track.report(True))
         return reports
+
+    def _may_start_rigid(self, seed: Seed, rigid_allowed: bool) -> bool:
+        return rigid_allowed and seed.travel_m >= self.params.rigid_start_travel_m
 
     def _seed_clusters(self, points: np.ndarray, ground) -> list[np.ndarray]:
         """Connected components tall enough to be a vehicle, those closer than ``start_join_m`` joined
@@ -314,12 +324,17 @@ class VehicleTracker:
                 out.append(cluster)
         return out
 
-    def _new_track(self, cluster: np.ndarray, seed: Seed, ground_z_m: float, stamp_s: float) -> _Track | None:
+    def _new_track(
+        self, cluster: np.ndarray, seed: Seed, ground_z_m: float, stamp_s: float, rigid_allowed: bool
+    ) -> _Track | None:
         hypotheses = self._hypotheses(cluster, ground_z_m)
         if not hypotheses:
             return None
         chosen = self._choose(hypotheses, seed)
         if chosen is None:
+            return None
+        seed.rigid = not chosen[0].articulated
+        if seed.rigid and not self._may_start_rigid(seed, rigid_allowed):
             return None
         model, m = chosen
         if float(np.mean(m.unit >= 0)) < self.params.start_min_explained or not _supported(m, model, ground_z_m):
