@@ -146,16 +146,18 @@ def faces(
     along = xy @ table[:, 2:4].T - table[:, 5]
     excess = np.maximum(np.abs(along) - table[:, 6], 0.0)
     dist2 = perp * perp + excess * excess
-    tops = [model.tractor.top_m] + ([model.trailer.top_m] if model.trailer is not None else [])
-    roof = np.zeros((n, len(tops)), dtype=bool)
-    for u, top in enumerate(tops):
+    boxes = [model.tractor] + ([model.trailer] if model.trailer is not None else [])
+    # on the roof, or under the floor (wheels, landing gear, chassis: set in from the sides)
+    roof = np.zeros((n, len(boxes)), dtype=bool)
+    for u, box in enumerate(boxes):
         cols = slice(4 * u, 4 * u + 4)
         inside = perp[:, cols].max(axis=1) <= 0.0
         if u == 1 and trailer_slack_m > 0:  # the roof reaches as far back as the sides may
             inside = np.maximum(perp[:, [4, 6, 7]].max(axis=1), perp[:, 5] - trailer_slack_m) <= 0.0
-        roof[:, u] = (np.abs(z_rel - top) <= top_band_m) & inside
+        flat = (np.abs(z_rel - box.top_m) <= top_band_m) | (z_rel < box.floor_m - top_band_m)
+        roof[:, u] = flat & inside
         dist2[roof[:, u], cols] = 0.0
-        dist2[z_rel > top + top_band_m, cols] = np.inf
+        dist2[z_rel > box.top_m + top_band_m, cols] = np.inf
     pick = np.argmin(dist2, axis=1)
     rows = np.arange(n)
     face = table[pick]
@@ -166,7 +168,7 @@ def faces(
     jac[:, 0], jac[:, 1], jac[:, 2] = -face[:, 0], -face[:, 1], lever + face[:, 8]
     if model.articulated:
         jac[:, 3] = np.where(unit == 1, lever, 0.0)
-    on_roof = roof[rows, unit]  # a roof point says nothing about the pose
+    on_roof = roof[rows, unit]  # a roof or undercarriage point says nothing about the pose
     residual[on_roof] = 0.0
     jac[on_roof] = 0.0
     return _Faces(residual, jac, unit, np.sqrt(dist2[rows, pick]))

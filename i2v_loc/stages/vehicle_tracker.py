@@ -421,14 +421,19 @@ class VehicleTracker:
 
 
 def _supported(m: Measurement, model: VehicleModel, ground_z_m: float) -> bool:
-    """Each unit's explained points span at least ``UNIT_SUPPORT`` of its length and reach
-    ``UNIT_SUPPORT`` of its height above its floor (a car's side on a trailer's faces is no truck)."""
+    """Each unit's explained points span at least ``UNIT_SUPPORT`` of its length, reach
+    ``UNIT_SUPPORT`` of its height above its floor (a car's side on a trailer's faces is no truck)
+    and are at least ``UNIT_SUPPORT`` of the unit's share of the side area (a parked trailer's
+    landing gear is no tractor)."""
     boxes = [model.tractor] + ([model.trailer] if model.trailer is not None else [])
     z_rel = m.points[:, 2] - ground_z_m
+    areas = np.array([box.length_m * box.height_m for box in boxes])
+    explained = max(int(np.sum(m.unit >= 0)), 1)
     for u, (box, q) in enumerate(zip(boxes, unit_frames(m.points, m.vector, model))):
         mine = m.unit == u
         if (
             mine.sum() < 3
+            or mine.sum() / explained < UNIT_SUPPORT * areas[u] / areas.sum()
             or np.ptp(q[mine, 0]) < UNIT_SUPPORT * box.length_m
             or z_rel[mine].max() < box.floor_m + UNIT_SUPPORT * box.height_m
         ):
