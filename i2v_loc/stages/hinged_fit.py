@@ -16,7 +16,7 @@ at the prediction; the covariance then says they were not measured.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -26,7 +26,9 @@ from i2v_loc.stages.vehicle_model import VehicleModel
 
 # Face normals in the unit's frame: front, rear, left, right.
 FACE_NORMALS = np.array([[1.0, 0.0], [-1.0, 0.0], [0.0, 1.0], [0.0, -1.0]])
-WEAK_PRIOR_SIGMAS = np.array([2.0, 2.0, np.radians(20.0), np.radians(30.0)])  # m, m, rad, rad
+WEAK_PRIOR_SIGMAS = np.array([2.0, 2.0, np.radians(20.0), np.radians(30.0), 4.0])  # m, m, rad, rad, m
+TRAILER_REAR_FACE = 5  # row of the face table: unit 1, rear
+TRAILER_LENGTH_RANGE_M = (2.0, 16.5)
 
 
 @dataclass(frozen=True)
@@ -42,11 +44,16 @@ class Prior:
     model: VehicleModel
     ground_z_m: float = 0.0
     trailer_slack_m: float = 0.0
+    free_trailer_length: bool = False  # fit the trailer's length too (its rear face moves)
 
     @property
     def vector(self) -> np.ndarray:
         v = [self.x_m, self.y_m, self.yaw_rad]
         return np.array(v + [self.hitch_rad] if self.model.articulated else v)
+
+    @property
+    def fits_length(self) -> bool:
+        return self.free_trailer_length and self.model.articulated
 
 
 @dataclass(frozen=True)
@@ -59,6 +66,8 @@ class Measurement:
     points: np.ndarray  # (n, 3) the thinned points fitted
     unit: np.ndarray  # (n,) int8 per fitted point: 0 tractor, 1 trailer, -1 not explained
     cost: float  # mean Cauchy loss per fitted point (m^2)
+    trailer_length_m: float | None = None  # fitted (Prior.free_trailer_length), else None
+    rear_points: int = 0  # explained points on the trailer's rear face
 
     @property
     def vector(self) -> np.ndarray:
@@ -78,6 +87,7 @@ class _Faces:
     jacobian: np.ndarray  # (N, P)
     unit: np.ndarray  # (N,) 0 / 1
     distance: np.ndarray  # (N,) to the face itself (beyond its ends too; inf above every roof)
+    on_rear: np.ndarray  # (N,) bool: on the trailer's rear face (not its roof or undercarriage)
 
 
 def thin(points: np.ndarray, max_points: int) -> np.ndarray:
@@ -171,7 +181,7 @@ def faces(
     on_roof = roof[rows, unit]  # a roof or undercarriage point says nothing about the pose
     residual[on_roof] = 0.0
     jac[on_roof] = 0.0
-    return _Faces(residual, jac, unit, np.sqrt(dist2[rows, pick]))
+    return _Faces(residual, jac, unit, np.sqrt(dist2[rows, pick]), (pick == TRAILER_REAR_FACE) & ~on_roof)
 
 
 def fit(
@@ -189,25 +199,46 @@ def fit(
         return None
     xy, z_rel = sample[:, :2], sample[:, 2] - prior.ground_z_m
     v0 = prior.vector
+    if prior.fits_length:
+        v0 = np.r_[v0, prior.model.trailer.length_m]
     scale = params.fit_loss_scale_m
     prior_info = np.diag((scale / WEAK_PRIOR_SIGMAS[: len(v0)]) ** 2)
     v = v0.copy()
     for k in range(iterations or params.fit_iterations):
         # graduated: a wide loss first so that faces a prediction misses by decimetres still pull
         c = max(scale, (start_scale_m or params.fit_start_scale_m) * 0.5**k)
-        at = faces(v, xy, z_rel, prior.model, params.fit_top_band_m, prior.trailer_slack_m)
+        at = _faces_of(v, xy, z_rel, prior, params)
         w = 1.0 / (1.0 + (at.residual / c) ** 2)  # Cauchy weights: iteratively reweighted Gauss-Newton
         jw = at.jacobian * w[:, None]
         step = np.linalg.solve(jw.T @ at.jacobian + prior_info, -(jw.T @ at.residual + prior_info @ (v - v0)))
         v = v + step
-        if c == scale and np.abs(step[:2]).max() < 1e-3 and np.abs(step[2:]).max() < 1e-4:
+        if prior.fits_length:
+            v[4] = np.clip(v[4], *TRAILER_LENGTH_RANGE_M)
+        if c == scale and np.abs(step[:2]).max() < 1e-3 and np.abs(step[2:4]).max() < 1e-4:
             break  # residuals and faces of the last step stand for the solution (it moved < 1 mm)
     cost = float(np.mean(np.log1p((at.residual / scale) ** 2))) * scale**2 / 2
-    covariance = _covariance(at, v0, params)
+    covariance = _covariance(at, v0, params)[:4, :4]
     # explained: on a face, not only on its plane (a wall running on past a box's corner is no side of it)
-    unit = np.where(at.distance <= params.fit_inlier_m, at.unit, -1).astype(np.int8)
+    explained = at.distance <= params.fit_inlier_m
+    unit = np.where(explained, at.unit, -1).astype(np.int8)
     hitch = float(wrap_rad(v[3])) if prior.model.articulated else None
-    return Measurement(float(v[0]), float(v[1]), float(wrap_rad(v[2])), hitch, covariance, sample, unit, cost)
+    length = float(v[4]) if prior.fits_length else None
+    rear = int(np.sum(at.on_rear & explained))
+    return Measurement(
+        float(v[0]), float(v[1]), float(wrap_rad(v[2])), hitch, covariance, sample, unit, cost, length, rear
+    )
+
+
+def _faces_of(v: np.ndarray, xy: np.ndarray, z_rel: np.ndarray, prior: Prior, params: ArticulatedParams) -> _Faces:
+    """``faces`` of the pose v[:4]; with a fitted trailer length v[4], its rear face moves with it."""
+    if not prior.fits_length:
+        return faces(v, xy, z_rel, prior.model, params.fit_top_band_m, prior.trailer_slack_m)
+    model = prior.model
+    model = model.with_boxes(model.tractor, replace(model.trailer, length_m=float(v[4])))
+    at = faces(v[:4], xy, z_rel, model, params.fit_top_band_m)
+    # the rear face lies length behind the front: a longer trailer moves it back (its normal points back)
+    at.jacobian = np.column_stack([at.jacobian, -at.on_rear.astype(float)])
+    return at
 
 
 def _covariance(at: _Faces, v0: np.ndarray, params: ArticulatedParams) -> np.ndarray:
@@ -224,5 +255,6 @@ def _covariance(at: _Faces, v0: np.ndarray, params: ArticulatedParams) -> np.nda
         params.fit_position_floor_m,
         np.radians(params.fit_angle_floor_deg),
         np.radians(params.fit_angle_floor_deg),
+        params.fit_position_floor_m,
     ][: len(v0)]
     return np.linalg.inv(info) + np.diag(floor**2)

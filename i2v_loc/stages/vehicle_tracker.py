@@ -33,6 +33,7 @@ START_SCALE_M = 0.8  # first loss scale of the start fits (a placed model is off
 DIRECTION_COST_RATIO = 0.8  # one end's fit must cost this much less than the other's to decide the direction
 RIGID_COST_RATIO = 0.7  # an articulated model must cost this much less than one rigid box
 MAX_TRAILER_LENGTH_M = 16.5
+REAR_FACE_MIN_POINTS = 3
 LENGTH_CONVERGED_OBSERVATIONS = 5
 SETTLED_SLACK_M = 0.5
 FACE_SEEN_SPAN = 0.6  # an end face is seen when its points span this share of the unit's width
@@ -355,6 +356,8 @@ class VehicleTracker:
         if model.trailer is not None:
             widths.append(_Extent(model.trailer.width_m, self.params.dimension_window))
             length = _Extent(model.trailer.length_m, self.params.dimension_window)
+            if m.rear_points >= REAR_FACE_MIN_POINTS:  # the start fit saw where the trailer ends
+                length.add(model.trailer.length_m)
         return _Track(
             next(self._ids), model, filt, model.name, length, widths, 0, m, np.array(m.vector[:2]), ground_z_m
         )
@@ -366,11 +369,10 @@ class VehicleTracker:
         out = []
         for model in self.catalogue.values():
             for sign in (1.0, -1.0):
-                slack = MAX_TRAILER_LENGTH_M - model.trailer.length_m
                 coarse = [
                     fit(
                         cluster,
-                        _placed(model, rect, sign, np.radians(h), ground_z_m, slack),
+                        _placed(model, rect, sign, np.radians(h), ground_z_m),
                         self.params,
                         COARSE_ITERATIONS,
                         START_SCALE_M,
@@ -378,10 +380,12 @@ class VehicleTracker:
                     for h in START_HITCHES_DEG
                 ]
                 coarse = [m for m in coarse if m is not None]
-                if coarse:  # the best start hitch, refined
+                if coarse:  # the best start hitch, refined, the trailer's length fitted too
                     m = min(coarse, key=lambda m: m.cost)
-                    prior = Prior(m.x_m, m.y_m, m.yaw_rad, m.hitch_rad, model, ground_z_m, slack)
-                    out.append((model, sign, fit(cluster, prior, self.params, START_ITERATIONS, START_SCALE_M)))
+                    sized = _with_trailer_length(model, m.trailer_length_m)
+                    prior = Prior(m.x_m, m.y_m, m.yaw_rad, m.hitch_rad, sized, ground_z_m, 0.0, True)
+                    m = fit(cluster, prior, self.params, START_ITERATIONS, START_SCALE_M)
+                    out.append((_with_trailer_length(model, m.trailer_length_m), sign, m))
         height = float(cluster[:, 2].max() - ground_z_m)
         rigid = VehicleModel.rigid("rigid", rect.length_m, rect.width_m, height)
         for sign in (1.0, -1.0):
@@ -467,7 +471,13 @@ def _join_near(parts: list[np.ndarray], distance_m: float) -> list[list[int]]:
     return list(groups.values())
 
 
-def _placed(model: VehicleModel, rect, sign: float, hitch_rad: float, ground_z_m: float, slack_m: float) -> Prior:
+def _with_trailer_length(model: VehicleModel, length_m: float | None) -> VehicleModel:
+    if length_m is None:
+        return model
+    return model.with_boxes(model.tractor, replace(model.trailer, length_m=length_m))
+
+
+def _placed(model: VehicleModel, rect, sign: float, hitch_rad: float, ground_z_m: float) -> Prior:
     """A prior putting the model's footprint centre on the rectangle's centre, its mean axis along
     the rectangle (``sign``: which end the tractor is at)."""
     axis = rect.yaw_rad + (0.0 if sign > 0 else np.pi)
@@ -480,7 +490,7 @@ def _placed(model: VehicleModel, rect, sign: float, hitch_rad: float, ground_z_m
         back = trailer_c - (model.trailer.length_m / 2) * np.array([np.cos(yaw + hitch_rad), np.sin(yaw + hitch_rad)])
         centre = (front + back) / 2
     x, y = rect.center_xy - centre
-    return Prior(float(x), float(y), float(yaw), float(hitch_rad), model, ground_z_m, max(slack_m, 0.0))
+    return Prior(float(x), float(y), float(yaw), float(hitch_rad), model, ground_z_m, 0.0, model.articulated)
 
 
 def unit_frames(points: np.ndarray, v: np.ndarray, model: VehicleModel) -> list[np.ndarray]:
