@@ -27,7 +27,7 @@ from i2v_loc.stages.vehicle_model import VehicleModel
 # Face normals in the unit's frame: front, rear, left, right.
 FACE_NORMALS = np.array([[1.0, 0.0], [-1.0, 0.0], [0.0, 1.0], [0.0, -1.0]])
 WEAK_PRIOR_SIGMAS = np.array([2.0, 2.0, np.radians(20.0), np.radians(30.0), 4.0])  # m, m, rad, rad, m
-TRAILER_REAR_FACE = 5  # row of the face table: unit 1, rear
+REAR, LEFT, RIGHT = 1, 2, 3  # face numbers of a unit (the face table's rows modulo 4)
 TRAILER_LENGTH_RANGE_M = (2.0, 16.5)
 
 
@@ -68,6 +68,7 @@ class Measurement:
     cost: float  # mean Cauchy loss per fitted point (m^2)
     trailer_length_m: float | None = None  # fitted (Prior.free_trailer_length), else None
     rear_points: int = 0  # explained points on the trailer's rear face
+    side: np.ndarray | None = None  # (n,) int8: +1 on the unit's left side's plane, -1 its right's, 0 else
 
     @property
     def vector(self) -> np.ndarray:
@@ -87,7 +88,12 @@ class _Faces:
     jacobian: np.ndarray  # (N, P)
     unit: np.ndarray  # (N,) 0 / 1
     distance: np.ndarray  # (N,) to the face itself (beyond its ends too; inf above every roof)
-    on_rear: np.ndarray  # (N,) bool: on the trailer's rear face (not its roof or undercarriage)
+    face: np.ndarray  # (N,) 0 front, 1 rear, 2 left, 3 right, -1 on the roof or under the floor
+
+    @property
+    def on_rear(self) -> np.ndarray:
+        """On the trailer's rear face (not its roof or undercarriage)."""
+        return (self.unit == 1) & (self.face == REAR)
 
 
 def thin(points: np.ndarray, max_points: int) -> np.ndarray:
@@ -181,7 +187,7 @@ def faces(
     on_roof = roof[rows, unit]  # a roof or undercarriage point says nothing about the pose
     residual[on_roof] = 0.0
     jac[on_roof] = 0.0
-    return _Faces(residual, jac, unit, np.sqrt(dist2[rows, pick]), (pick == TRAILER_REAR_FACE) & ~on_roof)
+    return _Faces(residual, jac, unit, np.sqrt(dist2[rows, pick]), np.where(on_roof, -1, pick % 4))
 
 
 def fit(
@@ -224,8 +230,10 @@ def fit(
     hitch = float(wrap_rad(v[3])) if prior.model.articulated else None
     length = float(v[4]) if prior.fits_length else None
     rear = int(np.sum(at.on_rear & explained))
+    on_plane = np.abs(at.residual) <= params.fit_inlier_m
+    side = (on_plane & (at.face == LEFT)).astype(np.int8) - (on_plane & (at.face == RIGHT))
     return Measurement(
-        float(v[0]), float(v[1]), float(wrap_rad(v[2])), hitch, covariance, sample, unit, cost, length, rear
+        float(v[0]), float(v[1]), float(wrap_rad(v[2])), hitch, covariance, sample, unit, cost, length, rear, side
     )
 
 

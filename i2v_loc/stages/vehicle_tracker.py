@@ -34,6 +34,8 @@ DIRECTION_COST_RATIO = 0.8  # one end's fit must cost this much less than the ot
 RIGID_COST_RATIO = 0.7  # an articulated model must cost this much less than one rigid box
 MAX_TRAILER_LENGTH_M = 16.5
 REAR_FACE_MIN_POINTS = 3
+SIDE_MIN_POINTS = 5
+MAX_START_HITCH_RAD = np.radians(100.0)  # a semitrailer jack-knifes near 90 deg: a fold beyond is no vehicle
 LENGTH_CONVERGED_OBSERVATIONS = 5
 SETTLED_SLACK_M = 0.5
 FACE_SEEN_SPAN = 0.6  # an end face is seen when its points span this share of the unit's width
@@ -185,12 +187,10 @@ class VehicleTracker:
         local = unit_frames(m.points, m.vector, model)
         new_boxes = []
         for u, box in enumerate(boxes):
-            q = local[u][m.unit == u]
-            if len(q) >= 5:
-                across = np.sort(q[:, 1])  # 2nd to 98th percentile
-                span = float(across[int(0.98 * (len(q) - 1))] - across[int(0.02 * (len(q) - 1))])
-                if span >= FACE_SEEN_SPAN * box.width_m:  # an end face or both sides: a width seen whole
-                    track.widths[u].add(span)
+            mine = m.unit == u
+            left, right = local[u][mine & (m.side > 0), 1], local[u][mine & (m.side < 0), 1]
+            if min(len(left), len(right)) >= SIDE_MIN_POINTS:  # both sides seen: the width between them
+                track.widths[u].add(float(np.median(left) - np.median(right)))
             width = track.widths[u].estimate
             new_boxes.append(replace(box, width_m=width))
         if model.trailer is not None and track.trailer_length is not None:
@@ -404,7 +404,7 @@ class VehicleTracker:
     def _choose(self, hypotheses, seed: Seed) -> tuple[VehicleModel, Measurement] | None:
         """The best-explaining model; between its two directions the cheaper fit, or the direction of
         travel when both cost alike."""
-        articulated = [h for h in hypotheses if h[0].articulated]
+        articulated = [h for h in hypotheses if h[0].articulated and abs(h[2].hitch_rad) <= MAX_START_HITCH_RAD]
         rigid = [h for h in hypotheses if not h[0].articulated]
         best_art = min(articulated, key=lambda h: h[2].cost, default=None)
         best_rigid = min(rigid, key=lambda h: h[2].cost, default=None)
