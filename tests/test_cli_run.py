@@ -88,7 +88,7 @@ def test_run_on_committed_samples_reports_both_units_in_most_frames(
     states = [json.loads(line) for line in out.read_text().splitlines()]
     rec = Recording(recording)
     assert len(states) == len(rec)
-    assert all(s["type"] == "state" and set(s["latency_ms"]) >= {"total", "clustering"} for s in states)
+    assert all(s["type"] == "state" and set(s["latency_ms"]) == {"merge", "front_end", "candidates", "vehicles", "total"} for s in states)
     both, errors = hitch_errors(states, rec.ground_truth())
     errors = np.array(errors)
     assert both >= min_both_fraction * len(states) and len(errors) == both

@@ -266,7 +266,7 @@ def test_tumtraf_pcd_folder_runs(realdata, tmp_path):
 
 def test_chengdu_background_is_learned(realdata):
     from i2v_loc.params import load_params
-    from i2v_loc.pipeline import Pipeline
+    from i2v_loc.pipelines import build_pipeline
 
     rec = open_recording(realdata / "roadside80_chengdu" / "frames")
     assert len(rec) == 20 and rec.sensor_names == ["frames"]
@@ -276,7 +276,7 @@ def test_chengdu_background_is_learned(realdata):
     params["background"].update(window_frames=10, learn_every_frames=1, min_samples=8)
     from i2v_loc.params import validate_params
 
-    pipeline = Pipeline(validate_params(params), method="default")
+    pipeline = build_pipeline(validate_params(params), "default")
     foreground = [len(pipeline.process(frame).foreground) for frame in rec.frames()]
     before, after = np.mean(foreground[:7]), np.mean(foreground[10:])
     assert before > 1000, "the region must hold non-ground points before the map is ready"
@@ -379,13 +379,13 @@ def test_ouster_udp_spec_errors_are_source_errors(tmp_path):
 
 
 def test_live_udp_on_loopback_gives_the_native_states(pcap_dir, native_states):
-    from i2v_loc.params import DEFAULT_METHOD, load_params
-    from i2v_loc.pipeline import Pipeline
+    from i2v_loc.params import load_params
+    from i2v_loc.pipelines import build_pipeline
 
     sent, frames, counters = _live_frames(pcap_dir, {})
     assert sum(counters[f"{s}.packets"] for s in sent) == sum(sent.values())
     assert all(counters[f"{s}.lost_packets"] == 0 and counters[f"{s}.foreign_packets"] == 0 for s in sent)
-    pipeline = Pipeline(load_params(pcap_dir / "sensors.yaml"), method=DEFAULT_METHOD)
+    pipeline = build_pipeline(load_params(pcap_dir / "sensors.yaml"))
     assert_same_states([pipeline.process(f).to_json() for f in frames], native_states)
 
 
