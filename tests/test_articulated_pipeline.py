@@ -225,7 +225,8 @@ def test_articulated_method_end_to_end():
 
 
 @pytest.mark.parametrize(
-    "method, pipeline", [("paper", PaperPipeline), ("default", ArticulatedPipeline), ("articulated", ArticulatedPipeline)]
+    "method, pipeline",
+    [("paper", PaperPipeline), ("default", ArticulatedPipeline), ("articulated", ArticulatedPipeline)],
 )
 def test_each_method_builds_its_pipeline(method, pipeline):
     assert type(build_pipeline(Params(), method)) is pipeline

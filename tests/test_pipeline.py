@@ -10,9 +10,9 @@ from conftest import REPO
 from test_cli_run import hitch_errors
 from test_stage_classification import articulated_points, articulated_poses
 
+from i2v_loc.formats import open_recording
 from i2v_loc.frame import Frame, SensorScan
 from i2v_loc.geometry import wrap_deg
-from i2v_loc.formats import open_recording
 from i2v_loc.params import Extrinsics, Params, ParamsError, SensorConfig, load_params
 from i2v_loc.pipelines import build_pipeline
 from i2v_loc.pipelines.paper import PaperPipeline

@@ -39,7 +39,9 @@ def run(args) -> int:
         update={"sensors": [sensor], "tracking": params.tracking.model_copy(update={"min_hits": 1})}
     )
     # the paper's stages find a vehicle in one sweep; the articulated estimator needs a few frames
-    result = build_pipeline(params, "paper").process(Frame(0, {sensor.name: SensorScan(sensor.name, 0.0, points, None)}))
+    result = build_pipeline(params, "paper").process(
+        Frame(0, {sensor.name: SensorScan(sensor.name, 0.0, points, None)})
+    )
     line = result.to_json()
     # one sweep: faults name the sensor; the counts of what was dropped are the state line's
     report = {
