@@ -188,7 +188,6 @@ def test_every_pipeline_reports_the_same_stage_latencies(method):
     pipeline = build_pipeline(yard_params("volvo_fh"), method)
     line = pipeline.process(frame_of(0, 0.0, {"l1": ground()})).to_json()
     assert list(line["latency_ms"]) == [*STAGES, "total"] == ["merge", "front_end", "candidates", "vehicles", "total"]
-    assert line["latency_ms"]["total"] >= max(line["latency_ms"][s] for s in STAGES)
     assert pipeline.method == ("paper" if method == "paper" else "default")
 
 
