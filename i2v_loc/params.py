@@ -20,7 +20,7 @@ from typing import Any, Literal
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
-DEFAULT_METHOD = "default"  # the pipeline method run, eval, bench, sweep and serve use (i2v_loc.pipeline.METHODS)
+DEFAULT_METHOD = "default"  # the pipeline method run, eval, bench, sweep and serve use (i2v_loc.pipelines.METHODS)
 YARD_EXTENT_M = 10_000.0  # positions and region bounds: a yard is never 10 km from its origin
 MAST_HEIGHT_M = 200.0
 MAX_POINTS_PER_FRAME = 10_000_000  # point counts: far above what four 128-beam sensors deliver
@@ -292,7 +292,7 @@ class RegionParams(Section):
         0.1, ge=0.0, le=1.0, description="A plane supported by fewer sampled points than this fraction is not ground"
     )
     ground_refit_frames: int = Field(
-        1,
+        10,
         ge=1,
         le=1000,
         description="Fit the ground plane every this many frames and keep it in between (1 = every frame; the ground is static)",
@@ -309,27 +309,11 @@ class RegionParams(Section):
 
 class ClusteringParams(Section):
     tolerance_m: float = Field(0.7, gt=0.0, le=5.0, description="ε of Eq. 4")
-    algorithm: Literal["kdtree", "grid"] = Field(
-        "kdtree",
-        description="kdtree: Eq. 4 on voxel centroids; grid: 26-connected components of a voxel occupancy grid of grid_voxel_m",
-    )
     voxel_size_m: float = Field(
         0.2, ge=0.0, le=2.0, description="Neighbour search on voxel centroids of this size (0 = every point)"
     )
-    grid_voxel_m: float = Field(
-        0.5,
-        ge=0.1,
-        le=2.0,
-        description="Voxel of the grid algorithm (0.3 m splits a vehicle: 32-beam rings are 0.5 m apart at 20 m)",
-    )
     min_points: int = Field(10, ge=1, le=MAX_POINTS_PER_FRAME)
     max_points: int = Field(200000, ge=1, le=MAX_POINTS_PER_FRAME)
-    hitch_range_deg: float = Field(
-        0.0,
-        ge=0.0,
-        le=90.0,
-        description="The whole-vehicle gate also admits the vehicle's oriented box at any hitch angle up to this, from its kinematic figures (0 = Eq. 5 alone)",
-    )
 
     @model_validator(mode="after")
     def _check_points(self) -> ClusteringParams:
@@ -364,34 +348,10 @@ class ClassificationParams(Section):
         le=0.3,
         description="The xy projection is thinned to one point per cell of this size before the second clustering (neighbour pairs fall with its square)",
     )
-    truck_one_end: bool = Field(
-        False,
-        description="The truck is the rest of the cluster at one end of the trailer only (the end holding most of it)",
-    )
-    min_height_fraction: float = Field(
-        0.0,
-        ge=0.0,
-        le=1.0,
-        description="A trailer candidate whose top (95th percentile above the ground) is below the trailer's floor plus this share of its height is rejected (0 = no check; a car's body fits the Twizy trailer's volume gate but is 1 m lower)",
-    )
-    complete_width: bool = Field(
-        False,
-        description="A trailer found narrower than its width (its far wall a sub-cluster of its own or joined to the cab) takes in the points up to its width on the side holding more of them",
-    )
-    max_hitch_gap_m: float = Field(
-        0.0,
-        ge=0.0,
-        le=20.0,
-        description="A truck whose corrected centre is further than this from where the trailer's hitch point puts it (the truck's centre-to-hitch distance from it) is dropped (0 = no check)",
-    )
 
 
 class CentroidParams(Section):
     enabled: bool = True
-    truck_front_anchor: bool = Field(
-        False,
-        description="A truck with a known heading whose points reach further back than its length (chassis rails, fifth wheel) is centred half its length behind its front end",
-    )
 
 
 class TrackingParams(Section):
@@ -404,17 +364,6 @@ class TrackingParams(Section):
     measurement_noise_m: float = Field(
         0.15, ge=0.001, le=10.0, description="Standard deviation of a measured unit centre"
     )
-    confirm_paired: bool = Field(
-        False,
-        description="A unit found together with its partner unit (truck and trailer of one classified cluster) is confirmed at once",
-    )
-    reacquire_distance_m: float = Field(
-        0.0,
-        ge=0.0,
-        le=20.0,
-        description="A new unit this close to the last position of a lost track of its kind continues it (ID, yaw); 0 = never",
-    )
-    reacquire_max_age_s: float = Field(5.0, ge=0.0, le=600.0, description="Lost tracks can be continued for this long")
 
 
 class OrientationParams(Section):
@@ -424,35 +373,18 @@ class OrientationParams(Section):
         22.5,
         gt=0.0,
         le=720.0,
-        description="Bound on the smoothed yaw's change per second (22.5: the bound in force before it was applied after the smoothing, 45 x 0.5)",
+        description="Bound on the smoothed yaw's change per second",
     )
     smoothing: float = Field(0.5, ge=0.0, lt=1.0, description="Weight of the previous yaw in the smoothed yaw")
-    shape_weight: float = Field(
-        0.0, ge=0.0, le=1.0, description="Blend of the unit's shape axis into the PCA axis (0 = pure PCA, the paper)"
-    )
     history_gap_s: float = Field(
         1.0, gt=0.0, le=60.0, description="A unit unseen for longer restarts its centroid history (its yaw is kept)"
-    )
-    prefer_continuity: bool = Field(
-        False,
-        description="A unit seen in the previous frames keeps its direction; the trailer-to-truck direction decides only for new or re-acquired units",
-    )
-    flip_confirm_frames: int = Field(
-        0,
-        ge=0,
-        le=100,
-        description="A yaw measured more than 90 deg from the unit's yaw is ignored until measured this many frames in a row, then taken at once (0 = no check: the rate bound turns the yaw over)",
-    )
-    hitch_forward: bool = Field(
-        False,
-        description="The truck's forward direction runs from the trailer's hitch point to the truck (its heading at any hitch angle), not from the trailer's centre",
     )
 
 
 class BackgroundParams(Section):
     """Static background (yard, parked objects) learned online as a voxel occupancy map over the region."""
 
-    enabled: bool = Field(False, description="Remove the learned background (the default method turns it on)")
+    enabled: bool = Field(True, description="Remove the learned background (the paper's preset turns it off)")
     voxel_size_m: float = Field(0.2, ge=0.05, le=2.0, description="Edge of the occupancy voxels")
     dilation_voxels: int = Field(1, ge=0, le=3, description="Background grown by this many voxels (range noise)")
     window_frames: int = Field(30, ge=2, le=255, description="Learning samples in the sliding window (N)")

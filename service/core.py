@@ -24,9 +24,9 @@ STOP_WAIT_S = 0.5  # for the frame in progress; the thread is a daemon, so a stu
 
 
 def real_pipeline(params: Params, method: str = DEFAULT_METHOD):
-    from i2v_loc.pipeline import Pipeline  # heavy imports only when the service starts
+    from i2v_loc.pipelines import build_pipeline  # heavy imports only when the service starts
 
-    return Pipeline(params, method=method)
+    return build_pipeline(params, method)
 
 
 @dataclass

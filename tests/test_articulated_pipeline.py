@@ -1,5 +1,5 @@
 """The articulated estimator on constructed scenes: vehicle tracks (start, units, unknown trailer
-length, two vehicles, reversing) and the ``articulated`` method end to end."""
+length, two vehicles, reversing) and the ``default`` method end to end."""
 
 from __future__ import annotations
 
@@ -11,7 +11,9 @@ from hinged_points import vehicle_points, world_boxes
 
 from i2v_loc.frame import Frame, SensorScan
 from i2v_loc.params import Extrinsics, Params, SensorConfig, apply_patch
-from i2v_loc.pipeline import Pipeline
+from i2v_loc.pipelines import build_pipeline
+from i2v_loc.pipelines.articulated import ArticulatedPipeline
+from i2v_loc.pipelines.paper import PaperPipeline
 from i2v_loc.sim.kinematics import Articulation, step
 from i2v_loc.stages.vehicle_model import VehicleModel
 from i2v_loc.stages.vehicle_tracker import VehicleTracker
@@ -203,8 +205,8 @@ def test_articulated_method_end_to_end():
     params = apply_patch(
         Params(sensors=[sensor]), {"background": {"min_samples": 3, "window_frames": 10, "learn_every_frames": 1}}
     )
-    pipeline = Pipeline(params, method="articulated")
-    assert pipeline.method == "articulated" and type(pipeline).__name__ == "ArticulatedPipeline"
+    pipeline = build_pipeline(params)
+    assert pipeline.method == "default" and type(pipeline) is ArticulatedPipeline
     gx, gy = np.meshgrid(np.arange(-30, 30, 0.4), np.arange(-12, 20, 0.4))
     ground = np.column_stack([gx.ravel(), gy.ravel(), np.zeros(gx.size)])
     wall = np.column_stack(
@@ -240,9 +242,12 @@ def test_articulated_method_end_to_end():
         )
 
 
-@pytest.mark.parametrize("method", ["paper", "default"])
-def test_other_methods_are_unchanged_pipelines(method):
-    assert type(Pipeline(Params(), method=method)) is Pipeline
+@pytest.mark.parametrize(
+    "method, pipeline",
+    [("paper", PaperPipeline), ("default", ArticulatedPipeline), ("articulated", ArticulatedPipeline)],
+)
+def test_each_method_builds_its_pipeline(method, pipeline):
+    assert type(build_pipeline(Params(), method)) is pipeline
 
 
 def test_wall_car_and_pole_are_no_vehicles():
@@ -257,8 +262,8 @@ def test_wall_car_and_pole_are_no_vehicles():
 
 
 def test_parameter_patch_reaches_the_tracker_and_keeps_the_vehicles():
-    pipeline = Pipeline(Params(), method="articulated")
-    assert pipeline.params.background.enabled  # the method's preset: the front end of default
+    pipeline = build_pipeline(Params(), "default")
+    assert pipeline.params.background.enabled  # the model's default
     tracker = pipeline.tracker
     new = pipeline.update_params({"articulated": {"leave_frames": 4}})
     assert new.articulated.leave_frames == 4 and pipeline.tracker.params.leave_frames != 4  # at the next frame
@@ -271,7 +276,7 @@ def test_parameter_patch_reaches_the_tracker_and_keeps_the_vehicles():
 def test_without_the_background_map_vehicles_start_at_once():
     sensor = SensorConfig(name="s1", extrinsics=Extrinsics(x_m=0.0, y_m=-15.0, z_m=4.0))
     params = Params(sensors=[sensor])
-    pipeline = Pipeline(params, method="articulated")
+    pipeline = build_pipeline(params, "default")
     pipeline.update_params({"background": {"enabled": False}})
     gx, gy = np.meshgrid(np.arange(-30, 30, 0.4), np.arange(-12, 20, 0.4))
     ground = np.column_stack([gx.ravel(), gy.ravel(), np.zeros(gx.size)])

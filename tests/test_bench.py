@@ -23,7 +23,7 @@ def test_bench_command_reports_every_stage(capsys):
     assert main(["bench", str(SAMPLES / "twizy_single_turn"), "--warmup", "40", "--json"]) == 0
     report = json.loads(capsys.readouterr().out)
     assert report["frames"] == 10
-    assert {"concatenation", "region", "clustering", "tracking", "total"} <= set(report["latency_ms"])
+    assert {"merge", "front_end", "candidates", "vehicles", "total"} == set(report["latency_ms"])
     assert report["latency_ms"]["total"]["p95"] >= report["latency_ms"]["total"]["p50"] > 0
 
 

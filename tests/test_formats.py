@@ -19,6 +19,11 @@ from i2v_loc.recording import Recording, SensorScans, write_recording
 
 SAMPLE = Path(__file__).resolve().parents[1] / "samples" / "man_tgx_docking"
 FIRST, COUNT = 20, 30  # 3 s of the sample: the truck reversing towards the dock
+# The layouts are compared on the states of the paper's pipeline: it tracks the MAN from the first
+# frames. The default pipeline reports nothing before its background map is learned (5 s by default;
+# 0.5 s with WARM_UP) and is checked on its own below.
+METHOD = "paper"
+WARM_UP = {"window_frames": 10, "learn_every_frames": 1, "min_samples": 5}
 
 
 @pytest.fixture(scope="module")
@@ -38,8 +43,8 @@ def native(tmp_path_factory) -> Path:
     return write_recording(out, meta, scans, gt, src.sensors_file.read_text(), src.sensors_guess_file.read_text())
 
 
-def run_states(rec: Path, out: Path, *extra: str) -> list[dict]:
-    assert main(["run", str(rec), "--out", str(out), "--quiet", *extra]) == 0
+def run_states(rec: Path, out: Path, *extra: str, method: str = METHOD) -> list[dict]:
+    assert main(["run", str(rec), "--out", str(out), "--quiet", "--method", method, *extra]) == 0
     return [json.loads(line) for line in out.read_text().splitlines()]
 
 
@@ -49,6 +54,25 @@ def native_states(native, tmp_path_factory) -> list[dict]:
     both = sum(any(v["truck"] and v["trailer"] for v in s["vehicles"]) for s in states)
     assert both >= COUNT // 2, "the reference run must track the truck and trailer, or the comparison says nothing"
     return states
+
+
+@pytest.fixture(scope="module")
+def default_states(native, tmp_path_factory) -> list[dict]:
+    """The default (articulated) pipeline on the native recording, its background learned in 0.5 s."""
+    folder = tmp_path_factory.mktemp("default")
+    params = folder / "warm_up.yaml"
+    params.write_text(yaml.safe_dump({"background": WARM_UP}))
+    return run_states(native, folder / "states.jsonl", "--params", str(params), method="default")
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="the default (articulated) pipeline finds the MAN, reversing while the map is learned, 1.9 s "
+    "after the map is ready: both units in 7 of the 30 frames (sample frames 43-49, hitch within 1.3 deg)",
+)
+def test_default_tracks_the_truck_and_trailer_in_most_frames(default_states):
+    both = sum(any(v["truck"] and v["trailer"] for v in s["vehicles"]) for s in default_states)
+    assert both >= COUNT // 2
 
 
 def assert_same_states(got: list[dict], expected: list[dict]) -> None:
@@ -130,7 +154,7 @@ def test_openlabel_written_and_read_back_equal(native, native_states, tmp_path):
     from i2v_loc.evaluation.groundtruth import load_ground_truth
 
     out = tmp_path / "states.openlabel.json"
-    assert main(["run", str(native), "--out", str(out), "--quiet", "--format", "openlabel"]) == 0
+    assert main(["run", str(native), "--out", str(out), "--quiet", "--method", METHOD, "--format", "openlabel"]) == 0
     data = json.loads(out.read_text())["openlabel"]
     types = {o["type"] for o in data["objects"].values()}
     assert types == {"TRUCK", "TRAILER"}
@@ -266,7 +290,7 @@ def test_tumtraf_pcd_folder_runs(realdata, tmp_path):
 
 def test_chengdu_background_is_learned(realdata):
     from i2v_loc.params import load_params
-    from i2v_loc.pipeline import Pipeline
+    from i2v_loc.pipelines import build_pipeline
 
     rec = open_recording(realdata / "roadside80_chengdu" / "frames")
     assert len(rec) == 20 and rec.sensor_names == ["frames"]
@@ -276,7 +300,7 @@ def test_chengdu_background_is_learned(realdata):
     params["background"].update(window_frames=10, learn_every_frames=1, min_samples=8)
     from i2v_loc.params import validate_params
 
-    pipeline = Pipeline(validate_params(params), method="default")
+    pipeline = build_pipeline(validate_params(params), "default")
     foreground = [len(pipeline.process(frame).foreground) for frame in rec.frames()]
     before, after = np.mean(foreground[:7]), np.mean(foreground[10:])
     assert before > 1000, "the region must hold non-ground points before the map is ready"
@@ -379,13 +403,13 @@ def test_ouster_udp_spec_errors_are_source_errors(tmp_path):
 
 
 def test_live_udp_on_loopback_gives_the_native_states(pcap_dir, native_states):
-    from i2v_loc.params import DEFAULT_METHOD, load_params
-    from i2v_loc.pipeline import Pipeline
+    from i2v_loc.params import load_params
+    from i2v_loc.pipelines import build_pipeline
 
     sent, frames, counters = _live_frames(pcap_dir, {})
     assert sum(counters[f"{s}.packets"] for s in sent) == sum(sent.values())
     assert all(counters[f"{s}.lost_packets"] == 0 and counters[f"{s}.foreign_packets"] == 0 for s in sent)
-    pipeline = Pipeline(load_params(pcap_dir / "sensors.yaml"), method=DEFAULT_METHOD)
+    pipeline = build_pipeline(load_params(pcap_dir / "sensors.yaml"), METHOD)
     assert_same_states([pipeline.process(f).to_json() for f in frames], native_states)
 
 
@@ -420,6 +444,17 @@ def test_state_lines_follow_the_published_schema(native_states, capsys):
     bad = {**native_states[-1], "vehicles": [{**native_states[-1]["vehicles"][0], "hitch_deg": "12"}]}
     assert not validator.is_valid(bad)
     assert not validator.is_valid({**native_states[0], "faults": {"l1": "on_fire"}})
+
+
+def test_default_state_lines_follow_the_published_schema(default_states, capsys):
+    import jsonschema
+
+    assert main(["params", "schema", "--state"]) == 0
+    validator = jsonschema.Draft202012Validator(json.loads(capsys.readouterr().out))
+    found = [line for line in default_states if line["vehicles"]]
+    assert found and all(v["kind"] == "articulated" for line in found for v in line["vehicles"])
+    for line in default_states:
+        validator.validate(line)
 
 
 def test_ros1_bag_is_read(tmp_path):
@@ -471,7 +506,10 @@ def test_run_writes_its_states_to_a_bag(fmt, native, native_states, tmp_path):
     from rosbags.highlevel import AnyReader
 
     out = tmp_path / "states_bag"
-    assert main(["run", str(native), "--out", str(out), "--quiet", "--format", fmt, "--frames", "4"]) == 0
+    assert (
+        main(["run", str(native), "--out", str(out), "--quiet", "--method", METHOD, "--format", fmt, "--frames", "4"])
+        == 0
+    )
     with AnyReader([out]) as reader:
         assert [c.topic for c in reader.connections] == ["/i2v_loc/states"]
         lines = [json.loads(reader.deserialize(raw, c.msgtype).data) for c, _, raw in reader.messages()]
@@ -519,7 +557,7 @@ def test_bench_reports_latency_on_the_chengdu_frames(realdata, tmp_path, capsys)
     assert main(["bench", str(folder), "--params", str(params), "--method", "default", "--warmup", "10", "--json"]) == 0
     report = json.loads(capsys.readouterr().out)
     assert report["frames"] == 10
-    assert {"concatenation", "background", "region", "clustering", "total"} <= set(report["latency_ms"])
+    assert {"merge", "front_end", "candidates", "vehicles", "total"} == set(report["latency_ms"])
     assert report["latency_ms"]["total"]["p95"] >= report["latency_ms"]["total"]["p50"] > 0
 
 

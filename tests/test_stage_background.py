@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from i2v_loc.params import BackgroundParams, Params, ParamsError, RegionParams
-from i2v_loc.pipeline import Pipeline
+from i2v_loc.pipelines import build_pipeline
 from i2v_loc.stages.background import BackgroundMap, ProtectedBox
 
 REGION = RegionParams(x_min_m=-10, x_max_m=10, y_min_m=-10, y_max_m=10, z_min_m=-1, z_max_m=4)
@@ -113,9 +113,9 @@ def test_saved_map_loads_into_an_equal_grid_and_refuses_another(tmp_path):
 
 def test_too_large_grid_is_a_parameter_error():
     with pytest.raises(ParamsError, match="max_voxels"):
-        Pipeline(Params(background={"voxel_size_m": 0.05}), method="default")
-    Pipeline(Params(background={"voxel_size_m": 0.05}), method="paper")  # no map, no grid
-    pipeline = Pipeline(Params(), method="default")
+        build_pipeline(Params(background={"voxel_size_m": 0.05}), "default")
+    build_pipeline(Params(background={"voxel_size_m": 0.05}), "paper")  # no map, no grid
+    pipeline = build_pipeline(Params(), "default")
     with pytest.raises(ParamsError, match="max_voxels"):
         pipeline.update_params({"background": {"max_voxels": 1000}})
     with pytest.raises(ParamsError, match="min_samples"):

@@ -2,10 +2,8 @@
 
 import numpy as np
 import pytest
-from test_stage_classification import articulated_points
 
 from i2v_loc.params import ClusteringParams, Params
-from i2v_loc.stages.articulation import centre_to_hitch_m, max_box_volume_m3
 from i2v_loc.stages.clustering import Clustering
 from i2v_loc.stages.primitives import euclidean_labels, min_area_rect, oriented_box_volume
 
@@ -63,25 +61,3 @@ def test_clusters_below_min_points_are_counted_as_noise():
     pts = np.vstack([solid_box((0, 0, 1), (2, 2, 2)), [[20, 20, 1]], [[-20, 20, 1]]])
     result = Clustering(ClusteringParams(min_points=5), Params().vehicles).process(pts)
     assert len(result.clusters) == 1 and result.noise_clusters == 2
-
-
-def test_articulated_box_volume_from_the_kinematic_figures():
-    v = Params().vehicles["volvo_fh"]
-    truck_ahead_m, hitch_ahead_m = centre_to_hitch_m(v)
-    straight_length_m = truck_ahead_m + v.truck.length_m / 2 + hitch_ahead_m + v.trailer.length_m / 2  # 10.2 m
-    top_m = v.trailer.floor_m + v.trailer.height_m
-    assert max_box_volume_m3(v, 0.0) == pytest.approx(straight_length_m * v.trailer.width_m * top_m, rel=1e-6)
-    assert max_box_volume_m3(v, 45.0) > 1.8 * max_box_volume_m3(v, 0.0)  # the box grows with the hitch angle
-
-
-def test_volvo_at_a_large_hitch_angle_is_a_volvo_candidate_with_the_articulated_gate():
-    """At a 60 deg hitch angle the Volvo's oriented box (166 m3 here; 176-183 m3 measured in the
-    simulated roundabout at 42 deg) is above its V_e + dV (155 m3): Eq. 5 alone offers only the MAN."""
-    params = Params()
-    truck, trailer = articulated_points(params.vehicles["volvo_fh"], (0.0, 0.0), 10.0, 60.0)
-    points = np.vstack([truck, trailer])
-    plain = Clustering(params.clustering, params.vehicles).describe(points)
-    assert plain.volume_m3 > Clustering.gate(params.vehicles["volvo_fh"])[2]
-    assert plain.candidates == ["man_tgx"]
-    wide = Clustering(params.clustering.model_copy(update={"hitch_range_deg": 90.0}), params.vehicles).describe(points)
-    assert "volvo_fh" in wide.candidates

@@ -52,17 +52,3 @@ def test_truck_and_trailer_of_one_cluster_share_a_vehicle_id_and_kinds_do_not_mi
     kinds = {t.track_id: t.kind for t in result.tracks}
     assert kinds == {1: "truck", 2: "trailer"}
     assert tracker.tracks[0].position[0] == pytest.approx(-0.4, abs=0.35)
-
-
-def test_paired_units_are_confirmed_at_once_but_not_a_second_truck_of_a_tracked_vehicle():
-    tracker = Tracker(TrackingParams(min_hits=3, confirm_paired=True))
-    result = tracker.process([det("truck", 0, 0), det("trailer", -8, 0)], 0.0)
-    assert sorted(t.kind for t in result.tracks) == ["trailer", "truck"]  # confirmed at the first frame
-    # a bad split: the truck is reported 3 m away (a new track) while the real truck track misses
-    result = tracker.process([det("truck", 0.1, 3.0), det("trailer", -7.9, 0)], 0.1)
-    assert [t.kind for t in result.tracks] == ["trailer"]
-    second = next(t for t in tracker.tracks if t.kind == "truck" and t.detection is not None)
-    assert not second.confirmed and second.vehicle_id == result.tracks[0].vehicle_id
-    # the real truck is back: reported with its own track id
-    result = tracker.process([det("truck", 0.2, 0), det("trailer", -7.8, 0)], 0.2)
-    assert {t.track_id for t in result.tracks} == {1, 2}

@@ -63,7 +63,7 @@ def summarize(latencies: list[dict[str, float]]) -> dict[str, dict[str, float]]:
 def run(args) -> int:
     from i2v_loc.formats import open_recording
     from i2v_loc.params import load_params
-    from i2v_loc.pipeline import Pipeline
+    from i2v_loc.pipelines import build_pipeline
     from i2v_loc.recording import RecordingError
 
     rec_path = Path(args.recording)
@@ -80,7 +80,7 @@ def run(args) -> int:
     latencies = []
     with _limit_threads(args.threads):
         for _ in range(args.repeat):
-            pipeline = Pipeline(params, method=args.method)
+            pipeline = build_pipeline(params, args.method)
             for i, frame in enumerate(frames):
                 result = pipeline.process(frame).to_json()
                 if i >= args.warmup:

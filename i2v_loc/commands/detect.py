@@ -21,7 +21,7 @@ def run(args) -> int:
     from i2v_loc.clouds import CloudError, read_cloud
     from i2v_loc.frame import Frame, SensorScan
     from i2v_loc.params import Extrinsics, SensorConfig, load_params
-    from i2v_loc.pipeline import Pipeline
+    from i2v_loc.pipelines import build_pipeline
 
     params = load_params(*args.params)
     try:
@@ -38,7 +38,10 @@ def run(args) -> int:
     params = params.model_copy(
         update={"sensors": [sensor], "tracking": params.tracking.model_copy(update={"min_hits": 1})}
     )
-    result = Pipeline(params).process(Frame(0, {sensor.name: SensorScan(sensor.name, 0.0, points, None)}))
+    # the paper's stages find a vehicle in one sweep; the articulated estimator needs a few frames
+    result = build_pipeline(params, "paper").process(
+        Frame(0, {sensor.name: SensorScan(sensor.name, 0.0, points, None)})
+    )
     line = result.to_json()
     # one sweep: faults name the sensor; the counts of what was dropped are the state line's
     report = {

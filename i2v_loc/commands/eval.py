@@ -111,22 +111,13 @@ def parse_methods(text: str) -> list[str]:
 
 def check_methods(methods: list[str]) -> None:
     """A clear error for an unknown method, before any work is started."""
-    try:
-        from i2v_loc import pipeline as pipeline_module
-    except ModuleNotFoundError as err:
-        raise UserError(f"the pipeline is not available ({err})") from err
-    from i2v_loc.params import Params
+    from i2v_loc.pipelines import method_name
 
-    known = getattr(pipeline_module, "METHODS", None)
     for method in methods:
-        if known is not None:
-            if method not in known:
-                raise UserError(f"unknown method {method!r}; known methods: {', '.join(known)}")
-            continue
         try:
-            pipeline_module.Pipeline(Params(), method=method)
-        except Exception as err:  # the pipeline decides what it accepts
-            raise UserError(f"method {method!r} is not accepted by the pipeline: {err}") from err
+            method_name(method)
+        except ValueError as err:
+            raise UserError(str(err)) from err
 
 
 def sensor_subsets(names: list[str]) -> list[tuple[str, ...]]:

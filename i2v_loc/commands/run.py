@@ -70,14 +70,16 @@ def run(args) -> int:
 
     from i2v_loc.formats import open_recording
     from i2v_loc.params import load_params
-    from i2v_loc.pipeline import METHODS, Pipeline
+    from i2v_loc.pipelines import build_pipeline, method_name
     from i2v_loc.recording import RecordingError
 
     rec_path = Path(args.recording)
     if args.frames is not None and args.frames < 1:
         raise UserError(f"--frames must be at least 1, got {args.frames}")
-    if args.method not in METHODS:
-        raise UserError(f"unknown method {args.method!r}; known: {', '.join(METHODS)}")
+    try:
+        method_name(args.method)
+    except ValueError as err:
+        raise UserError(str(err)) from err
     try:
         recording = open_recording(rec_path, bin_layout=args.bin_layout)
     except RecordingError as err:
@@ -86,7 +88,7 @@ def run(args) -> int:
     sensors = parse_list(args.sensors, recording.sensor_names, "sensor")
     vehicles = parse_list(args.vehicles, list(params.vehicles), "vehicle")
     params = restricted_params(params, sensors, vehicles)
-    pipeline = Pipeline(params, method=args.method)
+    pipeline = build_pipeline(params, args.method)
     n_frames = len(recording) if args.frames is None else min(args.frames, len(recording))
     if n_frames == 0:
         raise UserError(f"{rec_path}: the recording has no frames")

@@ -92,12 +92,14 @@ def register(sub) -> None:
 
 def run(args) -> int:
     from i2v_loc.params import load_params
-    from i2v_loc.pipeline import METHODS
+    from i2v_loc.pipelines import method_name
     from i2v_loc.sources import SourceError, open_source
     from service.auth import AuthConfig, TokenError, load_token
 
-    if args.method not in METHODS:
-        raise UserError(f"unknown method {args.method!r}; known: {', '.join(METHODS)}")
+    try:
+        method_name(args.method)
+    except ValueError as err:
+        raise UserError(str(err)) from err
     if not 0 <= args.port <= 65535:
         raise UserError(f"--port must be within 0..65535, got {args.port}")
     if args.max_points < 0:

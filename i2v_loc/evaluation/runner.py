@@ -64,11 +64,11 @@ def recording_params(patch: dict, recording: str, sensors: Sequence[str] | None)
 def run_pipeline(task: Task) -> list[dict]:
     """State lines of the pipeline on every frame of the task's recording."""
     from i2v_loc.formats import open_recording
-    from i2v_loc.pipeline import Pipeline
+    from i2v_loc.pipelines import build_pipeline
 
     rec = open_recording(task.recording)
     params = recording_params(task.params, task.recording, task.sensors)
-    pipeline = Pipeline(params, method=task.method)
+    pipeline = build_pipeline(params, task.method)
     return [pipeline.process(frame).to_json() for frame in rec.frames(sensors=task.sensors)]
 
 

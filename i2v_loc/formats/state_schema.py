@@ -31,6 +31,11 @@ class VehicleState(_Strict):
     truck: UnitState | None
     trailer: UnitState | None
     tractor_to_trailer: list[list[float]] | None = Field(description="4x4 row-major: truck frame -> trailer frame")
+    # the default (articulated) method adds these four; the paper's method does not
+    kind: Literal["articulated", "rigid"] | None = Field(None, description="Two hinged units, or one rigid unit")
+    hitch_std_deg: float | None = Field(None, ge=0.0, description="Standard deviation of hitch_deg (filter)")
+    jackknife: bool | None = Field(None, description="|hitch| or its rate above the configured limits")
+    speed_m_s: float | None = Field(None, description="Signed speed of the tractor; negative when reversing")
 
 
 class ClusterState(_Strict):

@@ -1,7 +1,7 @@
-"""The ``articulated`` method: the front end (merge, background, region) then one hinged-model fit
-and one kinematic UKF per vehicle (docs/pipeline.md, Articulated estimator). Same interface and
-state line as ``i2v_loc.pipeline.Pipeline``; each vehicle adds ``kind``, ``hitch_std_deg``,
-``jackknife`` and ``speed_m_s``.
+"""The ``default`` method, the articulated estimator: the front end (merge, background, region) then
+one hinged-model fit and one kinematic UKF per vehicle (docs/pipeline.md, Articulated estimator).
+Same interface and state line as the paper's pipeline (``i2v_loc.results``); each vehicle adds
+``kind``, ``hitch_std_deg``, ``jackknife`` and ``speed_m_s``. Its parameters are the model's defaults.
 """
 
 from __future__ import annotations
@@ -14,8 +14,8 @@ import numpy as np
 from i2v_loc.frame import Frame
 from i2v_loc.geometry import box_poses
 from i2v_loc.params import Params
-from i2v_loc.pipeline import FrameResult, UnitResult, VehicleResult, _r, _Timer, method_params
 from i2v_loc.pipelines.handoff import ParameterHandoff
+from i2v_loc.results import FrameResult, StageTimer, UnitResult, VehicleResult, _r, count_frame, frame_result
 from i2v_loc.stages.background import BackgroundMap, ProtectedBox, region_box
 from i2v_loc.stages.concatenation import Concatenation, MotionHint
 from i2v_loc.stages.primitives import voxel_centroids
@@ -53,9 +53,9 @@ def _turn(rate_rad_s: float, arm_xy: np.ndarray) -> np.ndarray:
 
 
 class ArticulatedPipeline(ParameterHandoff):
+    method = "default"
+
     def __init__(self, params: Params):
-        params = method_params(params, "articulated")
-        self.method = "articulated"
         self._init_params(params)
         self.counters: Counter = Counter()
         self.tracker = VehicleTracker(params.articulated, params.vehicles)
@@ -92,12 +92,11 @@ class ArticulatedPipeline(ParameterHandoff):
     def process(self, frame: Frame) -> FrameResult:
         self._apply_pending()
         params = self._active
-        timer = _Timer()
+        timer = StageTimer()
         merged = self.concatenation.merge(frame.scans)
-        timer.lap("concatenation")
+        timer.lap("merge")
         if self.background is not None:
             split = self.background.process(merged.points, self._protected_boxes())
-            timer.lap("background")
             region = self.region.process(merged.points, split.in_region, split.foreground)
         else:
             region = self.region.process(merged.points)
@@ -105,7 +104,7 @@ class ArticulatedPipeline(ParameterHandoff):
         if params.concatenation.motion_interpolation and self._reports:
             self.concatenation.interpolate(points, merged.lag_s[region.index], self._motion_hints())
         points, _ = voxel_centroids(points, params.concatenation.voxel_size_m)
-        timer.lap("region")
+        timer.lap("front_end")
         ground = region.ground.height_at if region.ground else (lambda x, y: 0.0)
         if np.isfinite(merged.stamp_s):
             ready = self.background is None or self.background.ready
@@ -113,18 +112,8 @@ class ArticulatedPipeline(ParameterHandoff):
         timer.lap("vehicles")
         vehicles = [self._result(r, ground) for r in self._reports]
         self._count(merged, region)
-        return FrameResult(
-            frame.index,
-            merged.stamp_s,
-            timer.total(),
-            merged.faults,
-            {k: v for k, v in merged.dropped.items() if k != "missing"},
-            [],
-            vehicles,
-            region.ground_found,
-            len(merged.points),
-            points,
-        )
+        # the seeding of new vehicles runs inside the tracker's one call: "candidates" stays 0
+        return frame_result(frame.index, merged, timer.total(), [], vehicles, region.ground_found, points)
 
     def _result(self, report: VehicleReport, ground) -> ArticulatedVehicleResult:
         s, model = report.state, report.model
@@ -202,9 +191,5 @@ class ArticulatedPipeline(ParameterHandoff):
         ]
 
     def _count(self, merged, region) -> None:
-        self.counters["frames"] += 1
-        for reason, n in merged.dropped.items():
-            self.counters[reason] += n
-        if not region.ground_found:
-            self.counters["no_ground"] += 1
+        count_frame(self.counters, merged, region.ground_found)
         self.counters["fits_rejected"] = self.tracker.rejected

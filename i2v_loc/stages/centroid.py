@@ -10,9 +10,7 @@ narrow edge). When both ends look alike: the middle of the extent if it covers t
 else the end closest to the centroid (the paper's rule).
 The axes come from the yaw hint (the unit's last estimated yaw) when given, else from the
 L-shape fit of the unit's points (closeness criterion), its longer extent matched to the longer
-known dimension. With ``front_anchor`` (a truck whose heading the hint gives) points reaching
-further back than the unit's length (chassis rails, fifth wheel, a trailer corner left over by
-the split) put the centre half the length behind the front end: the cab is the front of the truck.
+known dimension.
 """
 
 from __future__ import annotations
@@ -47,9 +45,8 @@ class CentroidCorrector:
         dims: UnitDimensions,
         ground_z_m: float = 0.0,
         yaw_hint_rad: float | None = None,
-        front_anchor: bool = False,
     ) -> CorrectedUnit:
-        """``yaw_hint_rad``: the unit's axis (its heading when ``front_anchor``)."""
+        """``yaw_hint_rad``: the unit's axis."""
         pts = np.asarray(points, dtype=np.float64)
         centroid = pts.mean(axis=0)
         shape_yaw = self._shape_yaw(pts, dims)
@@ -62,8 +59,6 @@ class CentroidCorrector:
             return CorrectedUnit(centroid, centroid, yaw, shape_yaw, (float(extent[0]), float(extent[1])), len(pts))
         known = np.array([dims.length_m, dims.width_m])
         shift = self._from_face_plane(local, low, high, known)
-        if front_anchor and yaw_hint_rad is not None and extent[0] > known[0] + FACE_SLAB_M:
-            shift[0] = high[0] - known[0] / 2
         center_xy = centroid[:2] + shift @ axes
         center_z = ground_z_m + dims.floor_m + dims.height_m / 2
         return CorrectedUnit(

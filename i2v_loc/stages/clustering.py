@@ -3,13 +3,9 @@
 The neighbour search runs on voxel centroids (``voxel_size_m``, 0 = every point) and the labels
 are copied back to the points: same clusters up to about half a voxel at the tolerance, and
 tens of times fewer neighbour pairs on dense walls.
-The ``grid`` algorithm (default method) labels the 26-connected components of a voxel occupancy
-grid instead (``grid_voxel_m``, about 0.5 m: a finer grid cuts a wall into its beam rings).
 Volume of a cluster = its oriented box: minimum-area rectangle in xy times the height range.
 A cluster is a candidate for every configured vehicle whose gate V_e +- dV holds it (closest
-V_e first). With ``hitch_range_deg`` the upper bound also admits the vehicle's oriented box at any
-hitch angle up to it (from the kinematic figures, plus BOX_MARGIN): a Volvo FH at a 42 deg hitch
-angle measures 176 m3, above its V_e + dV = 155 m3, and was classified as the MAN. Clusters bigger than every gate are ``too_large``, smaller than every gate or with
+V_e first). Clusters bigger than every gate are ``too_large``, smaller than every gate or with
 fewer than ``min_points`` are ``too_small``; none is dropped silently.
 """
 
@@ -20,10 +16,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from i2v_loc.params import ClusteringParams, VehicleConfig
-from i2v_loc.stages.articulation import max_box_volume_m3
-from i2v_loc.stages.primitives import Rect, euclidean_labels, grid_labels, oriented_box_volume, split_by_label
-
-BOX_MARGIN = 1.15  # measured boxes exceed the kinematic one (mirrors, range noise, a person beside)
+from i2v_loc.stages.primitives import Rect, euclidean_labels, oriented_box_volume, split_by_label
 
 
 @dataclass
@@ -48,25 +41,18 @@ class ClusteringResult:
 class Clustering:
     def __init__(self, params: ClusteringParams, vehicles: dict[str, VehicleConfig]):
         self.params = params
-        self.gates = {name: self.gate(v, params.hitch_range_deg) for name, v in vehicles.items()}
+        self.gates = {name: self.gate(v) for name, v in vehicles.items()}
 
     @staticmethod
-    def gate(v: VehicleConfig, hitch_range_deg: float = 0.0) -> tuple[float, float, float]:
+    def gate(v: VehicleConfig) -> tuple[float, float, float]:
         """(V_min, V_e, V_max) of Eq. 5; V_min is at least the trailer gate's lower bound (a vehicle
-        cluster holds its trailer), so a wide whole-vehicle tolerance does not admit small clutter;
-        V_max at least the box at any hitch angle up to ``hitch_range_deg`` (0: Eq. 5 alone)."""
+        cluster holds its trailer), so a wide whole-vehicle tolerance does not admit small clutter."""
         trailer_min = v.trailer.volume_m3 - v.trailer_volume_tolerance_m3
         v_min = max(v.vehicle_volume_m3 - v.vehicle_volume_tolerance_m3, trailer_min)
-        v_max = v.vehicle_volume_m3 + v.vehicle_volume_tolerance_m3
-        if hitch_range_deg > 0:
-            v_max = max(v_max, BOX_MARGIN * max_box_volume_m3(v, hitch_range_deg))
-        return v_min, v.vehicle_volume_m3, v_max
+        return v_min, v.vehicle_volume_m3, v.vehicle_volume_m3 + v.vehicle_volume_tolerance_m3
 
     def process(self, points: np.ndarray) -> ClusteringResult:
-        if self.params.algorithm == "grid":
-            labels = grid_labels(points, self.params.grid_voxel_m)
-        else:
-            labels = euclidean_labels(points, self.params.tolerance_m, self.params.voxel_size_m)
+        labels = euclidean_labels(points, self.params.tolerance_m, self.params.voxel_size_m)
         groups = split_by_label(labels)
         clusters, noise = [], 0
         for idx in groups:

@@ -10,19 +10,8 @@ of travel. Below ``min_travel_m`` of travel over the history the last yaw is hel
 no yaw yet takes its shape axis (minimum-area rectangle); such a guess (no travel, no partner
 unit) is provisional: the first real measurement replaces it at once. The yaw is exponentially
 smoothed, then its per-frame change bounded by ``max_yaw_rate_deg_s`` (the bound is the real
-rate limit). With ``flip_confirm_frames`` a measurement more than 90 deg from the unit's yaw (a
-180 deg flip, impossible between frames at yard speeds) is ignored unless it persists that many
-frames, then taken at once (the old yaw was the wrong one). With ``hitch_forward`` the truck's
-forward direction starts at the trailer's hitch point (``hitch_offset_m`` ahead of the trailer's
-centre, at its truck end) instead of the trailer's centre: the truck's heading itself, at any
-hitch angle (from the trailer's centre it is up to 60 deg off at a 90 deg hitch angle, which
-picks the wrong 90 deg equivalent of a square cab). ``shape_weight`` blends the
-measured axis with the unit's shape axis (0 = the paper's pure PCA); for a nearly square unit the
-shape axis is only known modulo 90 deg and the PCA axis picks the equivalent (for a first estimate,
-the trailer-to-truck direction does). With ``prefer_continuity`` a unit seen in the previous
-frames keeps its direction (no 180 deg turn-over from one bad truck detection); the
-trailer-to-truck direction then only decides for new or re-acquired units. A unit unseen for
-more than ``history_gap_s`` restarts its centroid history but keeps its yaw.
+rate limit). A unit unseen for more than ``history_gap_s`` restarts its centroid history but
+keeps its yaw.
 """
 
 from __future__ import annotations
@@ -43,8 +32,6 @@ class UnitObservation:
     kind: str  # "truck" | "trailer"
     center: np.ndarray  # (3,) corrected centre
     shape_axis_deg: float  # long axis of the unit's points, modulo 180
-    shape_period_deg: float = 180.0  # 90 for a nearly square unit (its long axis is ambiguous)
-    hitch_offset_m: float = 0.0  # trailers: from the centre forward to the hitch (kingpin or drawbar eye)
 
 
 @dataclass
@@ -53,7 +40,6 @@ class _UnitState:
     yaw_deg: float | None = None
     last_seen_s: float | None = None
     provisional: bool = False  # the yaw is a shape-axis guess (no travel, no partner unit)
-    flips: int = 0  # consecutive measurements more than 90 deg from the yaw
 
 
 class OrientationEstimator:
@@ -63,8 +49,7 @@ class OrientationEstimator:
         self._last_stamp_s: float | None = None
 
     def process(self, units: list[UnitObservation], stamp_s: float, live_track_ids: set[int]) -> dict[int, float]:
-        """Yaw (deg) per observed track id; forgets tracks not in ``live_track_ids`` (which should hold
-        the lost tracks that may be re-acquired too: they keep their yaw)."""
+        """Yaw (deg) per observed track id; forgets tracks not in ``live_track_ids``."""
         frame_dt = self._step(stamp_s)
         self.states = {k: v for k, v in self.states.items() if k in live_track_ids}
         forwards = self._forward_directions(units)
@@ -72,7 +57,7 @@ class OrientationEstimator:
         for unit in units:
             state = self.states.setdefault(unit.track_id, _UnitState(deque(maxlen=self.params.history_frames)))
             recent = self._recent(state, stamp_s)
-            if not recent:  # a re-acquired unit: its old centroids say nothing of its motion now
+            if not recent:  # unseen too long: its old centroids say nothing of its motion now
                 state.history.clear()
             # the rate bound covers the time since the unit's own last sighting (not just one frame)
             dt = (
@@ -102,8 +87,8 @@ class OrientationEstimator:
         return float(np.clip(dt, 1e-3, 2.0))
 
     def _forward_directions(self, units: list[UnitObservation]) -> dict[tuple[int, str], np.ndarray]:
-        """Per (vehicle, kind) with both units seen: a vector pointing forward. Trailer: from its centre
-        to the truck's. Truck: the same, or with ``hitch_forward`` from the trailer's hitch point."""
+        """Per (vehicle, kind) with both units seen: a vector pointing forward, from the trailer's centre
+        to the truck's."""
         by_vehicle: dict[int, dict[str, UnitObservation]] = {}
         for u in units:
             by_vehicle.setdefault(u.vehicle_id, {})[u.kind] = u
@@ -113,11 +98,6 @@ class OrientationEstimator:
                 continue
             truck, trailer = (np.asarray(pair[k].center[:2], dtype=float) for k in ("truck", "trailer"))
             out[(vid, "trailer")] = out[(vid, "truck")] = truck - trailer
-            if self.params.hitch_forward and pair["trailer"].hitch_offset_m:
-                axis = np.radians(pair["trailer"].shape_axis_deg)
-                ahead = np.array([np.cos(axis), np.sin(axis)])
-                ahead *= 1.0 if ahead @ (truck - trailer) >= 0 else -1.0
-                out[(vid, "truck")] = truck - (trailer + pair["trailer"].hitch_offset_m * ahead)
         return out
 
     def _recent(self, state: _UnitState, stamp_s: float) -> bool:
@@ -138,28 +118,9 @@ class OrientationEstimator:
             axis_deg = self._pca_axis_deg(history)
         elif state.yaw_deg is not None and not (state.provisional and has_forward):
             return None, False  # standing still: hold
-        elif has_forward and self.params.shape_weight > 0:
-            axis_deg = float(np.degrees(np.arctan2(forward[1], forward[0])))  # first estimate at standstill
         else:
             axis_deg = unit.shape_axis_deg
-        # the shape axis of a square cab is known modulo 90 deg only: its equivalent nearest the forward
-        # direction (the truck is ahead of the trailer; with hitch_forward, its heading), else nearest
-        # its last yaw, is the one; the centre's path (PCA) is up to 45 deg off the heading of a cab
-        # turning while reversing
-        reference_deg = axis_deg
-        if unit.shape_period_deg < 180.0 and self.params.shape_weight > 0:
-            if has_forward:
-                reference_deg = float(np.degrees(np.arctan2(forward[1], forward[0])))
-            elif state.yaw_deg is not None and not state.provisional:
-                reference_deg = state.yaw_deg
-        axis_deg = self._blend_with_shape(axis_deg, unit.shape_axis_deg, unit.shape_period_deg, reference_deg)
-        if self.params.prefer_continuity and state.yaw_deg is not None and len(history) >= 2:
-            forward = None  # seen in the last frames: a yaw cannot turn over between two frames
         return self._resolve_direction(axis_deg, forward, state.yaw_deg, travel), moved or has_forward
-
-    @staticmethod
-    def _nearest_equivalent(reference_deg: float, axis_deg: float, period_deg: float) -> float:
-        return float(reference_deg + (axis_deg - reference_deg + period_deg / 2) % period_deg - period_deg / 2)
 
     @staticmethod
     def _pca_axis_deg(history_xy: np.ndarray) -> float:
@@ -168,21 +129,6 @@ class OrientationEstimator:
         eigvals, eigvecs = np.linalg.eigh(q)
         v = eigvecs[:, np.argmax(eigvals)]
         return float(np.degrees(np.arctan2(v[1], v[0])))
-
-    def _blend_with_shape(
-        self, axis_deg: float, shape_axis_deg: float, period_deg: float = 180.0, reference_deg: float | None = None
-    ) -> float:
-        """The measured axis moved towards the shape axis: its equivalent (modulo 180 deg, or modulo
-        90 deg for a nearly square unit such as a tractor cab) nearest ``reference_deg`` (default: the
-        measured axis)."""
-        w = self.params.shape_weight
-        if w <= 0:
-            return axis_deg
-        shape = self._nearest_equivalent(
-            axis_deg if reference_deg is None else reference_deg, shape_axis_deg, period_deg
-        )
-        shape = self._nearest_equivalent(axis_deg, shape, 180.0)
-        return float(axis_deg + w * (shape - axis_deg))
 
     @staticmethod
     def _resolve_direction(
@@ -201,16 +147,8 @@ class OrientationEstimator:
         if measured_deg is None:
             return state.yaw_deg
         if state.yaw_deg is None or (state.provisional and reliable):
-            state.provisional, state.flips = not reliable, 0
+            state.provisional = not reliable
             return measured_deg
-        confirm = self.params.flip_confirm_frames
-        if confirm and abs(wrap_deg(measured_deg - state.yaw_deg)) > 90.0:
-            state.flips += 1
-            if state.flips < confirm:
-                return state.yaw_deg  # an isolated flip: a wrong truck / trailer split, not a turn
-            state.flips = 0
-            return measured_deg  # a persistent one: the old direction was the wrong one
-        state.flips = 0
         return self._bounded_smoothed(state.yaw_deg, measured_deg, dt)
 
     def _bounded_smoothed(self, previous_deg: float, measured_deg: float, dt: float) -> float:

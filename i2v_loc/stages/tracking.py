@@ -44,12 +44,6 @@ class Track:
     misses: int = 0
     confirmed: bool = False
     detection: Detection | None = None
-    last_detection: Detection | None = None  # kept while the track is unseen or lost
-    origin_xy: np.ndarray | None = None  # first position: how far the unit has travelled
-    travel_m: float = 0.0  # largest distance from origin_xy so far
-    age_frames: int = 0  # frames since the track was born
-    lost_at_s: float | None = None  # stamp when it left the live tracks (re-acquisition)
-    reacquired: bool = False  # continued a lost track in this frame
 
     @property
     def position(self) -> np.ndarray:
@@ -64,7 +58,6 @@ class Track:
 class TrackingResult:
     tracks: list[Track]  # confirmed tracks updated in this frame
     all_tracks: list[Track] = field(default_factory=list)  # every live track (for motion hints)
-    lost_tracks: list[Track] = field(default_factory=list)  # dead tracks that may still be re-acquired
 
 
 class Tracker:
@@ -74,15 +67,12 @@ class Tracker:
         self._track_ids = itertools.count(1)
         self._vehicle_ids = itertools.count(1)
         self._last_stamp_s: float | None = None
-        self.lost: list[Track] = []
 
     def process(self, detections: list[Detection], stamp_s: float) -> TrackingResult:
         dt = self._step(stamp_s)
         for track in self.tracks:
             self._set_dt(track.kf, dt)
             track.kf.predict()
-            track.reacquired = False
-            track.age_frames += 1
         matches, unmatched = self._associate(detections)
         for t_idx, d_idx in matches:
             self._update(self.tracks[t_idx], detections[d_idx])
@@ -92,12 +82,11 @@ class Tracker:
                 track.misses += 1
                 track.detection = None
         for d_idx in unmatched:
-            self.tracks.append(self._reacquire(detections[d_idx]) or self._new_track(detections[d_idx]))
-        self._retire(stamp_s)
+            self.tracks.append(self._new_track(detections[d_idx]))
+        self.tracks = [t for t in self.tracks if t.misses <= self.params.max_age_frames]
         self._share_vehicle_ids()
-        self._confirm_pairs()
         reported = [t for t in self.tracks if t.confirmed and t.detection is not None]
-        return TrackingResult(reported, list(self.tracks), list(self.lost))
+        return TrackingResult(reported, list(self.tracks))
 
     # ----------------------------------------------------------------- internals
 
@@ -125,60 +114,9 @@ class Tracker:
         track.z_m = float(detection.center[2])
         track.hits += 1
         track.misses = 0
-        track.detection = track.last_detection = detection
+        track.detection = detection
         track.vehicle = detection.vehicle
         track.confirmed = track.confirmed or track.hits >= self.params.min_hits
-        # filtered position: the raw centre of a static object jumps when another sub-cluster wins
-        track.travel_m = max(track.travel_m, float(np.hypot(*(track.position[:2] - track.origin_xy))))
-
-    def _retire(self, stamp_s: float) -> None:
-        """Tracks unseen too long leave the live list; confirmed ones wait in ``lost`` for re-acquisition."""
-        now = stamp_s if np.isfinite(stamp_s) else (self._last_stamp_s or 0.0)
-        dead = [t for t in self.tracks if t.misses > self.params.max_age_frames]
-        self.tracks = [t for t in self.tracks if t.misses <= self.params.max_age_frames]
-        if self.params.reacquire_distance_m > 0:
-            for t in dead:
-                if t.confirmed:
-                    t.lost_at_s = now
-                    self.lost.append(t)
-        self.lost = [t for t in self.lost if now - t.lost_at_s <= self.params.reacquire_max_age_s]
-
-    def _reacquire(self, detection: Detection) -> Track | None:
-        """The nearest lost track of the detection's kind within the gate, continued from the detection
-        (ID, vehicle ID, confirmation and travel kept; the filter restarts at the detection)."""
-        gate = self.params.reacquire_distance_m
-        near = [
-            (float(np.hypot(*(t.last_detection.center[:2] - detection.center[:2]))), i)
-            for i, t in enumerate(self.lost)
-            if t.kind == detection.kind
-        ]
-        near = [(d, i) for d, i in near if d <= gate]
-        if not near:
-            return None
-        track = self.lost.pop(min(near)[1])
-        track.kf, track.z_m = self._new_filter(detection.center), float(detection.center[2])
-        track.misses, track.hits, track.lost_at_s, track.reacquired = 0, track.hits + 1, None, True
-        track.detection = track.last_detection = detection
-        track.vehicle = detection.vehicle
-        return track
-
-    def _confirm_pairs(self) -> None:
-        """With ``confirm_paired``: truck and trailer classified together in one cluster are confirmed
-        at once (the classification is the evidence that min_hits stands in for), unless the vehicle
-        already has a confirmed live unit of that kind (missed in this frame): a vehicle has one
-        truck, so a second one is a bad split until it earns ``min_hits``."""
-        if not self.params.confirm_paired:
-            return
-        kinds: dict[int, set[str]] = {}
-        for t in self.tracks:
-            if t.detection is not None:
-                kinds.setdefault(t.detection.group, set()).add(t.kind)
-        held = {(t.vehicle_id, t.kind) for t in self.tracks if t.confirmed}
-        for t in self.tracks:
-            if t.confirmed or t.detection is None or not kinds[t.detection.group] >= {"truck", "trailer"}:
-                continue
-            if (t.vehicle_id, t.kind) not in held:
-                t.confirmed = True
 
     def _new_filter(self, center: np.ndarray) -> KalmanFilter:
         kf = KalmanFilter(dim_x=4, dim_z=2)
@@ -200,8 +138,6 @@ class Tracker:
             float(detection.center[2]),
             confirmed=self.params.min_hits <= 1,
             detection=detection,
-            last_detection=detection,
-            origin_xy=np.asarray(detection.center[:2], dtype=float).copy(),
         )
 
     def _set_dt(self, kf: KalmanFilter, dt: float) -> None:
