@@ -538,11 +538,17 @@ class ArticulatedParams(Section):
         le=30.0,
         description="A rigid vehicle (bus, rigid truck, van) is at least this long (cars are not reported)",
     )
-    rigid_start_travel_m: float = Field(
+    start_max_hitch_deg: float = Field(
+        75.0,
+        gt=0.0,
+        le=180.0,
+        description="A vehicle folded further (a parked trailer beside a container looks jack-knifed) starts only once it moved",
+    )
+    start_travel_m: float = Field(
         1.5,
         ge=0.0,
         le=50.0,
-        description="A rigid vehicle starts once its seed moved this far (a container or a parked trailer never does)",
+        description="A rigid or folded vehicle starts once its seed moved this far (a container or a parked trailer never does)",
     )
     start_min_explained: float = Field(
         0.8, gt=0.0, le=1.0, description="A seed is a vehicle when the best model explains this share of its points"

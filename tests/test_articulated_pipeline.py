@@ -170,7 +170,7 @@ def test_bus_is_one_rigid_unit():
     bus = VehicleModel.rigid("rigid", 11.6, 2.55, 3.1, 0.3)
     tracker = VehicleTracker(PARAMS.articulated, PARAMS.vehicles)
     reports = []
-    for k in range(8):  # 4 m/s: 1.2 m travelled in the 4th frame, 1.6 m (>= rigid_start_travel_m) in the 5th
+    for k in range(8):  # 4 m/s: 1.2 m travelled in the 4th frame, 1.6 m (>= start_travel_m) in the 5th
         points = vehicle_points(bus, -5.0 + 0.4 * k, 4.0, 0.1, sensors=SENSORS, seed=k)
         reports = tracker.process(points, flat, 0.1 * k)
         assert len(reports) == (k >= 4)
@@ -296,14 +296,17 @@ def test_without_the_background_map_vehicles_start_at_once():
 
 
 @pytest.mark.parametrize("hitch_deg", [80.0, -85.0])
-def test_vehicle_found_at_a_jackknife_angle(hitch_deg):
+def test_a_standing_vehicle_folded_beyond_the_start_limit_waits_until_it_moves(hitch_deg):
+    """Folded beyond start_max_hitch_deg (75) and standing, it looks like a parked trailer beside a
+    container: no vehicle. With the limit raised to 90 it starts, at the true pose, jack-knifed."""
+    state = (0.0, 4.0, 0.3, 0.3 + np.radians(hitch_deg))
     tracker = VehicleTracker(PARAMS.articulated, PARAMS.vehicles)
-    last = None
-    for t, points, (truth,) in drive([(volvo(), (0.0, 4.0, 0.3, 0.3 + np.radians(hitch_deg)))], 2.0, 0.5, 0.0):
+    for t, points, _ in drive([(volvo(), state)], 3.0, 0.0, 0.0):
+        assert tracker.process(points, flat, t) == []
+    params = PARAMS.articulated.model_copy(update={"start_max_hitch_deg": 90.0})
+    tracker = VehicleTracker(params, PARAMS.vehicles)
+    for t, points, (truth,) in drive([(volvo(), state)], 1.0, 0.0, 0.0):
         reports = tracker.process(points, flat, t)
-        if reports:
-            last = (reports[0], truth)
-    report, truth = last
-    pos, yaw, hitch = errors(report, truth)
+    pos, yaw, hitch = errors(reports[0], truth)
     assert pos < 0.05 and abs(yaw) < 0.5 and abs(hitch) < 0.5
-    assert report.state.jackknife and report.model.name == "volvo_fh"
+    assert reports[0].state.jackknife and reports[0].model.name == "volvo_fh"

@@ -35,7 +35,9 @@ RIGID_COST_RATIO = 0.7  # an articulated model must cost this much less than one
 MAX_TRAILER_LENGTH_M = 16.5
 REAR_FACE_MIN_POINTS = 3
 SIDE_MIN_POINTS = 5
-MAX_START_HITCH_RAD = np.radians(100.0)  # a semitrailer jack-knifes near 90 deg: a fold beyond is no vehicle
+GAP_TEST_MAX_HITCH_RAD = np.radians(10.0)  # beyond, a trailer's front corner swings into the gap
+GAP_FILL_RATIO = 0.5
+GAP_MIN_POINTS = 5
 LENGTH_CONVERGED_OBSERVATIONS = 5
 SETTLED_SLACK_M = 0.5
 FACE_SEEN_SPAN = 0.6  # an end face is seen when its points span this share of the unit's width
@@ -64,7 +66,10 @@ class Seed:
     first_xy: np.ndarray
     frames: int = 1
     seen: bool = True
-    rigid: bool = False  # best explained by one rigid box: fitted again once it has moved (and the map is ready)
+    # best explained by one rigid box, or by a tractor and trailer folded beyond start_max_hitch_deg
+    # (a parked trailer beside a container): fitted again once it has moved (rigid: and the map is ready)
+    rigid: bool = False
+    folded: bool = False
 
     @property
     def travel_m(self) -> float:
@@ -286,7 +291,7 @@ class VehicleTracker:
             else:
                 seed = Seed(center, center)
                 self.seeds.append(seed)
-            if seed.frames >= self.params.start_frames and (not seed.rigid or self._may_start_rigid(seed, rigid_allowed)):
+            if seed.frames >= self.params.start_frames and self._may_start(seed, rigid_allowed):
                 ready.append((seed, cluster))
         self.seeds = [s for s in self.seeds if s.seen]
         reports = []
@@ -294,7 +299,7 @@ class VehicleTracker:
             center = seed.center_xy
             track = self._new_track(cluster, seed, float(ground(center[0], center[1])), stamp_s, rigid_allowed)
             if track is None:
-                if not seed.rigid:  # no vehicle (a wall, a car, a person): tried again after a while
+                if not (seed.rigid or seed.folded):  # no vehicle (a wall, a car, a person): tried again after a while
                     seed.frames = -SEED_RETRY_FRAMES
                 continue
             self.seeds.remove(seed)
@@ -302,8 +307,10 @@ class VehicleTracker:
             reports.append(track.report(True))
         return reports
 
-    def _may_start_rigid(self, seed: Seed, rigid_allowed: bool) -> bool:
-        return rigid_allowed and seed.travel_m >= self.params.rigid_start_travel_m
+    def _may_start(self, seed: Seed, rigid_allowed: bool) -> bool:
+        """A rigid seed once the background is learned and it moved; a folded one once it moved."""
+        moved = seed.travel_m >= self.params.start_travel_m
+        return (not seed.rigid or (rigid_allowed and moved)) and (not seed.folded or moved)
 
     def _seed_clusters(self, points: np.ndarray, ground) -> list[np.ndarray]:
         """Connected components tall enough to be a vehicle, those closer than ``start_join_m`` joined
@@ -334,11 +341,16 @@ class VehicleTracker:
         chosen = self._choose(hypotheses, seed)
         if chosen is None:
             return None
-        seed.rigid = not chosen[0].articulated
-        if seed.rigid and not self._may_start_rigid(seed, rigid_allowed):
-            return None
         model, m = chosen
-        if float(np.mean(m.unit >= 0)) < self.params.start_min_explained or not _supported(m, model, ground_z_m):
+        seed.rigid = not model.articulated
+        seed.folded = model.articulated and abs(m.hitch_rad) > np.radians(self.params.start_max_hitch_deg)
+        if not self._may_start(seed, rigid_allowed):
+            return None
+        if (
+            float(np.mean(m.unit >= 0)) < self.params.start_min_explained
+            or not _supported(m, model, ground_z_m)
+            or _gap_filled(cluster, m, model, ground_z_m)
+        ):
             return None
         # the seed's points are not de-skewed (no motion known yet): the first pose is a rough one
         start_cov = m.covariance + np.diag(START_SIGMAS[: len(m.vector)] ** 2)
@@ -404,7 +416,7 @@ class VehicleTracker:
     def _choose(self, hypotheses, seed: Seed) -> tuple[VehicleModel, Measurement] | None:
         """The best-explaining model; between its two directions the cheaper fit, or the direction of
         travel when both cost alike."""
-        articulated = [h for h in hypotheses if h[0].articulated and abs(h[2].hitch_rad) <= MAX_START_HITCH_RAD]
+        articulated = [h for h in hypotheses if h[0].articulated]
         rigid = [h for h in hypotheses if not h[0].articulated]
         best_art = min(articulated, key=lambda h: h[2].cost, default=None)
         best_rigid = min(rigid, key=lambda h: h[2].cost, default=None)
@@ -443,6 +455,29 @@ def _supported(m: Measurement, model: VehicleModel, ground_z_m: float) -> bool:
         ):
             return False
     return True
+
+
+def _gap_filled(cluster: np.ndarray, m: Measurement, model: VehicleModel, ground_z_m: float) -> bool:
+    """A straight articulated vehicle seen from the side shows a gap between the cab's rear and the
+    trailer's front above the chassis; a wall or a parked trailer's side runs on through it. The
+    middle half of the gap, between the trailer's floor and the lower roof, holds more than
+    ``GAP_FILL_RATIO`` times the points of as long a slice of the cab just ahead of it (of at least
+    ``GAP_MIN_POINTS``)."""
+    if model.trailer is None or abs(m.hitch_rad) > GAP_TEST_MAX_HITCH_RAD:
+        return False
+    trailer_front = model.trailer.front_m - model.kingpin_behind_axle_m  # in the tractor's frame at hitch 0
+    cab_rear = model.tractor.rear_m
+    length = (cab_rear - trailer_front) / 2
+    if length <= 0.0:
+        return False
+    (q,) = unit_frames(cluster, m.vector, model.with_boxes(model.tractor, None))
+    z_rel = cluster[:, 2] - ground_z_m
+    band = (np.abs(q[:, 1]) <= model.tractor.width_m / 2) & (z_rel >= model.trailer.floor_m + END_BAND_M)
+    band &= z_rel <= min(model.tractor.top_m, model.trailer.top_m) - END_BAND_M
+    start = trailer_front + length / 2
+    in_gap = int(np.sum(band & (q[:, 0] >= start) & (q[:, 0] <= start + length)))
+    in_cab = int(np.sum(band & (q[:, 0] >= cab_rear) & (q[:, 0] <= cab_rear + length)))
+    return in_cab >= GAP_MIN_POINTS and in_gap > GAP_FILL_RATIO * in_cab
 
 
 def _height(points: np.ndarray, ground) -> float:
