@@ -65,26 +65,20 @@ def hitch_errors(states: list[dict], ground_truth: list[dict]) -> tuple[int, lis
 SAMPLES = Path(__file__).resolve().parents[1] / "samples"
 
 
-# measured with the old default method (the paper's stages plus switches; 50-60 frames each) on the samples
-# of the calibrated sensor model (i2v-loc realism): both units 0.98 / 0.86 / 0.92 of the frames, |hitch error|
-# median 2.55 / 1.80 / 0.81 deg, p90 4.41 / 3.54 / 2.24, RMSE 2.82 / 2.28 / 1.53, max 4.8, no flips (the old,
-# denser simulator gave 0.35-0.99 deg medians); the bounds keep a margin and fail on a flip, a lost unit or a
-# broken stage. The articulated default reports nothing before its background map is learned
-# (background.min_samples 25 x learn_every_frames 2 = 50 frames, 5 s) and the samples are 5-6 s long.
-WARM_UP = pytest.mark.xfail(
-    strict=True,
-    reason="the default (articulated) pipeline reports no vehicle in the first 5 s (background warm-up); "
-    "both units in 0/50 (Volvo), 0/50 (Twizy), 9/60 frames (MAN, hitch RMSE 0.27 deg over those 9)",
-)
+# measured with the articulated default on the samples of the calibrated sensor model (i2v-loc realism;
+# 50-60 frames, vehicles from the 3rd frame): both units 0.96 / 0.96 / 0.97 of the frames, |hitch error| median
+# 0.09 / 0.30 / 0.18 deg, p90 0.24 / 0.85 / 0.36, RMSE 0.14 / 0.88 / 0.22, max 2.9 (the former default, the
+# paper's stages plus switches: medians 2.55 / 1.80 / 0.81, RMSE 2.82 / 2.28 / 1.53); the bounds keep a margin
+# and fail on a flip, a lost unit or a broken stage.
 
 
 @pytest.mark.parametrize(
     "sample, min_both_fraction, max_median_deg, max_p90_deg, max_rmse_deg",
     [
-        pytest.param("volvo_fh_u_turn", 0.9, 3.5, 5.0, 4.0, marks=WARM_UP),
-        pytest.param("twizy_single_turn", 0.7, 3.0, 5.0, 3.5, marks=WARM_UP),
+        pytest.param("volvo_fh_u_turn", 0.9, 0.5, 1.0, 0.6),
+        pytest.param("twizy_single_turn", 0.9, 1.0, 2.0, 1.5),
         # reversing at up to 45 deg hitch: the cab touches the trailer
-        pytest.param("man_tgx_docking", 0.85, 1.5, 4.0, 2.5, marks=WARM_UP),
+        pytest.param("man_tgx_docking", 0.9, 0.5, 1.0, 0.6),
     ],
 )
 def test_run_on_committed_samples_reports_both_units_in_most_frames(
