@@ -26,9 +26,11 @@ from i2v_loc.stages.vehicle_model import VehicleModel
 
 # Face normals in the unit's frame: front, rear, left, right.
 FACE_NORMALS = np.array([[1.0, 0.0], [-1.0, 0.0], [0.0, 1.0], [0.0, -1.0]])
-WEAK_PRIOR_SIGMAS = np.array([2.0, 2.0, np.radians(20.0), np.radians(30.0), 4.0])  # m, m, rad, rad, m
-REAR, LEFT, RIGHT = 1, 2, 3  # face numbers of a unit (the face table's rows modulo 4)
+WEAK_PRIOR_SIGMAS = np.array([2.0, 2.0, np.radians(20.0), np.radians(30.0)])  # m, m, rad, rad
+WEAK_LENGTH_SIGMA_M, WEAK_KINGPIN_SIGMA_M = 4.0, 0.5
+FRONT, REAR, LEFT, RIGHT = 0, 1, 2, 3  # face numbers of a unit (the face table's rows modulo 4)
 TRAILER_LENGTH_RANGE_M = (2.0, 16.5)
+KINGPIN_RANGE_M = (-1.5, 1.5)
 
 
 @dataclass(frozen=True)
@@ -45,6 +47,7 @@ class Prior:
     ground_z_m: float = 0.0
     trailer_slack_m: float = 0.0
     free_trailer_length: bool = False  # fit the trailer's length too (its rear face moves)
+    free_kingpin: bool = False  # fit the kingpin's offset and the trailer's front from it (seen at a hitch angle)
 
     @property
     def vector(self) -> np.ndarray:
@@ -54,6 +57,18 @@ class Prior:
     @property
     def fits_length(self) -> bool:
         return self.free_trailer_length and self.model.articulated
+
+    @property
+    def fits_kingpin(self) -> bool:
+        return self.free_kingpin and self.model.articulated
+
+    @property
+    def extra(self) -> list[float]:
+        """Start values of the fitted model dimensions, after the pose: trailer length; kingpin offset
+        and trailer front (straight, they trade with each other: both or neither)."""
+        model = self.model
+        length = [model.trailer.length_m] if self.fits_length else []
+        return length + ([model.kingpin_behind_axle_m, model.trailer.front_m] if self.fits_kingpin else [])
 
 
 @dataclass(frozen=True)
@@ -67,8 +82,10 @@ class Measurement:
     unit: np.ndarray  # (n,) int8 per fitted point: 0 tractor, 1 trailer, -1 not explained
     cost: float  # mean Cauchy loss per fitted point (m^2)
     trailer_length_m: float | None = None  # fitted (Prior.free_trailer_length), else None
+    kingpin_m: float | None = None  # fitted (Prior.free_kingpin), else None
+    trailer_front_m: float | None = None  # fitted (Prior.free_kingpin), else None
     rear_points: int = 0  # explained points on the trailer's rear face
-    side: np.ndarray | None = None  # (n,) int8: +1 on the unit's left side's plane, -1 its right's, 0 else
+    face: np.ndarray | None = None  # (n,) int8: the face (FRONT, REAR, LEFT, RIGHT) whose plane it is on, else -1
 
     @property
     def vector(self) -> np.ndarray:
@@ -204,11 +221,10 @@ def fit(
     if len(sample) < params.fit_min_points:
         return None
     xy, z_rel = sample[:, :2], sample[:, 2] - prior.ground_z_m
-    v0 = prior.vector
-    if prior.fits_length:
-        v0 = np.r_[v0, prior.model.trailer.length_m]
+    v0 = np.r_[prior.vector, prior.extra]
     scale = params.fit_loss_scale_m
-    prior_info = np.diag((scale / WEAK_PRIOR_SIGMAS[: len(v0)]) ** 2)
+    sigmas = _weak_prior_sigmas(prior)
+    prior_info = np.diag((scale / sigmas) ** 2)
     v = v0.copy()
     for k in range(iterations or params.fit_iterations):
         # graduated: a wide loss first so that faces a prediction misses by decimetres still pull
@@ -220,36 +236,55 @@ def fit(
         v = v + step
         if prior.fits_length:
             v[4] = np.clip(v[4], *TRAILER_LENGTH_RANGE_M)
+        if prior.fits_kingpin:
+            v[-2] = np.clip(v[-2], *KINGPIN_RANGE_M)
         if c == scale and np.abs(step[:2]).max() < 1e-3 and np.abs(step[2:4]).max() < 1e-4:
             break  # residuals and faces of the last step stand for the solution (it moved < 1 mm)
     cost = float(np.mean(np.log1p((at.residual / scale) ** 2))) * scale**2 / 2
-    covariance = _covariance(at, v0, params)[:4, :4]
+    covariance = _covariance(at, sigmas, params)
     # explained: on a face, not only on its plane (a wall running on past a box's corner is no side of it)
     explained = at.distance <= params.fit_inlier_m
     unit = np.where(explained, at.unit, -1).astype(np.int8)
     hitch = float(wrap_rad(v[3])) if prior.model.articulated else None
     length = float(v[4]) if prior.fits_length else None
+    kingpin = (float(v[-2]), float(v[-1])) if prior.fits_kingpin else (None, None)
     rear = int(np.sum(at.on_rear & explained))
-    on_plane = np.abs(at.residual) <= params.fit_inlier_m
-    side = (on_plane & (at.face == LEFT)).astype(np.int8) - (on_plane & (at.face == RIGHT))
+    face = np.where(np.abs(at.residual) <= params.fit_inlier_m, at.face, -1).astype(np.int8)
     return Measurement(
-        float(v[0]), float(v[1]), float(wrap_rad(v[2])), hitch, covariance, sample, unit, cost, length, rear, side
+        float(v[0]), float(v[1]), float(wrap_rad(v[2])), hitch, covariance, sample, unit, cost, length, *kingpin, rear, face
     )
 
 
+def _weak_prior_sigmas(prior: Prior) -> np.ndarray:
+    pose = WEAK_PRIOR_SIGMAS[: len(prior.vector)]
+    return np.r_[pose, [WEAK_LENGTH_SIGMA_M] * int(prior.fits_length), [WEAK_KINGPIN_SIGMA_M] * 2 * int(prior.fits_kingpin)]
+
+
 def _faces_of(v: np.ndarray, xy: np.ndarray, z_rel: np.ndarray, prior: Prior, params: ArticulatedParams) -> _Faces:
-    """``faces`` of the pose v[:4]; with a fitted trailer length v[4], its rear face moves with it."""
-    if not prior.fits_length:
+    """``faces`` of the pose v[:4] and the fitted dimensions after it (``Prior.extra``): the trailer's
+    rear face moves with its length, the whole trailer with the kingpin."""
+    if not prior.extra:
         return faces(v, xy, z_rel, prior.model, params.fit_top_band_m, prior.trailer_slack_m)
     model = prior.model
-    model = model.with_boxes(model.tractor, replace(model.trailer, length_m=float(v[4])))
+    if prior.fits_length:
+        model = model.with_boxes(model.tractor, replace(model.trailer, length_m=float(v[4])))
+    if prior.fits_kingpin:
+        trailer = replace(model.trailer, front_m=float(v[-1]))
+        model = replace(model.with_boxes(model.tractor, trailer), kingpin_behind_axle_m=float(v[-2]))
     at = faces(v[:4], xy, z_rel, model, params.fit_top_band_m)
-    # the rear face lies length behind the front: a longer trailer moves it back (its normal points back)
-    at.jacobian = np.column_stack([at.jacobian, -at.on_rear.astype(float)])
+    columns = [at.jacobian]
+    if prior.fits_length:  # the rear face lies length behind the front (its normal points back)
+        columns.append(-at.on_rear.astype(float))
+    if prior.fits_kingpin:  # the trailer moves back along the tractor's axis (d perp = N . e1), forward along its own
+        trailer = (at.unit == 1) & (at.face >= 0)
+        for yaw, sign in ((v[2], -1.0), (v[2] + v[3], 1.0)):
+            along = at.jacobian[:, 0] * np.cos(yaw) + at.jacobian[:, 1] * np.sin(yaw)  # -N . e
+            columns.append(np.where(trailer, sign * along, 0.0))
+    at.jacobian = np.column_stack(columns)
     return at
 
 
-def _covariance(at: _Faces, v0: np.ndarray, params: ArticulatedParams) -> np.ndarray:
+def _covariance(at: _Faces, sigmas: np.ndarray, params: ArticulatedParams) -> np.ndarray:
     """Gauss-Newton covariance with the Cauchy weights of the residuals, the noise from the
     explained residuals, plus a floor (neighbouring points are not independent)."""
     scale = params.fit_loss_scale_m
@@ -257,12 +292,11 @@ def _covariance(at: _Faces, v0: np.ndarray, params: ArticulatedParams) -> np.nda
     w = 1.0 / (1.0 + (r / scale) ** 2)
     inliers = np.abs(r) <= params.fit_inlier_m
     sigma2 = max(float(np.median(r[inliers] ** 2)) / 0.455 if inliers.any() else scale**2, params.fit_noise_floor_m**2)
-    info = (at.jacobian * w[:, None]).T @ at.jacobian / sigma2 + np.diag(1.0 / WEAK_PRIOR_SIGMAS[: len(v0)] ** 2)
+    info = (at.jacobian * w[:, None]).T @ at.jacobian / sigma2 + np.diag(1.0 / sigmas**2)
     floor = np.r_[
         params.fit_position_floor_m,
         params.fit_position_floor_m,
         np.radians(params.fit_angle_floor_deg),
         np.radians(params.fit_angle_floor_deg),
-        params.fit_position_floor_m,
-    ][: len(v0)]
-    return np.linalg.inv(info) + np.diag(floor**2)
+    ][: min(len(sigmas), 4)]
+    return np.linalg.inv(info)[:4, :4] + np.diag(floor**2)

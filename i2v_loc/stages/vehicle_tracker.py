@@ -20,7 +20,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from i2v_loc.params import ArticulatedParams, VehicleConfig
-from i2v_loc.stages.hinged_fit import Measurement, Prior, fit
+from i2v_loc.stages.hinged_fit import LEFT, RIGHT, Measurement, Prior, fit
 from i2v_loc.stages.kinematic_filter import FilterState, KinematicFilter
 from i2v_loc.stages.primitives import grid_labels, min_area_rect, split_by_label
 from i2v_loc.stages.vehicle_model import VehicleModel
@@ -35,6 +35,8 @@ RIGID_COST_RATIO = 0.7  # an articulated model must cost this much less than one
 MAX_TRAILER_LENGTH_M = 16.5
 REAR_FACE_MIN_POINTS = 3
 SIDE_MIN_POINTS = 5
+KINGPIN_MIN_HITCH_RAD = np.radians(10.0)  # the kingpin's offset shows only at a hitch angle
+KINGPIN_SETTLED = 30  # observations of the kingpin's offset: learned
 GAP_TEST_MAX_HITCH_RAD = np.radians(10.0)  # beyond, a trailer's front corner swings into the gap
 GAP_FILL_RATIO = 0.5
 GAP_MIN_POINTS = 5
@@ -83,7 +85,7 @@ class _Extent:
     prior: float
     window: int
     values: deque = field(default_factory=deque)
-    lower_bound: float = 0.0
+    lower_bound: float = -np.inf
     median: float | None = None
 
     def add(self, value: float) -> None:
@@ -109,6 +111,8 @@ class _Track:
     last: Measurement | None = None
     first_xy: np.ndarray = field(default_factory=lambda: np.zeros(2))
     ground_z_m: float = 0.0  # under the vehicle, this frame
+    kingpin: _Extent | None = None  # its offset behind the rear axle (fitted at a hitch angle only)
+    trailer_front: _Extent | None = None  # the trailer's front face ahead of the kingpin (with it)
 
     def report(self, measured: bool) -> VehicleReport:
         s = self.filter.state
@@ -179,6 +183,7 @@ class VehicleTracker:
         if measured:
             track.missed, track.last = 0, m
             if self.params.learn_dimensions:
+                self._learn_kingpin(track, prior, points)
                 self._learn(track, m)
         else:
             track.missed += 1
@@ -193,14 +198,16 @@ class VehicleTracker:
         new_boxes = []
         for u, box in enumerate(boxes):
             mine = m.unit == u
-            left, right = local[u][mine & (m.side > 0), 1], local[u][mine & (m.side < 0), 1]
+            left, right = local[u][mine & (m.face == LEFT), 1], local[u][mine & (m.face == RIGHT), 1]
             if min(len(left), len(right)) >= SIDE_MIN_POINTS:  # both sides seen: the width between them
                 track.widths[u].add(float(np.median(left) - np.median(right)))
-            width = track.widths[u].estimate
-            new_boxes.append(replace(box, width_m=width))
+            new_boxes.append(replace(box, width_m=track.widths[u].estimate))
         if model.trailer is not None and track.trailer_length is not None:
             self._learn_trailer_length(track, m, local[1], new_boxes[1].width_m)
             new_boxes[1] = replace(new_boxes[1], length_m=track.trailer_length.estimate)
+            new_boxes[1] = replace(new_boxes[1], front_m=track.trailer_front.estimate)
+            model = replace(model, kingpin_behind_axle_m=track.kingpin.estimate)
+            track.filter.kingpin_m = model.kingpin_behind_axle_m
         track.model = model.with_boxes(new_boxes[0], new_boxes[1] if len(new_boxes) > 1 else None)
         name = self._type_name(track)
         if name in self.catalogue and name != track.catalogue_name:
@@ -208,16 +215,30 @@ class VehicleTracker:
         track.model = replace(track.model, name=name, trailer_axle_m=self._trailer_axle(track))
         track.filter.trailer_axle_m = track.model.trailer_axle_m
 
+    def _learn_kingpin(self, track: _Track, prior: Prior, points: np.ndarray) -> None:
+        """The kingpin's offset shows only at a hitch angle (straight, it trades with the trailer's
+        front): while unsettled, a second fit with it free measures it. (Free in the pose's own fit,
+        it let the rear axle wander by up to 9 cm on a known vehicle.)"""
+        kingpin = track.kingpin
+        if kingpin is None or len(kingpin.values) >= KINGPIN_SETTLED or abs(prior.hitch_rad) < KINGPIN_MIN_HITCH_RAD:
+            return
+        m = fit(points, replace(prior, free_kingpin=True), self.params)
+        if m is not None:
+            kingpin.add(m.kingpin_m)
+            track.trailer_front.add(m.trailer_front_m)
+
     def _retype(self, track: _Track, name: str) -> None:
         """The learned sizes match another catalogue vehicle better than the start's: take its
-        figures the points do not measure (tractor front and length, floors, heights, kingpin,
-        trailer front), keep the measured widths and trailer length."""
+        figures the points do not measure (tractor front and length, floors, heights, kingpin (learned
+        again from its axle), trailer front), keep the measured widths and trailer length."""
         prior = self.catalogue[name]
         model = track.model
         tractor = replace(prior.tractor, width_m=model.tractor.width_m)
         trailer = replace(prior.trailer, width_m=model.trailer.width_m, length_m=model.trailer.length_m)
         track.model = replace(prior.with_boxes(tractor, trailer), trailer_axle_m=model.trailer_axle_m)
         track.catalogue_name = name
+        track.kingpin = _Extent(prior.kingpin_behind_axle_m, self.params.dimension_window)  # from the old axle
+        track.trailer_front = _Extent(prior.trailer.front_m, self.params.dimension_window)
         track.filter.kingpin_m = prior.kingpin_behind_axle_m
         track.filter.shift_reference(model.tractor.front_m - prior.tractor.front_m)  # the cab stays where it is
 
@@ -363,15 +384,28 @@ class VehicleTracker:
             model.articulated,
             self.params,
         )
-        widths = [_Extent(model.tractor.width_m, self.params.dimension_window)]
-        length = None
+        window = self.params.dimension_window
+        boxes = [model.tractor] + ([model.trailer] if model.trailer is not None else [])
+        widths = [_Extent(box.width_m, window) for box in boxes]
+        length = kingpin = front = None
         if model.trailer is not None:
-            widths.append(_Extent(model.trailer.width_m, self.params.dimension_window))
-            length = _Extent(model.trailer.length_m, self.params.dimension_window)
+            length, kingpin = _Extent(model.trailer.length_m, window), _Extent(model.kingpin_behind_axle_m, window)
+            front = _Extent(model.trailer.front_m, window)
             if m.rear_points >= REAR_FACE_MIN_POINTS:  # the start fit saw where the trailer ends
                 length.add(model.trailer.length_m)
         return _Track(
-            next(self._ids), model, filt, model.name, length, widths, 0, m, np.array(m.vector[:2]), ground_z_m
+            next(self._ids),
+            model,
+            filt,
+            model.name,
+            length,
+            widths,
+            0,
+            m,
+            np.array(m.vector[:2]),
+            ground_z_m,
+            kingpin,
+            front,
         )
 
     def _hypotheses(self, cluster: np.ndarray, ground_z_m: float) -> list[tuple[VehicleModel, float, Measurement]]:
