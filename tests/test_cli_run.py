@@ -174,7 +174,7 @@ def test_detect_reads_npy_and_kitti_bin_and_reports_errors(tmp_path, capsys):
     np.save(tmp_path / "c.npy", cloud)
     np.column_stack([cloud, np.zeros(len(cloud), np.float32)]).tofile(tmp_path / "c.bin")
     for name in ("c.npy", "c.bin"):
-        assert main(["detect", str(tmp_path / name)]) == 0
+        assert main(["detect", str(tmp_path / name), "--method", "paper"]) == 0
         report = json.loads(capsys.readouterr().out)
         assert report["points"] == len(cloud) and report["ground_found"]
         assert len(report["clusters"]) == 1 and report["clusters"][0]["center"][:2] == pytest.approx([4, 4], abs=0.1)
@@ -230,7 +230,7 @@ def test_detect_on_a_real_roadside_ouster_frame(tmp_path, capsys):
         f"sensors:\n- name: south\n  max_range_m: 120\n  extrinsics: {{z_m: {lift_m}}}\n"
         "region: {x_min_m: -80, x_max_m: 80, y_min_m: -80, y_max_m: 80}\n"
     )
-    assert main(["detect", str(pcd), "--params", str(sensors), "--sensor", "south"]) == 0
+    assert main(["detect", str(pcd), "--params", str(sensors), "--sensor", "south", "--method", "paper"]) == 0
     report = json.loads(capsys.readouterr().out)
     assert report["points"] > 40000 and report["ground_found"]
     label = json.loads(pcd.with_suffix(".json").read_text())["openlabel"]["frames"]
@@ -249,3 +249,33 @@ def test_detect_on_a_real_roadside_ouster_frame(tmp_path, capsys):
             inside.append(cluster)
     assert len(inside) == 1 and 10 <= inside[0]["points"] <= 40
     assert inside[0]["status"] == "too_small" and inside[0]["volume_m3"] < 5
+
+
+def test_detect_with_the_default_method_measures_a_tractor_and_trailer_and_ignores_a_wall(tmp_path, capsys):
+    """One sweep of a Volvo FH at a 25 deg hitch angle seen by the paper's four sensors, beside a
+    6 m tall, 14 m long wall: the default finds one articulated vehicle at the true pose (no history,
+    no background: by its shape alone); the wall is no vehicle."""
+    from hinged_points import vehicle_points
+
+    from i2v_loc.params import Params
+    from i2v_loc.stages.vehicle_model import VehicleModel
+
+    model = VehicleModel.from_config("volvo_fh", Params().vehicles["volvo_fh"])
+    sensors = [(s.extrinsics.x_m, s.extrinsics.y_m, s.extrinsics.z_m) for s in Params().sensors]
+    x, y, yaw, hitch = 1.0, 2.0, np.radians(15.0), np.radians(25.0)
+    vehicle = vehicle_points(model, x, y, yaw, hitch, sensors=sensors, seed=3)
+    gx, gy = np.meshgrid(np.arange(-25, 25, 0.3), np.arange(-25, 25, 0.3))
+    ground = np.column_stack([gx.ravel(), gy.ravel(), np.zeros(gx.size)])
+    wx, wz = np.meshgrid(np.arange(-7.0, 7.0, 0.15), np.linspace(0.1, 6.0, 40))
+    wall = np.column_stack([wx.ravel(), np.full(wx.size, -15.0), wz.ravel()])
+    np.save(tmp_path / "c.npy", np.vstack([ground, vehicle, wall]).astype(np.float32))
+    assert main(["detect", str(tmp_path / "c.npy")]) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert len(report["vehicles"]) == 1
+    v = report["vehicles"][0]
+    assert v["kind"] == "articulated" and v["vehicle"] == "volvo_fh"
+    assert abs(v["hitch_deg"] - 25.0) < 1.0 and abs(v["truck"]["yaw_deg"] - 15.0) < 1.0
+    tractor_center = np.array([x, y]) + model.tractor.center_x_m * np.array([np.cos(yaw), np.sin(yaw)])
+    assert np.hypot(*(np.array(v["truck"]["center"][:2]) - tractor_center)) < 0.1
+    assert main(["detect", str(tmp_path / "c.npy"), "--method", "bogus"]) == 2
+    assert "unknown method 'bogus'" in capsys.readouterr().err

@@ -14,14 +14,27 @@ def register(sub) -> None:
     p.add_argument("cloud", metavar="CLOUD", help="point-cloud file, in the yard frame unless --sensor is given")
     p.add_argument("--params", action="append", default=[], metavar="FILE", help="parameter file(s) over the defaults")
     p.add_argument("--sensor", help="apply this configured sensor's extrinsics (the cloud is in its frame)")
+    p.add_argument("--method", default=None, help="paper or default (default: default)")
     p.set_defaults(func=run)
+
+
+def single_sweep(params, method: str):
+    """``params`` for one sweep: whatever is found in it is reported (no history, no background,
+    no motion: the default starts a vehicle by its shape alone)."""
+    from i2v_loc.params import apply_patch
+
+    if method == "paper":
+        return params.model_copy(update={"tracking": params.tracking.model_copy(update={"min_hits": 1})})
+    patch = {"background": {"enabled": False}, "articulated": {"start_frames": 1, "start_travel_m": 0.0}}
+    return apply_patch(params, patch, source="one sweep")
 
 
 def run(args) -> int:
     from i2v_loc.clouds import CloudError, read_cloud
     from i2v_loc.frame import Frame, SensorScan
     from i2v_loc.params import Extrinsics, SensorConfig, load_params
-    from i2v_loc.pipelines import build_pipeline
+    from i2v_loc.params import DEFAULT_METHOD
+    from i2v_loc.pipelines import build_pipeline, method_name
 
     params = load_params(*args.params)
     try:
@@ -35,13 +48,12 @@ def run(args) -> int:
         sensor = params.sensor(args.sensor)
     else:
         sensor = SensorConfig(name="cloud", extrinsics=Extrinsics(), min_range_m=0.0, max_range_m=300.0)
-    params = params.model_copy(
-        update={"sensors": [sensor], "tracking": params.tracking.model_copy(update={"min_hits": 1})}
-    )
-    # the paper's stages find a vehicle in one sweep; the articulated estimator needs a few frames
-    result = build_pipeline(params, "paper").process(
-        Frame(0, {sensor.name: SensorScan(sensor.name, 0.0, points, None)})
-    )
+    try:
+        method = method_name(args.method or DEFAULT_METHOD)
+    except ValueError as err:
+        raise UserError(str(err)) from err
+    params = single_sweep(params.model_copy(update={"sensors": [sensor]}), method)
+    result = build_pipeline(params, method).process(Frame(0, {sensor.name: SensorScan(sensor.name, 0.0, points, None)}))
     line = result.to_json()
     # one sweep: faults name the sensor; the counts of what was dropped are the state line's
     report = {
@@ -53,7 +65,9 @@ def run(args) -> int:
         "faults": line["faults"],
         "dropped": line["dropped"],
         "clusters": line["clusters"],
-        "vehicles": [{k: v[k] for k in ("vehicle", "truck", "trailer", "hitch_deg")} for v in line["vehicles"]],
+        "vehicles": [
+            {k: v[k] for k in ("vehicle", "kind", "truck", "trailer", "hitch_deg") if k in v} for v in line["vehicles"]
+        ],
     }
     print(json.dumps(report, indent=2))
     return 0

@@ -251,13 +251,26 @@ def fit(
     rear = int(np.sum(at.on_rear & explained))
     face = np.where(np.abs(at.residual) <= params.fit_inlier_m, at.face, -1).astype(np.int8)
     return Measurement(
-        float(v[0]), float(v[1]), float(wrap_rad(v[2])), hitch, covariance, sample, unit, cost, length, *kingpin, rear, face
+        float(v[0]),
+        float(v[1]),
+        float(wrap_rad(v[2])),
+        hitch,
+        covariance,
+        sample,
+        unit,
+        cost,
+        length,
+        *kingpin,
+        rear,
+        face,
     )
 
 
 def _weak_prior_sigmas(prior: Prior) -> np.ndarray:
     pose = WEAK_PRIOR_SIGMAS[: len(prior.vector)]
-    return np.r_[pose, [WEAK_LENGTH_SIGMA_M] * int(prior.fits_length), [WEAK_KINGPIN_SIGMA_M] * 2 * int(prior.fits_kingpin)]
+    return np.r_[
+        pose, [WEAK_LENGTH_SIGMA_M] * int(prior.fits_length), [WEAK_KINGPIN_SIGMA_M] * 2 * int(prior.fits_kingpin)
+    ]
 
 
 def _faces_of(v: np.ndarray, xy: np.ndarray, z_rel: np.ndarray, prior: Prior, params: ArticulatedParams) -> _Faces:

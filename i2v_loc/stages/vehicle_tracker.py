@@ -35,6 +35,8 @@ RIGID_COST_RATIO = 0.7  # an articulated model must cost this much less than one
 MAX_TRAILER_LENGTH_M = 16.5
 REAR_FACE_MIN_POINTS = 3
 SIDE_MIN_POINTS = 5
+MAX_VEHICLE_HEIGHT_M = 4.6  # 4.0 m in the EU, 4.3 m in the US, plus the roof's clutter and noise
+RIGID_MIN_WIDTH_M = 1.6  # a rigid vehicle starts once its width is seen (an end face or both sides)
 KINGPIN_MIN_HITCH_RAD = np.radians(10.0)  # the kingpin's offset shows only at a hitch angle
 KINGPIN_SETTLED = 30  # observations of the kingpin's offset: learned
 GAP_TEST_MAX_HITCH_RAD = np.radians(10.0)  # beyond, a trailer's front corner swings into the gap
@@ -433,6 +435,8 @@ class VehicleTracker:
                     m = fit(cluster, prior, self.params, START_ITERATIONS, START_SCALE_M)
                     out.append((_with_trailer_length(model, m.trailer_length_m), sign, m))
         height = float(cluster[:, 2].max() - ground_z_m)
+        if not (RIGID_MIN_WIDTH_M <= rect.width_m and height <= MAX_VEHICLE_HEIGHT_M):
+            return out  # a wall, a hedge or a building is no rigid vehicle
         rigid = VehicleModel.rigid("rigid", rect.length_m, rect.width_m, height)
         for sign in (1.0, -1.0):
             yaw = rect.yaw_rad + (0.0 if sign > 0 else np.pi)
