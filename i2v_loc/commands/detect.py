@@ -32,8 +32,7 @@ def single_sweep(params, method: str):
 def run(args) -> int:
     from i2v_loc.clouds import CloudError, read_cloud
     from i2v_loc.frame import Frame, SensorScan
-    from i2v_loc.params import Extrinsics, SensorConfig, load_params
-    from i2v_loc.params import DEFAULT_METHOD
+    from i2v_loc.params import DEFAULT_METHOD, Extrinsics, SensorConfig, load_params
     from i2v_loc.pipelines import build_pipeline, method_name
 
     params = load_params(*args.params)
