@@ -137,6 +137,36 @@ def test_unknown_trailer_length_converges():
     assert len(hitch_err) >= 15 and np.sqrt(np.mean(np.square(hitch_err))) < 0.5
 
 
+def test_a_tractor_with_another_kingpin_is_learned_in_the_turn():
+    """The catalogue's Volvo FH has its kingpin 0.3 m ahead of the rear axle; this tractor has it
+    on the axle. Straight, it does not show; turning (|hitch| >= 20 deg) a second fit measures it:
+    learned within 5 cm, and the hitch angle is right after it."""
+    truth_model = replace(volvo(), kingpin_behind_axle_m=0.0)
+    tracker = VehicleTracker(PARAMS.articulated, PARAMS.vehicles)
+    rows = []
+    steer = lambda t: float(np.clip(0.4 * (t - 2.0), 0.0, 0.5))  # noqa: E731
+    for t, points, (truth,) in drive([(truth_model, (-12.0, 4.0, 0.0, 0.0))], 10.0, 2.5, steer):
+        reports = tracker.process(points, flat, t)
+        if reports:
+            rows.append((t, *errors(reports[0], truth)))
+    assert len(tracker.tracks[0].kingpin.values) == 50  # settled
+    assert abs(tracker.tracks[0].model.kingpin_behind_axle_m) < 0.05
+    rows = np.array(rows)
+    late = rows[rows[:, 0] >= 9.0]
+    assert np.sqrt(np.mean(late[:, 3] ** 2)) < 0.5 and late[:, 1].max() < 0.05
+
+
+def test_a_parked_trailer_alone_is_no_vehicle():
+    """A trailer without its tractor, standing, seen all around or from one side only: no tractor is
+    made of its front, and it never moves, so it is no rigid vehicle either."""
+    trailer = VehicleModel.rigid("rigid", 13.6, 2.55, 2.6, 1.2)
+    for sensors in (SENSORS, SENSORS[:1]):  # all around; one side only (its side is one plane)
+        tracker = VehicleTracker(PARAMS.articulated, PARAMS.vehicles)
+        for k in range(40):
+            points = vehicle_points(trailer, 0.0, 3.0, 0.4, sensors=sensors, seed=k)
+            assert tracker.process(points, flat, 0.1 * k, background_ready=k >= 20) == []
+
+
 def test_two_vehicles_side_by_side_keep_their_units():
     pair = [(volvo(), (-12.0, 0.0, 0.0, 0.0)), (volvo(), (-14.0, 5.5, 0.0, 0.0))]
     tracker = VehicleTracker(PARAMS.articulated, PARAMS.vehicles)
