@@ -200,10 +200,10 @@ def test_bus_is_one_rigid_unit():
     bus = VehicleModel.rigid("rigid", 11.6, 2.55, 3.1, 0.3)
     tracker = VehicleTracker(PARAMS.articulated, PARAMS.vehicles)
     reports = []
-    for k in range(8):  # 4 m/s: 1.2 m travelled in the 4th frame, 1.6 m (>= start_travel_m) in the 5th
+    for k in range(8):  # 4 m/s; first fitted in the 3rd frame (start_frames): 1.6 m (>= start_travel_m) on in the 7th
         points = vehicle_points(bus, -5.0 + 0.4 * k, 4.0, 0.1, sensors=SENSORS, seed=k)
         reports = tracker.process(points, flat, 0.1 * k)
-        assert len(reports) == (k >= 4)
+        assert len(reports) == (k >= 6)
     r = reports[0]
     assert r.model.trailer is None and r.model.name == "rigid"
     assert abs(r.model.tractor.length_m - 11.6) < 0.3

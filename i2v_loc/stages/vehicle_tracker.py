@@ -74,6 +74,7 @@ class Seed:
     # (a parked trailer beside a container): fitted again once it has moved (rigid: and the map is ready)
     rigid: bool = False
     folded: bool = False
+    first_fit: tuple | None = None  # ((rigid, folded), xy) of its first rigid or folded fit
 
     @property
     def travel_m(self) -> float:
@@ -330,6 +331,16 @@ class VehicleTracker:
             reports.append(track.report(True))
         return reports
 
+    def _fit_moved(self, seed: Seed, m: Measurement) -> bool:
+        """A rigid or folded seed's fitted pose moved ``start_travel_m`` since its first such fit (its
+        points' centre alone jumps when a passing vehicle hides part of a container)."""
+        if not (seed.rigid or seed.folded):
+            return True
+        kind = (seed.rigid, seed.folded)
+        if seed.first_fit is None or seed.first_fit[0] != kind:
+            seed.first_fit = (kind, m.vector[:2].copy())
+        return float(np.hypot(*(m.vector[:2] - seed.first_fit[1]))) >= self.params.start_travel_m
+
     def _may_start(self, seed: Seed, rigid_allowed: bool) -> bool:
         """A rigid seed once the background is learned and it moved; a folded one once it moved."""
         moved = seed.travel_m >= self.params.start_travel_m
@@ -367,7 +378,8 @@ class VehicleTracker:
         model, m = chosen
         seed.rigid = not model.articulated
         seed.folded = model.articulated and abs(m.hitch_rad) > np.radians(self.params.start_max_hitch_deg)
-        if not self._may_start(seed, rigid_allowed):
+        fit_moved = self._fit_moved(seed, m)  # its first rigid or folded fit is remembered
+        if not (fit_moved and self._may_start(seed, rigid_allowed)):
             return None
         if (
             float(np.mean(m.unit >= 0)) < self.params.start_min_explained
