@@ -1,0 +1,529 @@
+"""Compiled (numba) kernels of the shared front end: one pass over the points each, no Python loop
+per point or per voxel. Compiled once and cached on disk (``cache=True``); ``warm_up()`` loads or
+compiles every specialisation the pipeline uses, so no frame pays for compilation.
+
+Arithmetic follows the numpy code these kernels replaced operation by operation (float32 where it
+was float32, the same rounding order), so the outputs are the same points and decisions.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+_JIT = {"cache": True, "nogil": True}
+
+# voxel grouping: a dense slot per key when the key range is at most this times the points (plus
+# a constant), else an open-addressing hash table
+DENSE_KEYS_PER_POINT = 8
+DENSE_KEYS_MIN = 1 << 16
+EMPTY = np.int64(-1)
+
+
+# ----------------------------------------------------------------------------- merge
+
+
+@njit(**_JIT)
+def sweep_to_yard(points, offsets, rot, trans, min_r2, max_r2, out_points, out_offsets, start):
+    """Clean one sweep (finite, within the range limits) and write its points in the yard frame
+    to ``out_points[start:]`` (their time offsets beside). Returns (points kept, non-finite points).
+
+    The rotation is the fused multiply-add chain of the float32 matrix product it replaces
+    (x r0 rounded, then y r1 and z r2 each added with one rounding), so the points are bit-equal.
+    """
+    k = start
+    n_bad = 0
+    for i in range(points.shape[0]):
+        x, y, z, off = points[i, 0], points[i, 1], points[i, 2], offsets[i]
+        if not (np.isfinite(x) and np.isfinite(y) and np.isfinite(z) and np.isfinite(off)):
+            n_bad += 1
+            continue
+        xd, yd, zd = np.float64(x), np.float64(y), np.float64(z)
+        r2 = xd * xd + yd * yd + zd * zd
+        if r2 < min_r2 or r2 > max_r2:
+            continue
+        for a in range(3):
+            acc = x * rot[a, 0]
+            acc = np.float32(yd * np.float64(rot[a, 1]) + np.float64(acc))
+            acc = np.float32(zd * np.float64(rot[a, 2]) + np.float64(acc))
+            out_points[k, a] = acc + trans[a]
+        out_offsets[k] = off
+        k += 1
+    return k - start, n_bad
+
+
+@njit(**_JIT)
+def interpolate(points, lag_s, boxes):
+    """Move each point inside a box to the reference time (in place); the first box holding a
+    point moves it. ``boxes`` rows: centre x, y, cos yaw, sin yaw, half length, half width,
+    velocity x, y, yaw rate."""
+    for i in range(points.shape[0]):
+        for b in range(boxes.shape[0]):
+            dx = points[i, 0] - np.float32(boxes[b, 0])
+            dy = points[i, 1] - np.float32(boxes[b, 1])
+            c, s = boxes[b, 2], boxes[b, 3]
+            along = np.float64(dx) * c + np.float64(dy) * s
+            across = -np.float64(dx) * s + np.float64(dy) * c
+            if abs(along) <= boxes[b, 4] and abs(across) <= boxes[b, 5]:
+                vx, vy = np.float32(boxes[b, 6]), np.float32(boxes[b, 7])
+                rate = boxes[b, 8]
+                if rate != 0.0:
+                    vx = vx + np.float32(rate) * -dy
+                    vy = vy + np.float32(rate) * dx
+                points[i, 0] += lag_s[i] * vx
+                points[i, 1] += lag_s[i] * vy
+                break
+
+
+# ----------------------------------------------------------------------------- background
+
+
+@njit(**_JIT)
+def background_pass(
+    points,
+    shift,
+    scale,
+    upper,
+    strides,
+    dilated,
+    outside,
+    ready,
+    keep_columns,
+    learn,
+    protect_columns,
+    counts,
+    seen,
+    in_region,
+    foreground,
+    learned,
+):
+    """Per point: its voxel of the padded grid, in the region, foreground (the map before this
+    frame); on a learning frame each region voxel outside the protected columns counts once.
+    ``keep_columns`` / ``protect_columns`` are empty when no box is protected. Returns the number
+    of voxels counted (their indices in ``learned``)."""
+    nz = strides[1]
+    use_keep = keep_columns.shape[0] > 0 and ready
+    use_protect = protect_columns.shape[0] > 0
+    n = 0
+    for i in range(points.shape[0]):
+        flat = np.int64(0)
+        for a in range(3):
+            q = (points[i, a] - shift[a]) * scale
+            q = min(max(q, np.float32(0.0)), upper[a])
+            flat += np.int64(q) * strides[a]
+        state = dilated[flat]
+        inside = state < outside
+        fg = (state == 0) if ready else inside
+        column = flat // nz
+        if use_keep and inside and keep_columns[column]:
+            fg = True
+        in_region[i] = inside
+        foreground[i] = fg
+        if learn and inside and not (use_protect and protect_columns[column]):
+            if not seen[flat]:
+                seen[flat] = True
+                counts[flat] += 1
+                learned[n] = flat
+                n += 1
+    for j in range(n):
+        seen[learned[j]] = False
+    return n
+
+
+@njit(**_JIT)
+def update_cells(cells, counts, is_background, dilated, offsets, threshold, forget):
+    """Re-decide these voxels (repeats allowed); a voxel that changes state updates the background
+    count of its neighbourhood."""
+    for c in cells:
+        current = is_background[c]
+        count = counts[c]
+        state = count >= threshold or (current and count > forget)
+        if state == current:
+            continue
+        is_background[c] = state
+        if state:
+            for o in offsets:
+                dilated[c + o] += 1
+        else:
+            for o in offsets:
+                dilated[c + o] -= 1
+
+
+@njit(**_JIT)
+def box_columns(boxes, margin, origin_x, origin_y, voxel, nx, ny, mask):
+    """Mark the (x, y) columns of the padded grid whose centre lies in a box plus ``margin``.
+    ``boxes`` rows: centre x, y, cos yaw, sin yaw, half length, half width."""
+    for b in range(boxes.shape[0]):
+        cx, cy, c, s, hl, hw = boxes[b, 0], boxes[b, 1], boxes[b, 2], boxes[b, 3], boxes[b, 4], boxes[b, 5]
+        reach = math.hypot(hl, hw) + margin
+        lo_i = min(max(int(math.floor((cx - reach - origin_x) / voxel)) + 1, 0), nx - 1)
+        lo_j = min(max(int(math.floor((cy - reach - origin_y) / voxel)) + 1, 0), ny - 1)
+        hi_i = min(max(int(math.ceil((cx + reach - origin_x) / voxel)) + 1, 0), nx - 1)
+        hi_j = min(max(int(math.ceil((cy + reach - origin_y) / voxel)) + 1, 0), ny - 1)
+        for i in range(lo_i, hi_i + 1):
+            dx = origin_x + (i - 0.5) * voxel - cx
+            for j in range(lo_j, hi_j + 1):
+                dy = origin_y + (j - 0.5) * voxel - cy
+                if abs(dx * c + dy * s) <= hl + margin and abs(-dx * s + dy * c) <= hw + margin:
+                    mask[i * ny + j] = True
+
+
+# ----------------------------------------------------------------------------- region
+
+
+@njit(**_JIT)
+def box_mask(points, low, high, out):
+    """Points inside the axis-aligned box [low, high] (bounds included)."""
+    for i in range(points.shape[0]):
+        inside = True
+        for a in range(3):
+            v = points[i, a]
+            if v < low[a] or v > high[a]:
+                inside = False
+                break
+        out[i] = inside
+
+
+@njit(**_JIT)
+def above_plane(points, take, normal, offset, threshold, out_index):
+    """Indices of the taken points more than ``threshold`` above the plane. Returns (kept, taken)."""
+    k = 0
+    taken = 0
+    for i in range(points.shape[0]):
+        if not take[i]:
+            continue
+        taken += 1
+        h = points[i, 0] * normal[0] + points[i, 1] * normal[1] + points[i, 2] * normal[2] + offset
+        if h > threshold:
+            out_index[k] = i
+            k += 1
+    return k, taken
+
+
+@njit(**_JIT)
+def plane_scores(sample, normals, offsets, threshold):
+    """Samples within ``threshold`` of each plane."""
+    scores = np.zeros(normals.shape[0], dtype=np.int64)
+    for i in range(sample.shape[0]):
+        x, y, z = sample[i, 0], sample[i, 1], sample[i, 2]
+        for h in range(normals.shape[0]):
+            if abs(x * normals[h, 0] + y * normals[h, 1] + z * normals[h, 2] + offsets[h]) < threshold:
+                scores[h] += 1
+    return scores
+
+
+# ----------------------------------------------------------------------------- voxel grouping
+
+
+@njit(**_JIT)
+def voxel_grid_keys(points, take, voxel, one):
+    """Key of each taken point's voxel (origin at the taken points' minimum, computed in the type of
+    ``one``/``voxel``: the points' own for float32 grids, float64 for ``one`` = 1.0) and the grid
+    dimensions; untaken points get -1."""
+    n = points.shape[0]
+    lo = np.full(3, one)
+    lo[:] = np.inf
+    for i in range(n):
+        if take[i]:
+            for a in range(3):
+                v = points[i, a] * one
+                if v < lo[a]:
+                    lo[a] = v
+    ijk = np.empty((n, 3), dtype=np.int64)
+    dims = np.zeros(3, dtype=np.int64)
+    for i in range(n):
+        if take[i]:
+            for a in range(3):
+                q = np.int64(math.floor((points[i, a] * one - lo[a]) / voxel))
+                ijk[i, a] = q
+                if q + 1 > dims[a]:
+                    dims[a] = q + 1
+    keys = np.full(n, EMPTY, dtype=np.int64)
+    for i in range(n):
+        if take[i]:
+            keys[i] = (ijk[i, 0] * dims[1] + ijk[i, 1]) * dims[2] + ijk[i, 2]
+    return keys, dims
+
+
+@njit(**_JIT)
+def _hash_slot(table_keys, key):
+    mask = table_keys.shape[0] - 1
+    h = (key * np.int64(-7046029254386353131)) >> np.int64(17)
+    slot = h & mask
+    while table_keys[slot] != EMPTY and table_keys[slot] != key:
+        slot = (slot + 1) & mask
+    return slot
+
+
+@njit(**_JIT)
+def group_keys(keys, n_taken):
+    """Voxel id of each point (-1 for untaken), ids in increasing key order, and the voxel keys.
+    Returns (ids, voxel_keys, lookup_dense, table_keys, table_ids): the dense lookup (slot per key)
+    when the key range is small, else the hash table (for neighbour queries)."""
+    n = keys.shape[0]
+    n_keys = np.int64(0)
+    for i in range(n):
+        if keys[i] + 1 > n_keys:
+            n_keys = keys[i] + 1
+    ids = np.full(n, EMPTY, dtype=np.int64)
+    if n_keys <= DENSE_KEYS_PER_POINT * n_taken + DENSE_KEYS_MIN:
+        dense = np.full(n_keys, EMPTY, dtype=np.int64)
+        for i in range(n):
+            if keys[i] >= 0:
+                dense[keys[i]] = 0
+        n_vox = 0
+        for key in range(n_keys):
+            if dense[key] == 0:
+                dense[key] = n_vox
+                n_vox += 1
+        voxel_keys = np.empty(n_vox, dtype=np.int64)
+        for key in range(n_keys):
+            if dense[key] >= 0:
+                voxel_keys[dense[key]] = key
+        for i in range(n):
+            if keys[i] >= 0:
+                ids[i] = dense[keys[i]]
+        return ids, voxel_keys, dense, np.empty(0, dtype=np.int64), np.empty(0, dtype=np.int64)
+    size = 1
+    while size < 2 * n_taken + 2:
+        size *= 2
+    table_keys = np.full(size, EMPTY, dtype=np.int64)
+    table_ids = np.full(size, EMPTY, dtype=np.int64)
+    first = np.empty(n_taken, dtype=np.int64)
+    n_vox = 0
+    for i in range(n):
+        if keys[i] < 0:
+            continue
+        slot = _hash_slot(table_keys, keys[i])
+        if table_keys[slot] == EMPTY:
+            table_keys[slot] = keys[i]
+            table_ids[slot] = n_vox
+            first[n_vox] = keys[i]
+            n_vox += 1
+        ids[i] = table_ids[slot]
+    order = np.argsort(first[:n_vox])
+    rank = np.empty(n_vox, dtype=np.int64)
+    for r in range(n_vox):
+        rank[order[r]] = r
+    voxel_keys = first[:n_vox][order]
+    for i in range(n):
+        if ids[i] >= 0:
+            ids[i] = rank[ids[i]]
+    for s in range(size):
+        if table_ids[s] >= 0:
+            table_ids[s] = rank[table_ids[s]]
+    return ids, voxel_keys, np.empty(0, dtype=np.int64), table_keys, table_ids
+
+
+@njit(**_JIT)
+def voxel_sums(points, values, ids, n_vox):
+    """Per voxel: the float64 sums of the points' coordinates and values (in point order) and the counts."""
+    sums = np.zeros((n_vox, 3 + values.shape[1]))
+    counts = np.zeros(n_vox, dtype=np.int64)
+    for i in range(points.shape[0]):
+        v = ids[i]
+        if v < 0:
+            continue
+        counts[v] += 1
+        for a in range(3):
+            sums[v, a] += points[i, a]
+        for a in range(values.shape[1]):
+            sums[v, 3 + a] += values[i, a]
+    return sums, counts
+
+
+@njit(**_JIT)
+def _lookup(key, dense, table_keys, table_ids):
+    if dense.shape[0] > 0:
+        return dense[key] if key < dense.shape[0] else EMPTY
+    slot = _hash_slot(table_keys, key)
+    return table_ids[slot] if table_keys[slot] == key else EMPTY
+
+
+@njit(**_JIT)
+def _root(parent, v):
+    while parent[v] != v:
+        parent[v] = parent[parent[v]]
+        v = parent[v]
+    return v
+
+
+@njit(**_JIT)
+def voxel_components(voxel_keys, dims, dense, table_keys, table_ids):
+    """26-connected components of the occupied voxels, numbered in the order of their first voxel
+    in key (raster) order."""
+    n_vox = voxel_keys.shape[0]
+    parent = np.arange(n_vox)
+    for v in range(n_vox):
+        key = voxel_keys[v]
+        i = key // (dims[1] * dims[2])
+        j = (key // dims[2]) % dims[1]
+        k = key % dims[2]
+        for di in range(0, 2):
+            for dj in range(-1, 2):
+                for dk in range(-1, 2):
+                    if di == 0 and (dj < 0 or (dj == 0 and dk <= 0)):
+                        continue  # the other half of the neighbourhood looks back at this voxel
+                    ni, nj, nk = i + di, j + dj, k + dk
+                    if ni >= dims[0] or nj < 0 or nj >= dims[1] or nk < 0 or nk >= dims[2]:
+                        continue
+                    w = _lookup((ni * dims[1] + nj) * dims[2] + nk, dense, table_keys, table_ids)
+                    if w < 0:
+                        continue
+                    a, b = _root(parent, v), _root(parent, w)
+                    if a != b:
+                        parent[max(a, b)] = min(a, b)
+    label = np.full(n_vox, EMPTY, dtype=np.int64)
+    n_comp = 0
+    for v in range(n_vox):
+        r = _root(parent, v)
+        if label[r] < 0:
+            label[r] = n_comp
+            n_comp += 1
+        label[v] = label[r]
+    return label
+
+
+@njit(**_JIT)
+def counting_order(labels, n_labels):
+    """Stable order of the points by label (labels in 0..n_labels-1) and the count of each label."""
+    counts = np.zeros(n_labels, dtype=np.int64)
+    for v in labels:
+        counts[v] += 1
+    start = np.empty(n_labels, dtype=np.int64)
+    total = 0
+    for v in range(n_labels):
+        start[v] = total
+        total += counts[v]
+    order = np.empty(labels.shape[0], dtype=np.int64)
+    for i in range(labels.shape[0]):
+        order[start[labels[i]]] = i
+        start[labels[i]] += 1
+    return order, counts
+
+
+# ----------------------------------------------------------------------------- rectangles
+
+
+@njit(**_JIT)
+def _cross(o, a, b):
+    return (a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0])
+
+
+@njit(**_JIT)
+def convex_hull(xy):
+    """Vertices of the convex hull, counter-clockwise, without collinear points (monotone chain)."""
+    n = xy.shape[0]
+    pts = xy[np.argsort(xy[:, 0], kind="mergesort")]  # by x, then (below) by y among equal x
+    i = 0
+    while i < n:
+        j = i
+        while j + 1 < n and pts[j + 1, 0] == pts[i, 0]:
+            j += 1
+        if j > i:
+            block = pts[i : j + 1]
+            pts[i : j + 1] = block[np.argsort(block[:, 1], kind="mergesort")]
+        i = j + 1
+    hull = np.empty((2 * n + 1, 2))
+    k = 0
+    for i in range(n):
+        while k >= 2 and _cross(hull[k - 2], hull[k - 1], pts[i]) <= 0:
+            k -= 1
+        hull[k] = pts[i]
+        k += 1
+    lower = k + 1
+    for i in range(n - 2, -1, -1):
+        while k >= lower and _cross(hull[k - 2], hull[k - 1], pts[i]) <= 0:
+            k -= 1
+        hull[k] = pts[i]
+        k += 1
+    return hull[: max(k - 1, 1)] if n > 0 else hull[:0]
+
+
+@njit(**_JIT)
+def min_area_rect(xy):
+    """Rotating calipers over the hull edges' directions (modulo 90 deg): centre x, y, extent
+    along the best direction, extent across it, the direction; NaN centre when the hull is flat."""
+    hull = convex_hull(xy)
+    m = hull.shape[0]
+    out = np.full(5, np.nan)
+    if m < 3:
+        return out
+    angles = np.empty(m)
+    for e in range(m):
+        nxt = hull[(e + 1) % m]
+        angles[e] = np.mod(np.arctan2(nxt[1] - hull[e, 1], nxt[0] - hull[e, 0]), np.pi / 2)
+    angles = np.unique(angles)
+    best_area = np.inf
+    for a in angles:
+        c, s = np.cos(a), np.sin(a)
+        u_lo, u_hi, v_lo, v_hi = np.inf, -np.inf, np.inf, -np.inf
+        for p in range(m):
+            u = hull[p, 0] * c + hull[p, 1] * s
+            v = -hull[p, 0] * s + hull[p, 1] * c
+            u_lo, u_hi, v_lo, v_hi = min(u_lo, u), max(u_hi, u), min(v_lo, v), max(v_hi, v)
+        du, dv = u_hi - u_lo, v_hi - v_lo
+        if du * dv < best_area:
+            best_area = du * dv
+            cu, cv = (u_hi + u_lo) / 2, (v_hi + v_lo) / 2
+            out[0] = cu * np.cos(a) - cv * np.sin(a)
+            out[1] = cu * np.sin(a) + cv * np.cos(a)
+            out[2], out[3], out[4] = du, dv, a
+    return out
+
+
+# ----------------------------------------------------------------------------- warm-up
+
+_WARM = False
+
+
+def warm_up() -> None:
+    """Load (or compile, the first time on this machine) every kernel specialisation the pipeline
+    calls, on tiny arrays, so that no frame pays for it."""
+    global _WARM
+    if _WARM:
+        return
+    p32 = np.array([[0.0, 0.0, 0.0], [1.0, 2.0, 0.5], [0.2, 0.1, 0.0]], dtype=np.float32)
+    p64 = p32.astype(np.float64)
+    offsets = np.zeros(3, dtype=np.float32)
+    out_p, out_o = np.empty((3, 3), dtype=np.float32), np.empty(3, dtype=np.float32)
+    sweep_to_yard(p32, offsets, np.eye(3, dtype=np.float32), np.zeros(3, dtype=np.float32), 0.0, 1e4, out_p, out_o, 0)
+    interpolate(p32.copy(), offsets, np.zeros((1, 9)))
+    take = np.ones(3, dtype=np.bool_)
+    cells = np.zeros(64, dtype=np.uint16)
+    flags = np.zeros(64, dtype=np.bool_)
+    background_pass(
+        p32,
+        np.zeros(3, dtype=np.float32),
+        np.float32(1.0),
+        np.full(3, 3.5, dtype=np.float32),
+        np.array([16, 4, 1], dtype=np.int64),
+        cells,
+        np.uint16(60000),
+        True,
+        np.zeros(16, dtype=np.bool_),
+        True,
+        np.zeros(16, dtype=np.bool_),
+        np.zeros(64, dtype=np.uint8),
+        flags,
+        np.empty(3, dtype=np.bool_),
+        np.empty(3, dtype=np.bool_),
+        np.empty(3, dtype=np.int64),
+    )
+    update_cells(np.array([5], dtype=np.int64), np.zeros(64, np.uint8), flags, cells, np.array([0]), 1, 0)
+    box_columns(np.zeros((1, 6)), 0.1, 0.0, 0.0, 0.2, 4, 4, np.zeros(16, dtype=np.bool_))
+    box_mask(p32, np.zeros(3, dtype=np.float32), np.ones(3, dtype=np.float32), np.empty(3, dtype=np.bool_))
+    above_plane(p32, take, np.array([0.0, 0.0, 1.0]), 0.0, 0.1, np.empty(3, dtype=np.int64))
+    plane_scores(p64, np.array([[0.0, 0.0, 1.0]]), np.zeros(1), 0.1)
+    for points, voxel, one in ((p32, np.float32(0.5), np.float32(1.0)), (p64, 0.5, 1.0), (p32, 0.5, 1.0)):
+        keys, dims = voxel_grid_keys(points, take, voxel, one)
+        for dense_range in (True, False):
+            k = keys if dense_range else keys * np.int64(1 << 40)
+            ids, vkeys, dense, tk, ti = group_keys(k, 3)
+            voxel_sums(points, np.zeros((3, 0)), ids, len(vkeys))
+            voxel_components(vkeys, dims, dense, tk, ti)
+    counting_order(np.array([1, 0, 1], dtype=np.int64), 2)
+    min_area_rect(p64[:, :2])
+    _WARM = True
