@@ -204,13 +204,16 @@ def above_plane(points, take, normal, offset, threshold, out_index):
 
 @njit(**_JIT)
 def plane_scores(sample, normals, offsets, threshold):
-    """Samples within ``threshold`` of each plane."""
+    """Samples within ``threshold`` of each plane (coordinates as rows: the inner loop runs along
+    contiguous memory and vectorises)."""
+    x, y, z = np.ascontiguousarray(sample[:, 0]), np.ascontiguousarray(sample[:, 1]), np.ascontiguousarray(sample[:, 2])
     scores = np.zeros(normals.shape[0], dtype=np.int64)
-    for i in range(sample.shape[0]):
-        x, y, z = sample[i, 0], sample[i, 1], sample[i, 2]
-        for h in range(normals.shape[0]):
-            if abs(x * normals[h, 0] + y * normals[h, 1] + z * normals[h, 2] + offsets[h]) < threshold:
-                scores[h] += 1
+    for h in range(normals.shape[0]):
+        a, b, c, d = normals[h, 0], normals[h, 1], normals[h, 2], offsets[h]
+        count = 0
+        for i in range(x.shape[0]):
+            count += abs(x[i] * a + y[i] * b + z[i] * c + d) < threshold
+        scores[h] = count
     return scores
 
 
@@ -231,19 +234,18 @@ def voxel_grid_keys(points, take, voxel, one):
                 v = points[i, a] * one
                 if v < lo[a]:
                     lo[a] = v
-    ijk = np.empty((n, 3), dtype=np.int64)
-    dims = np.zeros(3, dtype=np.int64)
+    dims = np.ones(3, dtype=np.int64)
     for i in range(n):
         if take[i]:
             for a in range(3):
-                q = np.int64(math.floor((points[i, a] * one - lo[a]) / voxel))
-                ijk[i, a] = q
-                if q + 1 > dims[a]:
-                    dims[a] = q + 1
+                dims[a] = max(dims[a], np.int64(math.floor((points[i, a] * one - lo[a]) / voxel)) + 1)
     keys = np.full(n, EMPTY, dtype=np.int64)
     for i in range(n):
         if take[i]:
-            keys[i] = (ijk[i, 0] * dims[1] + ijk[i, 1]) * dims[2] + ijk[i, 2]
+            key = np.int64(0)
+            for a in range(3):
+                key = key * dims[a] + np.int64(math.floor((points[i, a] * one - lo[a]) / voxel))
+            keys[i] = key
     return keys, dims
 
 

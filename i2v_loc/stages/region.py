@@ -124,7 +124,8 @@ class Region:
     def _refine(self, inliers: np.ndarray, normal: np.ndarray, offset: float, fraction: float) -> GroundPlane | None:
         if len(inliers) >= 3:
             centre = inliers.mean(axis=0)
-            refined = np.linalg.svd(inliers - centre, full_matrices=False)[2][2]
+            spread = inliers - centre
+            refined = np.linalg.eigh(spread.T @ spread)[1][:, 0]  # least-squares normal: the smallest axis
             refined *= np.sign(refined[2] + 1e-12)
             if refined[2] >= np.cos(np.radians(self.params.max_ground_tilt_deg)):
                 normal, offset = refined, -float(refined @ centre)
