@@ -329,12 +329,12 @@ class PipelineRunner:
         self.metrics.frames_dropped.labels(reason).inc(n)
 
     def _step(self, k: int) -> None:
-        taken_s = time.time()  # frame in: the state carries it, the WebSocket adds the send time
         try:
             frame = self.source.frame(k)
         except Exception as err:
             self._skip(k, "source_error", err)
             return
+        taken_s = time.time()  # frame in: the state carries it, the WebSocket adds the send time
         try:
             with self._apply_lock:
                 self._apply_updates()

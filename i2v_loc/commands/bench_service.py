@@ -19,14 +19,14 @@ STARTUP_TIMEOUT_S = 120.0
 WARMUP_S = 6.0  # the default background map is used after 25 samples, one every 2 frames at 10 Hz
 
 
-def bench_service(rec_path: Path, method: str, n_clients: int, seconds: float) -> dict:
+def bench_service(rec_path: Path, method: str, n_clients: int, seconds: float, warmup_s: float = WARMUP_S) -> dict:
     import numpy as np
 
     proc, url = _start(rec_path, method)
     try:
         _wait_for_state(url)
         late_before = _late_frames(url)
-        to_send, to_client, received = asyncio.run(_listen(url, n_clients, seconds))
+        to_send, to_client, received = asyncio.run(_listen(url, n_clients, seconds, warmup_s))
         late = _late_frames(url) - late_before
     finally:
         proc.terminate()
@@ -39,6 +39,7 @@ def bench_service(rec_path: Path, method: str, n_clients: int, seconds: float) -
     return {
         "clients": n_clients,
         "seconds": seconds,
+        "warmup_s": warmup_s,
         "messages": len(to_send),
         "messages_per_client_min": int(min(received)),
         "frames_dropped_late": int(late),
@@ -90,7 +91,7 @@ def _late_frames(url: str) -> float:
     return float(found.group(1)) if found else 0.0
 
 
-async def _listen(url: str, n_clients: int, seconds: float):
+async def _listen(url: str, n_clients: int, seconds: float, warmup_s: float):
     """(frame in to send ms, frame in to receipt ms, messages per client) over ``seconds``."""
     import websockets
 
@@ -118,7 +119,7 @@ async def _listen(url: str, n_clients: int, seconds: float):
 
     measuring = asyncio.Event()
     tasks = [asyncio.create_task(client(i)) for i in range(n_clients)]
-    await asyncio.sleep(WARMUP_S)  # every client connected, the background map learned
+    await asyncio.sleep(warmup_s)  # every client connected, the background map learned
     measuring.set()
     await asyncio.sleep(seconds)
     stop.set()
