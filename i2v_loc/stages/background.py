@@ -132,51 +132,61 @@ class BackgroundMap:
     @property
     def threshold(self) -> int:
         """Samples a voxel must be occupied in to be background (grows while the window fills)."""
-        return max(1, int(np.ceil(self.params.occupied_fraction * self.samples - 1e-9)))
+        return self._thresholds(self.samples)[0]
 
     # ----------------------------------------------------------------- learning
 
     def process(self, points: np.ndarray, protected: list[ProtectedBox] = ()) -> BackgroundResult:
         """Region and foreground masks of ``points`` (yard frame) with the map as it was before this
         frame; then learns from the frame when it is a learning frame. One compiled pass over the
-        points does the lookup and the counting."""
+        points does the lookup, the counting and (window full) finds the voxels that turn background."""
         points = np.ascontiguousarray(points, dtype=np.float32)
         n = len(points)
         result = BackgroundResult(np.empty(n, dtype=bool), np.empty(n, dtype=bool))
         learning = self.frames_seen % self.params.learn_every_frames == 0
+        sliding = learning and self.samples >= self.params.window_frames
+        old = self.history.popleft() if sliding else None
+        if sliding:
+            kernels.forget_counts(old, self.counts)  # first: the pass then sees every voxel's final count
+        threshold, forget = self._thresholds(self.params.window_frames)
         keep = self._protected_columns(protected, self.params.keep_margin_m) if self.ready else None
         protect = self._protected_columns(protected, self.params.protect_margin_m) if learning else None
         learned = np.empty(n if learning else 0, dtype=np.int64)
-        n_learned = kernels.background_pass(
+        flips = np.empty(n + len(old) if sliding else 0, dtype=np.int64)
+        n_learned, n_flips = kernels.background_pass(
             points, self._shift, self._scale, self._upper, self._strides, self.dilated, OUTSIDE, self.ready,
             _NO_COLUMNS if keep is None else keep, learning, _NO_COLUMNS if protect is None else protect,
             self.counts, self._seen, result.in_region, result.foreground, learned,
+            sliding, threshold, self.is_background, flips,
         )  # fmt: skip
-        if learning:
-            self._learned(learned[:n_learned].copy())
+        index = learned[:n_learned].copy()
+        if sliding:
+            n_flips = kernels.forgotten(old, self.counts, self.is_background, threshold, forget, flips, n_flips)
+            kernels.flip_cells(flips[:n_flips], self.is_background, self.dilated, self._offsets)
+            self.history.append(index)
+        elif learning:
+            self._filling(index)
         self.frames_seen += 1
         return result
 
-    def _learned(self, index: np.ndarray) -> None:
-        """The sample's voxels (each once) are counted: keep the window and re-decide what may change."""
-        was_filling = self.samples < self.params.window_frames
+    def _filling(self, index: np.ndarray) -> None:
+        """A sample while the window fills: the thresholds moved, so every voxel ever counted may
+        change (all others have count 0 and are not background, as counts only grow meanwhile)."""
         self.history.append(index)
-        old = self.history.popleft() if self.samples > self.params.window_frames else None
-        if old is not None:
-            self.counts[old] -= 1
-        if was_filling:
-            # the thresholds moved: every voxel ever counted may change (all others have count 0 and
-            # are not background, as counts only grow while the window fills)
-            self._occupied.append(index[self.counts[index] == 1])
-            self._update(np.concatenate(self._occupied))
-        else:
+        self._occupied.append(index[self.counts[index] == 1])
+        self._update(np.concatenate(self._occupied))
+        if self.samples == self.params.window_frames:
             self._occupied = []
-            self._update(index if old is None else np.concatenate([index, old]))
+
+    def _thresholds(self, samples: int) -> tuple[int, int]:
+        """(occupied in at least, forgotten at most) samples, of ``samples``."""
+        occupied = max(1, int(np.ceil(self.params.occupied_fraction * samples - 1e-9)))
+        return occupied, int(np.floor(self.params.forget_fraction * samples + 1e-9))
 
     @property
     def forget_threshold(self) -> int:
         """A background voxel occupied in at most this many samples of the window is forgotten."""
-        return int(np.floor(self.params.forget_fraction * self.samples + 1e-9))
+        return self._thresholds(self.samples)[1]
 
     def _rebuild(self) -> None:
         """Compare every voxel (a loaded map)."""

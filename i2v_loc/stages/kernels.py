@@ -98,15 +98,23 @@ def background_pass(
     in_region,
     foreground,
     learned,
+    evaluate,
+    threshold,
+    is_background,
+    flips,
 ):
     """Per point: its voxel of the padded grid, in the region, foreground (the map before this
     frame); on a learning frame each region voxel outside the protected columns counts once.
-    ``keep_columns`` / ``protect_columns`` are empty when no box is protected. Returns the number
-    of voxels counted (their indices in ``learned``)."""
+    ``keep_columns`` / ``protect_columns`` are empty when no box is protected. With ``evaluate``
+    (the window is full and the old sample already taken off the counts) a counted voxel that
+    reaches ``threshold`` and is not background is listed in ``flips``: with fixed thresholds and
+    every voxel decided, that is the only way a count going up changes a decision. Returns the
+    number of voxels counted (their indices in ``learned``) and of voxels listed."""
     nz = strides[1]
     use_keep = keep_columns.shape[0] > 0 and ready
     use_protect = protect_columns.shape[0] > 0
     n = 0
+    n_flips = 0
     for i in range(points.shape[0]):
         flat = np.int64(0)
         for a in range(3):
@@ -127,9 +135,46 @@ def background_pass(
                 counts[flat] += 1
                 learned[n] = flat
                 n += 1
+                if evaluate and counts[flat] == threshold and not is_background[flat]:
+                    flips[n_flips] = flat
+                    n_flips += 1
     for j in range(n):
         seen[learned[j]] = False
-    return n
+    return n, n_flips
+
+
+@njit(**_JIT)
+def forget_counts(cells, counts):
+    """Take one sample (its voxels, each once) off the counts."""
+    for c in cells:
+        counts[c] -= 1
+
+
+@njit(**_JIT)
+def forgotten(cells, counts, is_background, threshold, forget, flips, n_flips):
+    """List in ``flips`` (from ``n_flips`` on) the background voxels of a sample taken off the
+    window whose final count is below both thresholds (fixed thresholds, every voxel decided: the
+    only way a count going down changes a decision). Returns the new length of the list."""
+    for c in cells:
+        count = counts[c]
+        if count < threshold and count <= forget and is_background[c]:
+            flips[n_flips] = c
+            n_flips += 1
+    return n_flips
+
+
+@njit(**_JIT)
+def flip_cells(cells, is_background, dilated, offsets):
+    """Toggle the decision of these (distinct) voxels and the background count of their neighbourhood."""
+    for c in cells:
+        state = not is_background[c]
+        is_background[c] = state
+        if state:
+            for o in offsets:
+                dilated[c + o] += 1
+        else:
+            for o in offsets:
+                dilated[c + o] -= 1
 
 
 @njit(**_JIT)
@@ -513,7 +558,16 @@ def warm_up() -> None:
         np.empty(3, dtype=np.bool_),
         np.empty(3, dtype=np.bool_),
         np.empty(3, dtype=np.int64),
+        True,
+        1,
+        flags,
+        np.empty(3, dtype=np.int64),
     )
+    one_cell = np.array([5], dtype=np.int64)
+    forget_counts(one_cell, np.ones(64, np.uint8))
+    forgotten(one_cell, np.zeros(64, np.uint8), flags, 1, 0, np.empty(1, dtype=np.int64), 0)
+    flip_cells(one_cell, flags, cells, np.array([0]))
+    flip_cells(one_cell, flags, cells, np.array([0]))
     update_cells(np.array([5], dtype=np.int64), np.zeros(64, np.uint8), flags, cells, np.array([0]), 1, 0)
     box_columns(np.zeros((1, 6)), 0.1, 0.0, 0.0, 0.2, 4, 4, np.zeros(16, dtype=np.bool_))
     box_mask(p32, np.zeros(3, dtype=np.float32), np.ones(3, dtype=np.float32), np.empty(3, dtype=np.bool_))
