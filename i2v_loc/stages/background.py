@@ -107,7 +107,9 @@ class BackgroundMap:
         self.dilated[~self._region_cells()] = OUTSIDE
         self.history: deque[np.ndarray] = deque()  # the voxels of each sample, each once
         self.frames_seen = 0
-        self._seen = np.zeros(cells, dtype=bool)  # scratch of the learning pass, all False between frames
+        self._seen = np.zeros(
+            cells // 8 + 1, dtype=np.uint8
+        )  # a bit per voxel for the learning pass, clear between frames
         self._occupied: list[np.ndarray] = []  # while the window fills: the voxels counted for the first time
         self._shift = (self.origin - self.pad * params.voxel_size_m).astype(np.float32)
         self._scale = np.float32(1.0 / params.voxel_size_m)

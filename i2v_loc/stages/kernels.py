@@ -105,7 +105,8 @@ def background_pass(
 ):
     """Per point: its voxel of the padded grid, in the region, foreground (the map before this
     frame); on a learning frame each region voxel outside the protected columns counts once.
-    ``keep_columns`` / ``protect_columns`` are empty when no box is protected. With ``evaluate``
+    ``keep_columns`` / ``protect_columns`` are empty when no box is protected; ``seen`` is a bit per
+    voxel, all clear between calls (an eighth of a byte array: it stays in cache). With ``evaluate``
     (the window is full and the old sample already taken off the counts) a counted voxel that
     reaches ``threshold`` and is not background is listed in ``flips``: with fixed thresholds and
     every voxel decided, that is the only way a count going up changes a decision. Returns the
@@ -130,8 +131,9 @@ def background_pass(
         in_region[i] = inside
         foreground[i] = fg
         if learn and inside and not (use_protect and protect_columns[column]):
-            if not seen[flat]:
-                seen[flat] = True
+            bit = np.uint8(1) << np.uint8(flat & 7)
+            if not seen[flat >> 3] & bit:
+                seen[flat >> 3] |= bit
                 counts[flat] += 1
                 learned[n] = flat
                 n += 1
@@ -139,7 +141,7 @@ def background_pass(
                     flips[n_flips] = flat
                     n_flips += 1
     for j in range(n):
-        seen[learned[j]] = False
+        seen[learned[j] >> 3] = 0
     return n, n_flips
 
 
@@ -554,7 +556,7 @@ def warm_up() -> None:
         True,
         np.zeros(16, dtype=np.bool_),
         np.zeros(64, dtype=np.uint8),
-        flags,
+        np.zeros(8, dtype=np.uint8),
         np.empty(3, dtype=np.bool_),
         np.empty(3, dtype=np.bool_),
         np.empty(3, dtype=np.int64),
