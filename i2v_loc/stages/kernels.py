@@ -308,9 +308,10 @@ def _hash_slot(table_keys, key):
 
 @njit(**_JIT)
 def group_keys(keys, n_taken):
-    """Voxel id of each point (-1 for untaken), ids in increasing key order, and the voxel keys.
-    Returns (ids, voxel_keys, lookup_dense, table_keys, table_ids): the dense lookup (slot per key)
-    when the key range is small, else the hash table (for neighbour queries)."""
+    """Voxel id of each point (-1 for untaken) and the voxel keys. Returns (ids, voxel_keys,
+    lookup_dense, table_keys, table_ids, in_key_order): with a small key range a slot per key
+    (``lookup_dense``) and ids in key order; else a hash table, ids in order of first appearance
+    (``rank_in_key_order`` renumbers them once the keys are sorted)."""
     n = keys.shape[0]
     n_keys = np.int64(0)
     for i in range(n):
@@ -334,7 +335,7 @@ def group_keys(keys, n_taken):
         for i in range(n):
             if keys[i] >= 0:
                 ids[i] = dense[keys[i]]
-        return ids, voxel_keys, dense, np.empty(0, dtype=np.int64), np.empty(0, dtype=np.int64)
+        return ids, voxel_keys, dense, np.empty(0, dtype=np.int64), np.empty(0, dtype=np.int64), True
     size = 1
     while size < 2 * n_taken + 2:
         size *= 2
@@ -352,18 +353,20 @@ def group_keys(keys, n_taken):
             first[n_vox] = keys[i]
             n_vox += 1
         ids[i] = table_ids[slot]
-    order = np.argsort(first[:n_vox])
-    rank = np.empty(n_vox, dtype=np.int64)
-    for r in range(n_vox):
-        rank[order[r]] = r
-    voxel_keys = first[:n_vox][order]
-    for i in range(n):
+    return ids, first[:n_vox], np.empty(0, dtype=np.int64), table_keys, table_ids, False
+
+
+@njit(**_JIT)
+def rank_in_key_order(sorted_keys, ids, table_keys, table_ids):
+    """Renumber the voxels of a hash-table grouping by their rank in ``sorted_keys`` (in place)."""
+    rank = np.empty(sorted_keys.shape[0], dtype=np.int64)
+    for r in range(sorted_keys.shape[0]):
+        slot = _hash_slot(table_keys, sorted_keys[r])
+        rank[table_ids[slot]] = r
+        table_ids[slot] = r
+    for i in range(ids.shape[0]):
         if ids[i] >= 0:
             ids[i] = rank[ids[i]]
-    for s in range(size):
-        if table_ids[s] >= 0:
-            table_ids[s] = rank[table_ids[s]]
-    return ids, voxel_keys, np.empty(0, dtype=np.int64), table_keys, table_ids
 
 
 @njit(**_JIT)
@@ -579,7 +582,10 @@ def warm_up() -> None:
         keys, dims = voxel_grid_keys(points, take, voxel, one)
         for dense_range in (True, False):
             k = keys if dense_range else keys * np.int64(1 << 40)
-            ids, vkeys, dense, tk, ti = group_keys(k, 3)
+            ids, vkeys, dense, tk, ti, in_order = group_keys(k, 3)
+            if not in_order:
+                vkeys = np.sort(vkeys)
+                rank_in_key_order(vkeys, ids, tk, ti)
             voxel_sums(points, np.zeros((3, 0)), ids, len(vkeys))
             voxel_components(vkeys, dims, dense, tk, ti)
     counting_order(np.array([1, 0, 1], dtype=np.int64), 2)
