@@ -101,10 +101,13 @@ class BackgroundMap:
         self._offsets = offsets @ self._strides
         self.counts = np.zeros(cells, dtype=np.uint8)
         self.is_background = np.zeros(cells, dtype=bool)
-        # background voxels within the dilation of each voxel; padding holds OUTSIDE so that one
-        # lookup answers both "in the region" (< OUTSIDE) and "foreground" (== 0)
+        # background voxels within the dilation of each voxel; padding holds OUTSIDE (never 0)
         self.dilated = np.zeros(cells, dtype=np.uint16)
-        self.dilated[~self._region_cells()] = OUTSIDE
+        region_cells = self._region_cells()
+        self.dilated[~region_cells] = OUTSIDE
+        # the per-point lookups read bits (in the region; dilated count 0) that stay in cache
+        self._region_bits = np.packbits(region_cells, bitorder="little")
+        self._free_bits = self._region_bits.copy()
         self.history: deque[np.ndarray] = deque()  # the voxels of each sample, each once
         self.frames_seen = 0
         self._seen = np.zeros(
@@ -156,7 +159,7 @@ class BackgroundMap:
         learned = np.empty(n if learning else 0, dtype=np.int64)
         flips = np.empty(n + len(old) if sliding else 0, dtype=np.int64)
         n_learned, n_flips = kernels.background_pass(
-            points, self._shift, self._scale, self._upper, self._strides, self.dilated, OUTSIDE, self.ready,
+            points, self._shift, self._scale, self._upper, self._strides, self._region_bits, self._free_bits, self.ready,
             _NO_COLUMNS if keep is None else keep, learning, _NO_COLUMNS if protect is None else protect,
             self.counts, self._seen, result.in_region, result.foreground, learned,
             sliding, threshold, self.is_background, flips,
@@ -164,7 +167,7 @@ class BackgroundMap:
         index = learned[:n_learned].copy()
         if sliding:
             n_flips = kernels.forgotten(old, self.counts, self.is_background, threshold, forget, flips, n_flips)
-            kernels.flip_cells(flips[:n_flips], self.is_background, self.dilated, self._offsets)
+            kernels.flip_cells(flips[:n_flips], self.is_background, self.dilated, self._free_bits, self._offsets)
             self.history.append(index)
         elif learning:
             self._filling(index)
@@ -198,8 +201,9 @@ class BackgroundMap:
     def _update(self, touched: np.ndarray) -> None:
         """Re-decide these voxels (repeats allowed) and move the dilated counts of those that change."""
         kernels.update_cells(
-            touched, self.counts, self.is_background, self.dilated, self._offsets, self.threshold, self.forget_threshold
-        )
+            touched, self.counts, self.is_background, self.dilated, self._free_bits, self._offsets,
+            self.threshold, self.forget_threshold,
+        )  # fmt: skip
 
     def _protected_columns(self, boxes: list[ProtectedBox], margin_m: float) -> np.ndarray | None:
         """(x, y) columns of the padded grid (flattened) whose centre lies in a box plus the margin; None without boxes."""

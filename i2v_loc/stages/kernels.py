@@ -87,8 +87,8 @@ def background_pass(
     scale,
     upper,
     strides,
-    dilated,
-    outside,
+    region_bits,
+    free_bits,
     ready,
     keep_columns,
     learn,
@@ -104,7 +104,8 @@ def background_pass(
     flips,
 ):
     """Per point: its voxel of the padded grid, in the region, foreground (the map before this
-    frame); on a learning frame each region voxel outside the protected columns counts once.
+    frame: ``region_bits`` and ``free_bits``, a bit per voxel, small enough to stay in cache); on a
+    learning frame each region voxel outside the protected columns counts once.
     ``keep_columns`` / ``protect_columns`` are empty when no box is protected; ``seen`` is a bit per
     voxel, all clear between calls (an eighth of a byte array: it stays in cache). With ``evaluate``
     (the window is full and the old sample already taken off the counts) a counted voxel that
@@ -122,18 +123,17 @@ def background_pass(
             q = (points[i, a] - shift[a]) * scale
             q = min(max(q, np.float32(0.0)), upper[a])
             flat += np.int64(q) * strides[a]
-        state = dilated[flat]
-        inside = state < outside
-        fg = (state == 0) if ready else inside
+        byte, bit = flat >> 3, np.uint8(1) << np.uint8(flat & 7)
+        inside = (region_bits[byte] & bit) != 0
+        fg = (free_bits[byte] & bit) != 0 if ready else inside
         column = flat // nz
         if use_keep and inside and keep_columns[column]:
             fg = True
         in_region[i] = inside
         foreground[i] = fg
         if learn and inside and not (use_protect and protect_columns[column]):
-            bit = np.uint8(1) << np.uint8(flat & 7)
-            if not seen[flat >> 3] & bit:
-                seen[flat >> 3] |= bit
+            if not seen[byte] & bit:
+                seen[byte] |= bit
                 counts[flat] += 1
                 learned[n] = flat
                 n += 1
@@ -166,36 +166,41 @@ def forgotten(cells, counts, is_background, threshold, forget, flips, n_flips):
 
 
 @njit(**_JIT)
-def flip_cells(cells, is_background, dilated, offsets):
+def _count_neighbourhood(c, offsets, dilated, free_bits, step):
+    """Add ``step`` (+1 or -1) to the background count of the voxels around ``c``; a voxel whose
+    count leaves or reaches 0 loses or gets its foreground bit."""
+    for o in offsets:
+        v = c + o
+        if step > 0:
+            if dilated[v] == 0:
+                free_bits[v >> 3] &= ~(np.uint8(1) << np.uint8(v & 7))
+            dilated[v] += 1
+        else:
+            dilated[v] -= 1
+            if dilated[v] == 0:
+                free_bits[v >> 3] |= np.uint8(1) << np.uint8(v & 7)
+
+
+@njit(**_JIT)
+def flip_cells(cells, is_background, dilated, free_bits, offsets):
     """Toggle the decision of these (distinct) voxels and the background count of their neighbourhood."""
     for c in cells:
         state = not is_background[c]
         is_background[c] = state
-        if state:
-            for o in offsets:
-                dilated[c + o] += 1
-        else:
-            for o in offsets:
-                dilated[c + o] -= 1
+        _count_neighbourhood(c, offsets, dilated, free_bits, 1 if state else -1)
 
 
 @njit(**_JIT)
-def update_cells(cells, counts, is_background, dilated, offsets, threshold, forget):
+def update_cells(cells, counts, is_background, dilated, free_bits, offsets, threshold, forget):
     """Re-decide these voxels (repeats allowed); a voxel that changes state updates the background
     count of its neighbourhood."""
     for c in cells:
         current = is_background[c]
         count = counts[c]
         state = count >= threshold or (current and count > forget)
-        if state == current:
-            continue
-        is_background[c] = state
-        if state:
-            for o in offsets:
-                dilated[c + o] += 1
-        else:
-            for o in offsets:
-                dilated[c + o] -= 1
+        if state != current:
+            is_background[c] = state
+            _count_neighbourhood(c, offsets, dilated, free_bits, 1 if state else -1)
 
 
 @njit(**_JIT)
@@ -552,8 +557,8 @@ def warm_up() -> None:
         np.float32(1.0),
         np.full(3, 3.5, dtype=np.float32),
         np.array([16, 4, 1], dtype=np.int64),
-        cells,
-        np.uint16(60000),
+        np.zeros(8, dtype=np.uint8),
+        np.zeros(8, dtype=np.uint8),
         True,
         np.zeros(16, dtype=np.bool_),
         True,
@@ -571,9 +576,10 @@ def warm_up() -> None:
     one_cell = np.array([5], dtype=np.int64)
     forget_counts(one_cell, np.ones(64, np.uint8))
     forgotten(one_cell, np.zeros(64, np.uint8), flags, 1, 0, np.empty(1, dtype=np.int64), 0)
-    flip_cells(one_cell, flags, cells, np.array([0]))
-    flip_cells(one_cell, flags, cells, np.array([0]))
-    update_cells(np.array([5], dtype=np.int64), np.zeros(64, np.uint8), flags, cells, np.array([0]), 1, 0)
+    bits = np.zeros(8, dtype=np.uint8)
+    flip_cells(one_cell, flags, cells, bits, np.array([0]))
+    flip_cells(one_cell, flags, cells, bits, np.array([0]))
+    update_cells(one_cell, np.zeros(64, np.uint8), flags, cells, bits, np.array([0]), 1, 0)
     box_columns(np.zeros((1, 6)), 0.1, 0.0, 0.0, 0.2, 4, 4, np.zeros(16, dtype=np.bool_))
     box_mask(p32, np.zeros(3, dtype=np.float32), np.ones(3, dtype=np.float32), np.empty(3, dtype=np.bool_))
     above_plane(p32, take, np.array([0.0, 0.0, 1.0]), 0.0, 0.1, np.empty(3, dtype=np.int64))
