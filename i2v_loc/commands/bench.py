@@ -41,7 +41,9 @@ def register(sub) -> None:
         type=int,
         help=f"frames of each pass reported apart (default: until the background map is ready, at least {MIN_WARMUP_FRAMES})",
     )
-    p.add_argument("--json", metavar="OUT", help="write the figures as JSON to OUT ('-': standard output)")
+    p.add_argument(
+        "--json", metavar="OUT", help="write the figures as JSON to OUT ('-': standard output, the table to stderr)"
+    )
     p.add_argument(
         "--scaling", choices=["quick", "full", "none"], default="quick", help="the scaling table (default quick)"
     )
@@ -92,7 +94,7 @@ def run(args) -> int:
         from i2v_loc.commands.bench_service import bench_service
 
         report["service"] = bench_service(rec_path, method, args.clients, args.service_seconds)
-    print_report(report)
+    print_report(report, sys.stderr if args.json == "-" else sys.stdout)
     if args.json:
         import json
 
@@ -499,8 +501,7 @@ def _bench_files(files: list[Path], method: str, param_files: list[str]) -> dict
 # ----------------------------------------------------------------------------- output
 
 
-def print_report(report: dict) -> None:
-    out = sys.stdout
+def print_report(report: dict, out) -> None:
     print(
         f"{Path(report['recording']).name} ({report['recording_source']}): {report['frames']} frames timed, "
         f"{report['warmup_frames']} warm-up, {report['points_per_frame']:.0f} points per frame "
