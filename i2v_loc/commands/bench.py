@@ -73,7 +73,7 @@ def _cache_dir() -> Path:
 def run(args) -> int:
     if args.threads < 1 or args.repeat < 1 or (args.warmup is not None and args.warmup < 0):
         raise UserError("--threads and --repeat must be at least 1, --warmup at least 0")
-    os.environ.setdefault("OMP_NUM_THREADS", str(args.threads))  # Open3D reads it when it loads
+    os.environ["OMP_NUM_THREADS"] = str(args.threads)  # Open3D reads it when it loads (below)
     from threadpoolctl import threadpool_limits
 
     from i2v_loc.params import DEFAULT_METHOD
