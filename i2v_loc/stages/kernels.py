@@ -276,7 +276,8 @@ def plane_scores(sample, normals, offsets, threshold):
 def voxel_grid_keys(points, take, voxel, one):
     """Key of each taken point's voxel (origin at the taken points' minimum, computed in the type of
     ``one``/``voxel``: the points' own for float32 grids, float64 for ``one`` = 1.0) and the grid
-    dimensions; untaken points get -1."""
+    dimensions; untaken points get -1. The offsets from the minimum are never negative, so the
+    integer conversion is the floor."""
     n = points.shape[0]
     lo = np.full(3, one)
     lo[:] = np.inf
@@ -290,13 +291,13 @@ def voxel_grid_keys(points, take, voxel, one):
     for i in range(n):
         if take[i]:
             for a in range(3):
-                dims[a] = max(dims[a], np.int64(math.floor((points[i, a] * one - lo[a]) / voxel)) + 1)
+                dims[a] = max(dims[a], np.int64((points[i, a] * one - lo[a]) / voxel) + 1)
     keys = np.full(n, EMPTY, dtype=np.int64)
     for i in range(n):
         if take[i]:
             key = np.int64(0)
             for a in range(3):
-                key = key * dims[a] + np.int64(math.floor((points[i, a] * one - lo[a]) / voxel))
+                key = key * dims[a] + np.int64((points[i, a] * one - lo[a]) / voxel)
             keys[i] = key
     return keys, dims
 
