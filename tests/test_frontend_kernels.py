@@ -219,3 +219,21 @@ def test_region_box_is_the_passthrough_box():
     region = Region(RegionParams(x_min_m=-2, x_max_m=2, y_min_m=-1, y_max_m=1, z_min_m=0, z_max_m=1))
     points = np.array([[0, 0, 0.5], [2, 1, 1], [2.01, 0, 0.5], [0, 0, -0.01], [-2, -1, 0]], dtype=np.float32)
     assert region.roi_mask(points).tolist() == [True, True, False, False, True]
+
+
+@pytest.mark.parametrize("method", ["paper", "default", "articulated"])
+def test_no_kernel_is_compiled_while_frames_are_processed(method):
+    """Building the pipeline loads every specialisation its frames call: none is compiled in a frame."""
+    from numba.core.registry import CPUDispatcher
+
+    from i2v_loc.pipeline import Pipeline
+    from i2v_loc.stages import kernels
+
+    recording = Recording(SAMPLES / "man_tgx_docking")
+    pipeline = Pipeline(load_params(recording.sensors_file), method=method)
+    dispatchers = {name: f for name, f in vars(kernels).items() if isinstance(f, CPUDispatcher)}
+    before = {name: set(f.signatures) for name, f in dispatchers.items()}
+    for frame in itertools.islice(recording.frames(), 60):  # the map becomes ready, vehicles are found
+        pipeline.process(frame)
+    assert {name: set(f.signatures) for name, f in dispatchers.items()} == before
+    assert not [name for name, sigs in before.items() if not sigs and not name.startswith("_")]  # all loaded

@@ -596,5 +596,5 @@ def warm_up() -> None:
             voxel_sums(points, np.zeros((3, 0)), ids, len(vkeys))
             voxel_components(vkeys, dims, dense, tk, ti)
     counting_order(np.array([1, 0, 1], dtype=np.int64), 2)
-    min_area_rect(p64[:, :2])
+    min_area_rect(np.ascontiguousarray(p64[:, :2]))
     _WARM = True
