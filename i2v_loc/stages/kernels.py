@@ -288,17 +288,17 @@ def voxel_grid_keys(points, take, voxel, one):
                 if v < lo[a]:
                     lo[a] = v
     dims = np.ones(3, dtype=np.int64)
+    ijk = np.empty((n, 3), dtype=np.int64)
     for i in range(n):
         if take[i]:
             for a in range(3):
-                dims[a] = max(dims[a], np.int64((points[i, a] * one - lo[a]) / voxel) + 1)
+                q = np.int64((points[i, a] * one - lo[a]) / voxel)
+                ijk[i, a] = q
+                dims[a] = max(dims[a], q + 1)
     keys = np.full(n, EMPTY, dtype=np.int64)
     for i in range(n):
         if take[i]:
-            key = np.int64(0)
-            for a in range(3):
-                key = key * dims[a] + np.int64((points[i, a] * one - lo[a]) / voxel)
-            keys[i] = key
+            keys[i] = (ijk[i, 0] * dims[1] + ijk[i, 1]) * dims[2] + ijk[i, 2]
     return keys, dims
 
 
@@ -329,15 +329,14 @@ def group_keys(keys, n_taken):
         for i in range(n):
             if keys[i] >= 0:
                 dense[keys[i]] = 0
+        voxel_keys = np.empty(n_taken, dtype=np.int64)
         n_vox = 0
         for key in range(n_keys):
             if dense[key] == 0:
                 dense[key] = n_vox
+                voxel_keys[n_vox] = key
                 n_vox += 1
-        voxel_keys = np.empty(n_vox, dtype=np.int64)
-        for key in range(n_keys):
-            if dense[key] >= 0:
-                voxel_keys[dense[key]] = key
+        voxel_keys = voxel_keys[:n_vox]
         for i in range(n):
             if keys[i] >= 0:
                 ids[i] = dense[keys[i]]
