@@ -470,7 +470,7 @@ def _cross(o, a, b):
 
 
 @njit(**_JIT)
-def convex_hull(xy):
+def _convex_hull(xy):
     """Vertices of the convex hull, counter-clockwise, without collinear points (monotone chain)."""
     n = xy.shape[0]
     pts = xy[np.argsort(xy[:, 0], kind="mergesort")]  # by x, then (below) by y among equal x
@@ -503,7 +503,7 @@ def convex_hull(xy):
 def min_area_rect(xy):
     """Rotating calipers over the hull edges' directions (modulo 90 deg): centre x, y, extent
     along the best direction, extent across it, the direction; NaN centre when the hull is flat."""
-    hull = convex_hull(xy)
+    hull = _convex_hull(xy)
     m = hull.shape[0]
     out = np.full(5, np.nan)
     if m < 3:
