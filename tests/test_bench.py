@@ -84,3 +84,30 @@ def test_open3d_recipe_times_every_frame_given():
     frames = list(itertools.islice(rec.frames(), 3))
     times = open3d_recipe(frames, load_params(rec.sensors_file))
     assert len(times) == 3 and min(times) > 0
+
+
+def test_default_recording_is_generated_once_into_the_cache_or_falls_back_to_the_sample(tmp_path, monkeypatch):
+    from i2v_loc.commands import bench
+
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
+    calls = []
+
+    def fake_generate(path):
+        calls.append(path)
+        (path / "scans").mkdir(parents=True)
+        (path / "meta.yaml").write_text("format_version: 1\n")
+
+    monkeypatch.setattr(bench, "generate_bench_recording", fake_generate)
+    first, source = bench._recording(None)
+    assert first == tmp_path / "i2v-loc" / "bench" / bench.BENCH_NAME and "now cached" in source
+    again, source = bench._recording(None)
+    assert again == first and "cached in" in source and len(calls) == 1  # generated once
+
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "elsewhere"))
+
+    def failing(path):
+        raise OSError("read-only cache")
+
+    monkeypatch.setattr(bench, "generate_bench_recording", failing)
+    sample, source = bench._recording(None)
+    assert sample.name == "man_tgx_docking" and "committed 6 s sample" in source
