@@ -237,3 +237,16 @@ def test_no_kernel_is_compiled_while_frames_are_processed(method):
         pipeline.process(frame)
     assert {name: set(f.signatures) for name, f in dispatchers.items()} == before
     assert not [name for name, sigs in before.items() if not sigs and not name.startswith("_")]  # all loaded
+
+
+def test_min_area_rect_of_a_dense_blob_with_few_hull_points_matches_qhull():
+    """Most points inside the hull (the filter drops them), a few on it, duplicates and collinear ones."""
+    rng = np.random.default_rng(11)
+    inside = rng.uniform(-1, 1, (20000, 2)) * [6.0, 1.2]
+    edge = np.column_stack([np.linspace(-6, 6, 50), np.full(50, 1.2)])  # collinear along the top side
+    xy = np.vstack([inside, edge, edge[:5], [[-6.0, -1.2], [6.0, -1.2]]]) @ np.array([[0.8, 0.6], [-0.6, 0.8]])
+    rect = min_area_rect(xy)
+    center, length, width, yaw = ref.min_area_rect(xy)
+    assert (rect.length_m, rect.width_m) == pytest.approx((length, width), abs=1e-9)
+    assert rect.center_xy == pytest.approx(center, abs=1e-9) and rect.yaw_rad == pytest.approx(yaw, abs=1e-12)
+    assert (length, width) == pytest.approx((12.0, 2.4), abs=1e-3)

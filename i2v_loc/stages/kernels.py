@@ -470,8 +470,46 @@ def _cross(o, a, b):
 
 
 @njit(**_JIT)
+def _outside_octagon(xy):
+    """The points not strictly inside the polygon of the extreme points along x, y, x + y and x - y
+    (Akl-Toussaint): those strictly inside are inside the hull, never its vertices."""
+    n = xy.shape[0]
+    # support directions counter-clockwise from straight down: the extremes are hull vertices in order
+    dirs = np.array(
+        [[0.0, -1.0], [1.0, -1.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0], [-1.0, 1.0], [-1.0, 0.0], [-1.0, -1.0]]
+    )
+    best = np.full(8, -np.inf)
+    which = np.zeros(8, dtype=np.int64)
+    for i in range(n):
+        for d in range(8):
+            v = dirs[d, 0] * xy[i, 0] + dirs[d, 1] * xy[i, 1]
+            if v > best[d]:
+                best[d], which[d] = v, i
+    edges = np.empty((8, 2), dtype=np.int64)
+    m = 0
+    for d in range(8):
+        a, b = which[d], which[(d + 1) % 8]
+        if xy[a, 0] != xy[b, 0] or xy[a, 1] != xy[b, 1]:
+            edges[m, 0], edges[m, 1] = a, b
+            m += 1
+    if m < 3:
+        return xy
+    keep = np.empty(n, dtype=np.bool_)
+    for i in range(n):
+        inside = True
+        for e in range(m):
+            if _cross(xy[edges[e, 0]], xy[edges[e, 1]], xy[i]) <= 0:
+                inside = False
+                break
+        keep[i] = not inside
+    return xy[keep]
+
+
+@njit(**_JIT)
 def _convex_hull(xy):
-    """Vertices of the convex hull, counter-clockwise, without collinear points (monotone chain)."""
+    """Vertices of the convex hull, counter-clockwise, without collinear points (monotone chain on
+    the points the octagon filter leaves)."""
+    xy = _outside_octagon(xy) if xy.shape[0] > 64 else xy
     n = xy.shape[0]
     pts = xy[np.argsort(xy[:, 0], kind="mergesort")]  # by x, then (below) by y among equal x
     i = 0
