@@ -44,6 +44,17 @@ def grid_labels(points, voxel_m, origin=None):
     return labels[ijk[:, 0], ijk[:, 1], ijk[:, 2]].astype(np.int64) - 1
 
 
+def euclidean_labels(points, tolerance_m):
+    """Connected components of a k-d tree's pairs at most ``tolerance_m`` apart."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+    from scipy.spatial import cKDTree
+
+    pairs = cKDTree(points).query_pairs(tolerance_m, output_type="ndarray")
+    graph = coo_matrix((np.ones(len(pairs), dtype=np.int8), (pairs[:, 0], pairs[:, 1])), shape=(len(points),) * 2)
+    return connected_components(graph, directed=False)[1].astype(np.int64)
+
+
 def split_by_label(labels):
     order = np.argsort(labels, kind="stable")
     groups = np.split(order, np.flatnonzero(np.diff(labels[order])) + 1)

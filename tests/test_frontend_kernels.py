@@ -16,7 +16,7 @@ from i2v_loc.params import BackgroundParams, ConcatenationParams, Extrinsics, Re
 from i2v_loc.recording import Recording
 from i2v_loc.stages.background import BackgroundMap, ProtectedBox
 from i2v_loc.stages.concatenation import Concatenation, MotionHint
-from i2v_loc.stages.primitives import grid_labels, min_area_rect, split_by_label, voxel_centroids
+from i2v_loc.stages.primitives import euclidean_labels, grid_labels, min_area_rect, split_by_label, voxel_centroids
 from i2v_loc.stages.region import Region
 
 
@@ -250,3 +250,18 @@ def test_min_area_rect_of_a_dense_blob_with_few_hull_points_matches_qhull():
     assert (rect.length_m, rect.width_m) == pytest.approx((length, width), abs=1e-9)
     assert rect.center_xy == pytest.approx(center, abs=1e-9) and rect.yaw_rad == pytest.approx(yaw, abs=1e-12)
     assert (length, width) == pytest.approx((12.0, 2.4), abs=1e-3)
+
+
+@pytest.mark.parametrize("seed", range(4))
+@pytest.mark.parametrize("dims", [2, 3])
+@pytest.mark.parametrize("tolerance_m", [0.3, 0.7])
+def test_euclidean_labels_are_the_k_d_tree_components_numbered_alike(seed, dims, tolerance_m):
+    points = blobs(seed, n=3000, spread=15.0, dtype=np.float64)[:, :dims]
+    got = euclidean_labels(points, tolerance_m)
+    want = ref.euclidean_labels(points, tolerance_m)
+    assert want.max() >= 2 and np.array_equal(got, want)
+
+
+def test_euclidean_labels_join_points_exactly_at_the_tolerance_and_no_further():
+    points = np.array([[0.0, 0.0], [0.5, 0.0], [1.0, 0.0], [1.5000001, 0.0], [0.0, 0.5]])
+    assert euclidean_labels(points, 0.5).tolist() == ref.euclidean_labels(points, 0.5).tolist() == [0, 0, 0, 1, 0]

@@ -444,6 +444,65 @@ def voxel_components(voxel_keys, dims, dense, table_keys, table_ids):
 
 
 @njit(**_JIT)
+def radius_components(points, radius):
+    """Connected components of the graph joining points at most ``radius`` apart (squared distances
+    summed over the coordinates in order, as a k-d tree's pair query does), numbered in the order of
+    their first point. Points are binned in cells of ``radius``: a pair can only join across
+    neighbouring cells. ``points`` (N, 3) float64 (a 2-D cloud with a zero third column)."""
+    n = points.shape[0]
+    r2 = radius * radius
+    lo = np.full(3, np.inf)
+    for i in range(n):
+        for a in range(3):
+            lo[a] = min(lo[a], points[i, a])
+    cell = np.empty((n, 3), dtype=np.int64)
+    dims = np.ones(3, dtype=np.int64)
+    for i in range(n):
+        for a in range(3):
+            c = np.int64((points[i, a] - lo[a]) / radius)
+            cell[i, a] = c
+            dims[a] = max(dims[a], c + 1)
+    keys = np.empty(n, dtype=np.int64)
+    for i in range(n):
+        keys[i] = (cell[i, 0] * dims[1] + cell[i, 1]) * dims[2] + cell[i, 2]
+    order = np.argsort(keys)
+    sorted_keys = keys[order]
+    parent = np.arange(n)
+    for s in range(n):
+        i = order[s]
+        for di in range(-1, 2):
+            for dj in range(-1, 2):
+                for dk in range(-1, 2):
+                    ci, cj, ck = cell[i, 0] + di, cell[i, 1] + dj, cell[i, 2] + dk
+                    if ci < 0 or cj < 0 or ck < 0 or ci >= dims[0] or cj >= dims[1] or ck >= dims[2]:
+                        continue
+                    key = (ci * dims[1] + cj) * dims[2] + ck
+                    t = np.searchsorted(sorted_keys, key)
+                    while t < n and sorted_keys[t] == key:
+                        j = order[t]
+                        t += 1
+                        if j <= i:
+                            continue
+                        d = 0.0
+                        for a in range(3):
+                            diff = points[i, a] - points[j, a]
+                            d += diff * diff
+                        if d <= r2:
+                            a_root, b_root = _root(parent, i), _root(parent, j)
+                            if a_root != b_root:
+                                parent[max(a_root, b_root)] = min(a_root, b_root)
+    labels = np.full(n, EMPTY, dtype=np.int64)
+    n_comp = 0
+    for i in range(n):
+        r = _root(parent, i)
+        if labels[r] < 0:
+            labels[r] = n_comp
+            n_comp += 1
+        labels[i] = labels[r]
+    return labels
+
+
+@njit(**_JIT)
 def counting_order(labels, n_labels):
     """Stable order of the points by label (labels in 0..n_labels-1) and the count of each label."""
     counts = np.zeros(n_labels, dtype=np.int64)
@@ -633,5 +692,6 @@ def warm_up() -> None:
             voxel_sums(points, np.zeros((3, 0)), ids, len(vkeys))
             voxel_components(vkeys, dims, dense, tk, ti)
     counting_order(np.array([1, 0, 1], dtype=np.int64), 2)
+    radius_components(p64, 0.5)
     min_area_rect(np.ascontiguousarray(p64[:, :2]))
     _WARM = True

@@ -5,9 +5,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import connected_components
-from scipy.spatial import cKDTree
 
 from i2v_loc.stages import kernels
 
@@ -89,10 +86,9 @@ def euclidean_labels(points: np.ndarray, tolerance_m: float, voxel_m: float = 0.
         _, first, inverse = np.unique(voxel_keys(points, voxel_m), return_index=True, return_inverse=True)
         centroids, _ = voxel_centroids(points, voxel_m)  # same key order as np.unique above
         return euclidean_labels(centroids, tolerance_m)[inverse.reshape(-1)]
-    pairs = cKDTree(points).query_pairs(tolerance_m, output_type="ndarray")
-    graph = coo_matrix((np.ones(len(pairs), dtype=np.int8), (pairs[:, 0], pairs[:, 1])), shape=(n, n))
-    _, labels = connected_components(graph, directed=False)
-    return labels.astype(np.int64)
+    xyz = np.zeros((n, 3))
+    xyz[:, : points.shape[1]] = points  # a 2-D cloud gets a zero third coordinate: the same distances
+    return kernels.radius_components(xyz, float(tolerance_m))
 
 
 def split_by_label(labels: np.ndarray) -> list[np.ndarray]:
