@@ -304,9 +304,14 @@ def voxel_grid_keys(points, take, voxel, one):
 
 @njit(**_JIT)
 def _hash_slot(table_keys, key):
+    """Open addressing, linear probing; the key mixed first (splitmix64's finaliser: grid keys are
+    regular, and probing clusters on them otherwise)."""
     mask = table_keys.shape[0] - 1
-    h = (key * np.int64(-7046029254386353131)) >> np.int64(17)
-    slot = h & mask
+    x = np.uint64(key)
+    x = (x ^ (x >> np.uint64(33))) * np.uint64(0xFF51AFD7ED558CCD)
+    x = (x ^ (x >> np.uint64(33))) * np.uint64(0xC4CEB9FE1A85EC53)
+    x = x ^ (x >> np.uint64(33))
+    slot = np.int64(x & np.uint64(mask))
     while table_keys[slot] != EMPTY and table_keys[slot] != key:
         slot = (slot + 1) & mask
     return slot
