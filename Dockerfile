@@ -15,6 +15,9 @@ COPY service ./service
 COPY samples ./samples
 RUN pip install --no-cache-dir . && rm -rf /root/.cache /app/i2v_loc /app/service /app/samples
 COPY params ./params
+# The front end's compiled kernels (numba) are built once here, into a cache the service user reads
+ENV NUMBA_CACHE_DIR=/app/.numba_cache
+RUN python -c "from i2v_loc.stages import kernels; kernels.warm_up()"
 RUN chown -R i2v /app
 
 USER i2v

@@ -1,6 +1,7 @@
 """The ``i2v-loc`` command. Each subcommand lives in ``i2v_loc.commands.<name>`` and exposes
-``register(subparsers)``; modules are imported only when present, so heavy libraries load only
-for the subcommand that needs them."""
+``register(subparsers)``; only the module of the subcommand that runs is imported (all of them
+for the overview help), so heavy libraries load only for the subcommand that needs them, and
+``--version`` loads none."""
 
 from __future__ import annotations
 
@@ -10,7 +11,6 @@ import os
 import sys
 
 from i2v_loc import __version__
-from i2v_loc.params import ParamsError
 
 COMMANDS = ["sim", "realism", "params", "calibrate", "run", "detect", "eval", "sweep", "serve", "bench", "sources"]
 
@@ -19,11 +19,12 @@ class UserError(Exception):
     """An error caused by the user's input: printed without a traceback, exit code 2."""
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(only: str | None = None) -> argparse.ArgumentParser:
+    """The parser with every subcommand, or with ``only`` that one."""
     parser = argparse.ArgumentParser(prog="i2v-loc", description=__doc__.split("\n")[0] if __doc__ else None)
     parser.add_argument("--version", action="version", version=f"i2v-loc {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
-    for name in COMMANDS:
+    for name in [only] if only else COMMANDS:
         try:
             module = importlib.import_module(f"i2v_loc.commands.{name}")
         except ModuleNotFoundError as err:
@@ -35,11 +36,17 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = build_parser()
+    argv = sys.argv[1:] if argv is None else list(argv)
+    if argv == ["--version"]:
+        print(f"i2v-loc {__version__}")
+        return 0
+    parser = build_parser(argv[0] if argv and argv[0] in COMMANDS else None)
     args = parser.parse_args(argv)
     if not getattr(args, "func", None):
         parser.print_help()
         return 2
+    from i2v_loc.params import ParamsError
+
     try:
         return int(args.func(args) or 0)
     except (UserError, ParamsError, FileNotFoundError) as err:

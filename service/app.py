@@ -10,6 +10,7 @@ import json
 import logging
 import math
 import threading
+import time
 from pathlib import Path
 
 import uvicorn
@@ -485,7 +486,9 @@ async def _serve_states(service: Service, websocket: WebSocket, points: str | No
 async def _send_loop(websocket: WebSocket, client) -> None:
     with contextlib.suppress(WebSocketDisconnect, RuntimeError, OSError):
         while True:
-            await websocket.send_text(await client.next_text())
+            text = await client.next_text()
+            # the wall-clock send time: frame in (``frame_in_unix_s``) to message out is measured
+            await websocket.send_text(f'{text[:-1]},"sent_unix_s":{time.time():.6f}}}')
             client.sent += 1
 
 

@@ -334,11 +334,12 @@ class PipelineRunner:
         except Exception as err:
             self._skip(k, "source_error", err)
             return
+        taken_s = time.time()  # frame in: the state carries it, the WebSocket adds the send time
         try:
             with self._apply_lock:
                 self._apply_updates()
                 result = self.pipeline.process(frame)
-            self._publish(frame, result)
+            self._publish(frame, result, taken_s)
         except Exception as err:  # any part of one frame: process, serialise, record, publish
             self._skip(k, "pipeline_error", err)
 
@@ -348,9 +349,10 @@ class PipelineRunner:
         self.last_frame_error = {"frame": k, "reason": reason, "error": detail[:500]}
         log.warning("frame %d was skipped (%s): %s", k, reason, detail)
 
-    def _publish(self, frame, result) -> None:
+    def _publish(self, frame, result, taken_s: float) -> None:
         state = _finite(result.to_json())
         state["params_version"] = self.params_version
+        state["frame_in_unix_s"] = round(taken_s, 6)
         plain = dumps(state)
         with_points = None
         xy = self._foreground(result, frame)

@@ -60,6 +60,12 @@ class StateLine(_Strict):
     vehicles: list[VehicleState]
     params_version: int | None = Field(None, description="Parameter version the frame ran with (service only)")
     foreground: Foreground | None = Field(None, description="Dashboard points (WebSocket only)")
+    frame_in_unix_s: float | None = Field(
+        None, description="Wall-clock time (Unix s) the service took the frame from its source (service only)"
+    )
+    sent_unix_s: float | None = Field(
+        None, description="Wall-clock time (Unix s) this message was sent (WebSocket only)"
+    )
 
 
 def state_json_schema() -> dict:

@@ -17,9 +17,10 @@ learned, so a vehicle that stops does not become background; points in the box (
 pipeline's choice (those that have travelled; a parked trailer never does).
 
 The map is a dense grid: ``counts`` (uint8 per voxel) and ``dilated`` (how many background voxels
-in each voxel's 3x3x3 neighbourhood). Once the window is full the threshold is fixed and only the
-voxels whose count crossed it are updated; while the window fills the threshold grows with the
-sample count, so the map is rebuilt at once (a few ms per learning frame, first seconds only).
+in each voxel's 3x3x3 neighbourhood). One compiled pass per frame looks every point up and, on a
+learning frame, counts its voxel. Once the window is full the threshold is fixed and only the
+voxels whose count changed are re-decided; while the window fills the threshold grows with the
+sample count, so every voxel counted so far is re-decided (all others cannot change).
 """
 
 from __future__ import annotations
@@ -31,9 +32,11 @@ from pathlib import Path
 import numpy as np
 
 from i2v_loc.params import BackgroundParams, RegionParams
+from i2v_loc.stages import kernels
 
 FORMAT_VERSION = 1
 OUTSIDE = np.uint16(60000)  # padding marker in ``dilated`` (above any neighbourhood count)
+_NO_COLUMNS = np.zeros(0, dtype=bool)
 
 
 @dataclass
@@ -60,7 +63,7 @@ def check_grid(params: BackgroundParams, region: RegionParams) -> None:
     """ValueError naming the fix when the padded grid would exceed ``max_voxels`` (also for a region
     so large, or infinite, that the voxel count overflows)."""
     box = np.array(region_box(region), dtype=float)
-    extent = np.ceil((box[3:] - box[:3]) / params.voxel_size_m - 1e-9) + 2  # float: no integer overflow
+    extent = np.ceil((box[3:] - box[:3]) / params.voxel_size_m - 1e-9) + 2 * _padding(params)  # float: no overflow
     cells = float(np.prod(extent)) if np.all(np.isfinite(extent)) else float("inf")
     if not cells <= params.max_voxels:
         raise ValueError(
@@ -68,6 +71,10 @@ def check_grid(params: BackgroundParams, region: RegionParams) -> None:
             f"{params.voxel_size_m} m) exceeds background.max_voxels {params.max_voxels}: "
             "enlarge background.voxel_size_m or shrink the region"
         )
+
+
+def _padding(params: BackgroundParams) -> int:
+    return max(1, params.dilation_voxels)
 
 
 @dataclass
@@ -83,9 +90,10 @@ class BackgroundMap:
         self.region_box = region_box(region)
         self.origin = np.array(self.region_box[:3], dtype=np.float64)
         self.shape = grid_shape(params, region)
-        # one voxel of padding on every side: points outside the region are clipped into it, and
-        # neighbour offsets of a region voxel never leave the array
-        self.padded = tuple(n + 2 for n in self.shape)
+        # padding on every side: points outside the region are clipped into it, and neighbour
+        # offsets of a region voxel (up to the dilation) never leave the array
+        self.pad = _padding(params)
+        self.padded = tuple(n + 2 * self.pad for n in self.shape)
         cells = int(np.prod(self.padded, dtype=np.int64))
         self._strides = np.array([self.padded[1] * self.padded[2], self.padded[2], 1], dtype=np.int64)
         d = params.dilation_voxels
@@ -93,16 +101,27 @@ class BackgroundMap:
         self._offsets = offsets @ self._strides
         self.counts = np.zeros(cells, dtype=np.uint8)
         self.is_background = np.zeros(cells, dtype=bool)
-        # background voxels within the dilation of each voxel; padding holds OUTSIDE so that one
-        # lookup answers both "in the region" (< OUTSIDE) and "foreground" (== 0)
+        # background voxels within the dilation of each voxel; padding holds OUTSIDE (never 0)
         self.dilated = np.zeros(cells, dtype=np.uint16)
-        self.dilated[~self._region_cells()] = OUTSIDE
-        self.history: deque[np.ndarray] = deque()
+        region_cells = self._region_cells()
+        self.dilated[~region_cells] = OUTSIDE
+        # the per-point lookups read bits (in the region; dilated count 0) that stay in cache
+        self._region_bits = np.packbits(region_cells, bitorder="little")
+        self._free_bits = self._region_bits.copy()
+        self.history: deque[np.ndarray] = deque()  # the voxels of each sample, each once
         self.frames_seen = 0
+        self._seen = np.zeros(
+            cells // 8 + 1, dtype=np.uint8
+        )  # a bit per voxel for the learning pass, clear between frames
+        self._occupied: list[np.ndarray] = []  # while the window fills: the voxels counted for the first time
+        self._shift = (self.origin - self.pad * params.voxel_size_m).astype(np.float32)
+        self._scale = np.float32(1.0 / params.voxel_size_m)
+        self._upper = np.array(self.padded, dtype=np.float32) - np.float32(0.5)
+        kernels.warm_up()
 
     def _region_cells(self) -> np.ndarray:
         inside = np.zeros(self.padded, dtype=bool)
-        inside[1:-1, 1:-1, 1:-1] = True
+        inside[self.pad : -self.pad, self.pad : -self.pad, self.pad : -self.pad] = True
         return inside.ravel()
 
     # ----------------------------------------------------------------- queries
@@ -118,109 +137,100 @@ class BackgroundMap:
     @property
     def threshold(self) -> int:
         """Samples a voxel must be occupied in to be background (grows while the window fills)."""
-        return max(1, int(np.ceil(self.params.occupied_fraction * self.samples - 1e-9)))
-
-    def voxel_index(self, points: np.ndarray) -> np.ndarray:
-        """Flat index (padded grid) of each point's voxel; points outside the region land in the padding."""
-        q = np.asarray(points, dtype=np.float32) - (self.origin - self.params.voxel_size_m).astype(np.float32)
-        q *= np.float32(1.0 / self.params.voxel_size_m)
-        np.clip(q, 0.0, np.array(self.padded, dtype=np.float32) - 0.5, out=q)
-        ijk = q.astype(np.int64)
-        flat = ijk[:, 0] * self._strides[0]
-        flat += ijk[:, 1] * self._strides[1]
-        flat += ijk[:, 2]
-        return flat
-
-    def classify(self, index: np.ndarray) -> BackgroundResult:
-        state = self.dilated[index]
-        in_region = state < OUTSIDE
-        return BackgroundResult(in_region, state == 0 if self.ready else in_region)
+        return self._thresholds(self.samples)[0]
 
     # ----------------------------------------------------------------- learning
 
     def process(self, points: np.ndarray, protected: list[ProtectedBox] = ()) -> BackgroundResult:
         """Region and foreground masks of ``points`` (yard frame) with the map as it was before this
-        frame; then learns from the frame when it is a learning frame."""
-        index = self.voxel_index(points)
-        result = self.classify(index)
-        columns = index // self.padded[2] if len(protected) else None
-        if len(protected) and self.ready:
-            # a tracked vehicle's points are never background, even where a standing vehicle was learned
-            result.foreground |= (
-                result.in_region & self._protected_columns(protected, self.params.keep_margin_m)[columns]
-            )
-        if self.frames_seen % self.params.learn_every_frames == 0:
-            learn = result.in_region
-            if len(protected):
-                learn = learn & ~self._protected_columns(protected, self.params.protect_margin_m)[columns]
-            self.learn(index[learn])
+        frame; then learns from the frame when it is a learning frame. One compiled pass over the
+        points does the lookup, the counting and (window full) finds the voxels that turn background."""
+        points = np.ascontiguousarray(points, dtype=np.float32)
+        n = len(points)
+        result = BackgroundResult(np.empty(n, dtype=bool), np.empty(n, dtype=bool))
+        learning = self.frames_seen % self.params.learn_every_frames == 0
+        sliding = learning and self.samples >= self.params.window_frames
+        old = self.history.popleft() if sliding else None
+        if sliding:
+            kernels.forget_counts(old, self.counts)  # first: the pass then sees every voxel's final count
+        threshold, forget = self._thresholds(self.params.window_frames)
+        keep = self._protected_columns(protected, self.params.keep_margin_m) if self.ready else None
+        protect = self._protected_columns(protected, self.params.protect_margin_m) if learning else None
+        learned = np.empty(n if learning else 0, dtype=np.int64)
+        flips = np.empty(n + len(old) if sliding else 0, dtype=np.int64)
+        n_learned, n_flips = kernels.background_pass(
+            points, self._shift, self._scale, self._upper, self._strides, self._region_bits, self._free_bits, self.ready,
+            _NO_COLUMNS if keep is None else keep, learning, _NO_COLUMNS if protect is None else protect,
+            self.counts, self._seen, result.in_region, result.foreground, learned,
+            sliding, threshold, self.is_background, flips,
+        )  # fmt: skip
+        index = learned[:n_learned].copy()
+        if sliding:
+            n_flips = kernels.forgotten(old, self.counts, self.is_background, threshold, forget, flips, n_flips)
+            kernels.flip_cells(flips[:n_flips], self.is_background, self.dilated, self._free_bits, self._offsets)
+            self.history.append(index)
+        elif learning:
+            self._filling(index)
         self.frames_seen += 1
         return result
 
-    def learn(self, index: np.ndarray) -> None:
-        """Add one sample: the voxels in ``index`` (region voxels; duplicates allowed) were occupied."""
-        index = index.astype(np.int32)
-        was_filling = self.samples < self.params.window_frames
-        self.counts[index] += 1  # fancy += counts a repeated voxel once: one sample, one count
+    def _filling(self, index: np.ndarray) -> None:
+        """A sample while the window fills: the thresholds moved, so every voxel ever counted may
+        change (all others have count 0 and are not background, as counts only grow meanwhile)."""
         self.history.append(index)
-        old = self.history.popleft() if self.samples > self.params.window_frames else None
-        if old is not None:
-            self.counts[old] -= 1
-        if was_filling:
-            self._rebuild()
-        else:
-            self._update(index if old is None else np.concatenate([index, old]))
+        self._occupied.append(index[self.counts[index] == 1])
+        self._update(np.concatenate(self._occupied))
+        if self.samples == self.params.window_frames:
+            self._occupied = []
+
+    def _thresholds(self, samples: int) -> tuple[int, int]:
+        """(occupied in at least, forgotten at most) samples, of ``samples``."""
+        occupied = max(1, int(np.ceil(self.params.occupied_fraction * samples - 1e-9)))
+        return occupied, int(np.floor(self.params.forget_fraction * samples + 1e-9))
 
     @property
     def forget_threshold(self) -> int:
         """A background voxel occupied in at most this many samples of the window is forgotten."""
-        return int(np.floor(self.params.forget_fraction * self.samples + 1e-9))
-
-    def _state(self, counts: np.ndarray, current: np.ndarray) -> np.ndarray:
-        # hysteresis: a wall hidden behind a standing truck for a while stays background
-        return (counts >= self.threshold) | (current & (counts > self.forget_threshold))
+        return self._thresholds(self.samples)[1]
 
     def _rebuild(self) -> None:
-        """While the window fills the thresholds move: compare every voxel."""
-        self._flip(np.flatnonzero(self._state(self.counts, self.is_background) != self.is_background))
+        """Compare every voxel (a loaded map)."""
+        state = (self.counts >= self.threshold) | (self.is_background & (self.counts > self.forget_threshold))
+        self._update(np.flatnonzero(state != self.is_background))
 
     def _update(self, touched: np.ndarray) -> None:
-        """Once the thresholds are fixed only the touched voxels can change."""
-        current = self.is_background[touched]
-        self._flip(np.unique(touched[self._state(self.counts[touched], current) != current]))
+        """Re-decide these voxels (repeats allowed) and move the dilated counts of those that change."""
+        kernels.update_cells(
+            touched, self.counts, self.is_background, self.dilated, self._free_bits, self._offsets,
+            self.threshold, self.forget_threshold,
+        )  # fmt: skip
 
-    def _flip(self, changed: np.ndarray) -> None:
-        """Toggle the background state of these (unique) voxels and their neighbourhood counts."""
-        if not len(changed):
-            return
-        on = ~self.is_background[changed]
-        self.is_background[changed] = on
-        added, removed = changed[on], changed[~on]
-        for offset in self._offsets:  # unique cells: each fancy update touches a voxel once
-            self.dilated[added + offset] += 1
-            self.dilated[removed + offset] -= 1
-
-    def _protected_columns(self, boxes: list[ProtectedBox], margin_m: float) -> np.ndarray:
-        """(x, y) columns of the padded grid (flattened) whose centre lies in a box plus the margin."""
+    def _protected_columns(self, boxes: list[ProtectedBox], margin_m: float) -> np.ndarray | None:
+        """(x, y) columns of the padded grid (flattened) whose centre lies in a box plus the margin; None without boxes."""
+        if not len(boxes):
+            return None
+        rows = np.array(
+            [(*b.center_xy, np.cos(b.yaw_rad), np.sin(b.yaw_rad), b.half_length_m, b.half_width_m) for b in boxes],
+            dtype=np.float64,
+        )
         nx, ny = self.padded[0], self.padded[1]
         mask = np.zeros(nx * ny, dtype=bool)
-        voxel, margin = self.params.voxel_size_m, margin_m + self.params.voxel_size_m / 2
-        for box in boxes:
-            reach = np.hypot(box.half_length_m, box.half_width_m) + margin
-            lo = np.floor((np.asarray(box.center_xy) - reach - self.origin[:2]) / voxel).astype(int) + 1
-            hi = np.ceil((np.asarray(box.center_xy) + reach - self.origin[:2]) / voxel).astype(int) + 1
-            lo, hi = np.clip(lo, 0, [nx - 1, ny - 1]), np.clip(hi, 0, [nx - 1, ny - 1])
-            ii, jj = np.meshgrid(np.arange(lo[0], hi[0] + 1), np.arange(lo[1], hi[1] + 1), indexing="ij")
-            cx = self.origin[0] + (ii - 0.5) * voxel - box.center_xy[0]
-            cy = self.origin[1] + (jj - 0.5) * voxel - box.center_xy[1]
-            c, s = np.cos(box.yaw_rad), np.sin(box.yaw_rad)
-            inside = (np.abs(cx * c + cy * s) <= box.half_length_m + margin) & (
-                np.abs(-cx * s + cy * c) <= box.half_width_m + margin
-            )
-            mask[(ii * ny + jj)[inside]] = True
+        voxel = self.params.voxel_size_m
+        corner = self.origin[:2] - (self.pad - 1) * voxel  # the kernel counts one voxel of padding
+        kernels.box_columns(rows, margin_m + voxel / 2, corner[0], corner[1], voxel, nx, ny, mask)
         return mask
 
     # ----------------------------------------------------------------- saving
+
+    def _reindex(self, flat: np.ndarray, pad_from: int, pad_to: int) -> np.ndarray:
+        """Flat voxel indices of a grid padded by ``pad_from`` as indices of one padded by ``pad_to``
+        (files hold one voxel of padding, whatever the dilation)."""
+        if pad_from == pad_to:
+            return flat
+        ijk = np.unravel_index(flat, tuple(n + 2 * pad_from for n in self.shape))
+        return np.ravel_multi_index(
+            tuple(i + pad_to - pad_from for i in ijk), tuple(n + 2 * pad_to for n in self.shape)
+        )
 
     def save(self, path: str | Path) -> None:
         """The learned map (background voxels and grid) as .npz; loaded maps start as a full window."""
@@ -230,7 +240,7 @@ class BackgroundMap:
             origin=self.origin,
             shape=np.array(self.shape),
             voxel_size_m=self.params.voxel_size_m,
-            background=np.flatnonzero(self.is_background).astype(np.int64),
+            background=self._reindex(np.flatnonzero(self.is_background), self.pad, 1),
         )
 
     def load(self, path: str | Path) -> None:
@@ -250,10 +260,11 @@ class BackgroundMap:
             )
             if not same:
                 raise ValueError(f"{path}: background map of another grid (region or background.voxel_size_m changed)")
-            cells = data["background"]
+            cells = self._reindex(data["background"].astype(np.int64), 1, self.pad)
         # a loaded map acts as a full window in which its voxels were always occupied
         window = self.params.window_frames
         self.counts[:] = 0
         self.counts[cells] = window
-        self.history = deque([cells.astype(np.int32)] * window)
+        self.history = deque([cells.astype(np.int64)] * window)
+        self._occupied = []
         self._rebuild()

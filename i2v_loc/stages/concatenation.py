@@ -22,6 +22,7 @@ import numpy as np
 from i2v_loc.frame import SensorScan
 from i2v_loc.geometry import extrinsics_matrix
 from i2v_loc.params import ConcatenationParams, SensorConfig
+from i2v_loc.stages import kernels
 from i2v_loc.stages.primitives import voxel_centroids
 
 DROP_REASONS = ("out_of_sync", "empty", "missing", "nan_points")
@@ -49,19 +50,13 @@ class ConcatenationResult:
     lag_s: np.ndarray | None = None  # (N,) reference time minus each point's capture time (``merge`` only)
 
 
-@dataclass
-class _CleanSweep:
-    name: str
-    stamp_s: float
-    points: np.ndarray
-    time_offset_s: np.ndarray
-
-
 class Concatenation:
     def __init__(self, params: ConcatenationParams, sensors: list[SensorConfig]):
         self.params = params
         self.sensors = {s.name: s for s in sensors}
-        self._to_yard = {s.name: extrinsics_matrix(s.extrinsics).astype(np.float32) for s in sensors}
+        to_yard = {s.name: extrinsics_matrix(s.extrinsics).astype(np.float32) for s in sensors}
+        self._to_yard = {name: (np.ascontiguousarray(t[:3, :3]), t[:3, 3].copy()) for name, t in to_yard.items()}
+        kernels.warm_up()
 
     def process(self, scans: dict[str, SensorScan], motion: list[MotionHint] = ()) -> ConcatenationResult:
         """Merged, motion-interpolated and voxel-downsampled cloud (the paper's order)."""
@@ -75,50 +70,55 @@ class Concatenation:
 
     def merge(self, scans: dict[str, SensorScan]) -> ConcatenationResult:
         """Cleaned, synchronised sweeps in the yard frame with each point's lag to the reference time;
-        neither interpolated nor downsampled (the default method does both on the foreground only)."""
+        neither interpolated nor downsampled (the default method does both on the foreground only).
+
+        One compiled pass per sweep cleans it and writes its points in the yard frame straight into
+        the merged cloud; a sweep dropped as out of sync afterwards is cut out again."""
         faults: dict[str, str] = {}
         dropped = dict.fromkeys(DROP_REASONS, 0)
-        sweeps = self._clean_all(scans, faults, dropped)
-        reference_s, in_sync = self._synchronise([s.stamp_s for s in sweeps])
-        for sweep, ok in zip(sweeps, in_sync):
-            if not ok:
-                faults[sweep.name] = "out_of_sync"
-                dropped["out_of_sync"] += 1
-        kept = [s for s, ok in zip(sweeps, in_sync) if ok]
-        points, lag_s = self._merge(kept, reference_s)
-        return ConcatenationResult(points, reference_s, [s.name for s in kept], faults, dropped, lag_s)
-
-    # ----------------------------------------------------------------- cleaning
-
-    def _clean_all(self, scans: dict[str, SensorScan], faults: dict, dropped: dict) -> list[_CleanSweep]:
-        sweeps = []
+        present = [scans[name] for name in self.sensors if name in scans]
+        total = sum(len(scan.points) for scan in present)
+        points, offsets = np.empty((total, 3), dtype=np.float32), np.empty(total, dtype=np.float32)
+        sweeps = []  # (name, stamp on the common clock, first row, rows)
+        start = 0
         for name in self.sensors:
             if name not in scans:
                 faults[name] = "missing"
                 dropped["missing"] += 1
                 continue
-            sweep = self._clean(scans[name], faults, dropped)
-            if sweep is not None:
-                sweeps.append(sweep)
+            scan, config, (rotation, translation) = scans[name], self.sensors[name], self._to_yard[name]
+            kept, n_bad = kernels.sweep_to_yard(
+                np.ascontiguousarray(scan.points), np.ascontiguousarray(scan.time_offset_s), rotation, translation,
+                config.min_range_m**2, config.max_range_m**2, points, offsets, start,
+            )  # fmt: skip
+            if n_bad:
+                faults[name] = "nan_points"
+                dropped["nan_points"] += n_bad
+            if not kept or not np.isfinite(scan.stamp_s):
+                faults[name] = "empty"
+                dropped["empty"] += 1
+                continue
+            sweeps.append((name, scan.stamp_s + config.time_offset_s, start, kept))
+            start += kept
         for name in scans.keys() - self.sensors.keys():
             faults[name] = "unknown_sensor"
-        return sweeps
-
-    def _clean(self, scan: SensorScan, faults: dict, dropped: dict) -> _CleanSweep | None:
-        config = self.sensors[scan.sensor]
-        points, offsets = scan.points, scan.time_offset_s
-        finite = np.isfinite(points).all(axis=1) & np.isfinite(offsets)
-        n_bad = int(len(points) - finite.sum())
-        if n_bad:
-            faults[scan.sensor] = "nan_points"
-            dropped["nan_points"] += n_bad
-        range_sq = np.einsum("ij,ij->i", points, points, dtype=np.float64)
-        keep = finite & (range_sq >= config.min_range_m**2) & (range_sq <= config.max_range_m**2)
-        if not keep.any() or not np.isfinite(scan.stamp_s):
-            faults[scan.sensor] = "empty"
-            dropped["empty"] += 1
-            return None
-        return _CleanSweep(scan.sensor, scan.stamp_s + config.time_offset_s, points[keep], offsets[keep])
+        reference_s, in_sync = self._synchronise([stamp for _, stamp, _, _ in sweeps])
+        for (name, *_), ok in zip(sweeps, in_sync):
+            if not ok:
+                faults[name] = "out_of_sync"
+                dropped["out_of_sync"] += 1
+        kept_sweeps = [sweep for sweep, ok in zip(sweeps, in_sync) if ok]
+        if len(kept_sweeps) == len(sweeps):
+            points, offsets = points[:start], offsets[:start]
+        else:
+            rows = np.concatenate([np.arange(first, first + n) for _, _, first, n in kept_sweeps] or [[]]).astype(int)
+            points, offsets = points[rows], offsets[rows]
+        lag_s = np.repeat(
+            np.array([np.float32(reference_s - stamp) for _, stamp, _, _ in kept_sweeps], dtype=np.float32),
+            [n for *_, n in kept_sweeps],
+        )
+        lag_s -= offsets
+        return ConcatenationResult(points, reference_s, [name for name, *_ in kept_sweeps], faults, dropped, lag_s)
 
     # ----------------------------------------------------------------- synchronisation
 
@@ -142,30 +142,18 @@ class Concatenation:
         reference = {"earliest": group.min(), "latest": group.max(), "mean": group.mean()}[self.params.reference]
         return float(reference), members
 
-    # ----------------------------------------------------------------- merging
-
-    def _merge(self, sweeps: list[_CleanSweep], reference_s: float) -> tuple[np.ndarray, np.ndarray]:
-        if not sweeps:
-            return np.zeros((0, 3), dtype=np.float32), np.zeros(0, dtype=np.float32)
-        clouds, lags = [], []
-        for sweep in sweeps:
-            t = self._to_yard[sweep.name]
-            clouds.append(np.asarray(sweep.points, dtype=np.float32) @ t[:3, :3].T + t[:3, 3])
-            lags.append(np.float32(reference_s - sweep.stamp_s) - sweep.time_offset_s.astype(np.float32))
-        return np.concatenate(clouds), np.concatenate(lags)
-
     @staticmethod
     def interpolate(points: np.ndarray, lag_s: np.ndarray, motion: list[MotionHint]) -> None:
         """Move the points of each moving object to the reference time (in place); a point inside
         several boxes (truck and trailer overlap at the hitch) moves once, with the first box."""
-        moved = np.zeros(len(points), dtype=bool)
-        for hint in motion:
-            d = points[:, :2] - np.asarray(hint.center_xy, dtype=np.float32)
-            c, s = np.cos(hint.yaw_rad), np.sin(hint.yaw_rad)
-            along, across = d[:, 0] * c + d[:, 1] * s, -d[:, 0] * s + d[:, 1] * c
-            inside = (np.abs(along) <= hint.half_length_m) & (np.abs(across) <= hint.half_width_m) & ~moved
-            velocity = np.asarray(hint.velocity_xy, dtype=np.float32)
-            if hint.yaw_rate_rad_s:
-                velocity = velocity + np.float32(hint.yaw_rate_rad_s) * np.column_stack([-d[inside, 1], d[inside, 0]])
-            points[inside, :2] += lag_s[inside, None] * velocity
-            moved |= inside
+        if not len(motion) or not len(points):
+            return
+        boxes = np.array(
+            [
+                (*h.center_xy, np.cos(h.yaw_rad), np.sin(h.yaw_rad), h.half_length_m, h.half_width_m,
+                 *h.velocity_xy, h.yaw_rate_rad_s)
+                for h in motion
+            ],
+            dtype=np.float64,
+        )  # fmt: skip
+        kernels.interpolate(points, np.ascontiguousarray(lag_s, dtype=np.float32), boxes)

@@ -5,13 +5,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import ndimage
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import connected_components
-from scipy.spatial import ConvexHull, QhullError, cKDTree
 
-DENSE_KEYS_PER_POINT = 8  # voxel_centroids bins by key directly when the key range is this small
-DENSE_KEYS_MIN = 1 << 16
+from i2v_loc.stages import kernels
 
 
 def voxel_keys(points: np.ndarray, voxel_m: float) -> np.ndarray:
@@ -24,45 +19,59 @@ def voxel_keys(points: np.ndarray, voxel_m: float) -> np.ndarray:
     return keys
 
 
-def voxel_centroids(points: np.ndarray, voxel_m: float, values: np.ndarray | None = None):
+def _voxel_ids(points: np.ndarray, voxel_m: float, take: np.ndarray | None = None, float64: bool = False):
+    """(voxel id of each point, -1 where not taken; voxel keys, dims and the key lookup), ids in key
+    order. The grid is computed in the points' precision (float32 stays float32) unless ``float64``."""
+    if points.dtype != np.float32:
+        points = np.asarray(points, dtype=np.float64)
+    points = np.ascontiguousarray(points)
+    if take is None:
+        take, n_taken = np.ones(len(points), dtype=bool), len(points)
+    else:
+        n_taken = int(np.count_nonzero(take))
+    dtype = np.float64 if float64 else points.dtype.type
+    keys, dims = kernels.voxel_grid_keys(points, take, dtype(voxel_m), dtype(1.0))
+    ids, voxel_keys, dense, table_keys, table_ids, in_key_order = kernels.group_keys(keys, n_taken)
+    if not in_key_order:  # numpy's sort (vectorised) of the distinct keys, then the ids follow
+        voxel_keys = np.sort(voxel_keys)
+        kernels.rank_in_key_order(voxel_keys, ids, table_keys, table_ids)
+    return points, ids, voxel_keys, dims, (dense, table_keys, table_ids)
+
+
+def voxel_centroids(
+    points: np.ndarray,
+    voxel_m: float,
+    values: np.ndarray | None = None,
+    take: np.ndarray | None = None,
+    float64: bool = False,
+):
     """Centroid of the points of each occupied voxel (paper Eq. 2), voxels in key order.
 
     ``values`` (N, k) are averaged per voxel along with the points; returns (centroids, means or None).
+    ``take`` (bool mask) uses only those points; ``float64`` computes the grid and returns the
+    centroids in float64 (else in the points' dtype). Sums are float64, in point order.
     """
-    if voxel_m <= 0 or len(points) == 0:
-        return points, values
-    data = points if values is None else np.hstack([points, values.reshape(len(points), -1)])
-    keys = voxel_keys(points, voxel_m)
-    n_keys = int(keys.max()) + 1
-    if n_keys <= DENSE_KEYS_PER_POINT * len(points) + DENSE_KEYS_MIN:
-        # small key range: per-key sums straight from bincount, no sort (same order as np.unique)
-        counts = np.bincount(keys, minlength=n_keys)
-        occupied = np.flatnonzero(counts)
-        sums = np.column_stack(
-            [np.bincount(keys, weights=data[:, c], minlength=n_keys)[occupied] for c in range(data.shape[1])]
-        )
-        counts = counts[occupied]
-    else:
-        _, inverse, counts = np.unique(keys, return_inverse=True, return_counts=True)
-        sums = np.column_stack(
-            [np.bincount(inverse, weights=data[:, c], minlength=len(counts)) for c in range(data.shape[1])]
-        )
+    out_dtype = np.float64 if float64 else points.dtype
+    if voxel_m <= 0 or len(points) == 0 or (take is not None and not take.any()):
+        chosen = points if take is None else points[take]
+        return chosen.astype(out_dtype, copy=False), (values if take is None or values is None else values[take])
+    points, ids, voxel_keys, _, _ = _voxel_ids(points, voxel_m, take, float64)
+    extra = (
+        np.zeros((len(points), 0)) if values is None else np.asarray(values, dtype=np.float64).reshape(len(points), -1)
+    )
+    sums, counts = kernels.voxel_sums(points, extra, ids, len(voxel_keys))
     means = sums / counts[:, None]
-    if values is None:
-        return means[:, :3].astype(points.dtype), None
-    return means[:, :3].astype(points.dtype), means[:, 3:]
+    return means[:, :3].astype(out_dtype), (None if values is None else means[:, 3:])
 
 
 def grid_labels(points: np.ndarray, voxel_m: float) -> np.ndarray:
     """Cluster label per point: 26-connected components of the occupied voxels of size ``voxel_m``
-    (neighbouring voxels join: points up to about 2 * sqrt(3) * voxel apart, never closer ones split)."""
+    (neighbouring voxels join: points up to about 2 * sqrt(3) * voxel apart, never closer ones split);
+    components numbered in the raster order of their first voxel."""
     if len(points) == 0:
         return np.zeros(0, dtype=np.int64)
-    ijk = np.floor((points - points.min(axis=0)) / voxel_m).astype(np.int64)
-    occupied = np.zeros(tuple(ijk.max(axis=0) + 1), dtype=bool)
-    occupied[ijk[:, 0], ijk[:, 1], ijk[:, 2]] = True
-    labels, _ = ndimage.label(occupied, structure=np.ones((3, 3, 3), dtype=bool))
-    return labels[ijk[:, 0], ijk[:, 1], ijk[:, 2]].astype(np.int64) - 1
+    _, ids, voxel_keys, dims, lookup = _voxel_ids(points, voxel_m)
+    return kernels.voxel_components(voxel_keys, dims, *lookup)[ids]
 
 
 def euclidean_labels(points: np.ndarray, tolerance_m: float, voxel_m: float = 0.0) -> np.ndarray:
@@ -77,20 +86,25 @@ def euclidean_labels(points: np.ndarray, tolerance_m: float, voxel_m: float = 0.
         _, first, inverse = np.unique(voxel_keys(points, voxel_m), return_index=True, return_inverse=True)
         centroids, _ = voxel_centroids(points, voxel_m)  # same key order as np.unique above
         return euclidean_labels(centroids, tolerance_m)[inverse.reshape(-1)]
-    pairs = cKDTree(points).query_pairs(tolerance_m, output_type="ndarray")
-    graph = coo_matrix((np.ones(len(pairs), dtype=np.int8), (pairs[:, 0], pairs[:, 1])), shape=(n, n))
-    _, labels = connected_components(graph, directed=False)
-    return labels.astype(np.int64)
+    xyz = np.zeros((n, 3))
+    xyz[:, : points.shape[1]] = points  # a 2-D cloud gets a zero third coordinate: the same distances
+    return kernels.radius_components(xyz, float(tolerance_m))
 
 
 def split_by_label(labels: np.ndarray) -> list[np.ndarray]:
-    """Point indices of each label, largest group first."""
+    """Point indices of each label (in point order), largest group first (ties: lower label first)."""
     if len(labels) == 0:
         return []
-    order = np.argsort(labels, kind="stable")
-    bounds = np.flatnonzero(np.diff(labels[order])) + 1
-    groups = np.split(order, bounds)
-    return sorted(groups, key=len, reverse=True)
+    labels = np.asarray(labels)
+    low, high = int(labels.min()), int(labels.max())
+    if low >= 0 and high < 4 * len(labels) + 1024:
+        order, counts = kernels.counting_order(labels.astype(np.int64, copy=False), high + 1)
+        counts = counts[counts > 0]
+    else:
+        order = np.argsort(labels, kind="stable")
+        counts = np.diff(np.concatenate([[0], np.flatnonzero(np.diff(labels[order])) + 1, [len(labels)]]))
+    bounds = np.concatenate([[0], np.cumsum(counts)])
+    return [order[bounds[g] : bounds[g + 1]] for g in np.argsort(-counts, kind="stable")]
 
 
 @dataclass
@@ -108,25 +122,15 @@ class Rect:
 
 
 def min_area_rect(xy: np.ndarray) -> Rect:
-    """Rotating-calipers minimum-area rectangle, all hull edges evaluated at once."""
-    xy = np.asarray(xy, dtype=float)
-    try:
-        hull = xy[ConvexHull(xy).vertices]
-    except (QhullError, ValueError):
+    """Rotating-calipers minimum-area rectangle over the convex hull's edge directions (compiled)."""
+    xy = np.ascontiguousarray(xy, dtype=np.float64)
+    cx, cy, du, dv, a = kernels.min_area_rect(xy)
+    if np.isnan(cx):
         return _degenerate_rect(xy)
-    edges = np.diff(np.vstack([hull, hull[:1]]), axis=0)
-    angles = np.unique(np.mod(np.arctan2(edges[:, 1], edges[:, 0]), np.pi / 2))
-    c, s = np.cos(angles), np.sin(angles)
-    u = hull[:, 0][None] * c[:, None] + hull[:, 1][None] * s[:, None]
-    v = -hull[:, 0][None] * s[:, None] + hull[:, 1][None] * c[:, None]
-    du, dv = u.max(1) - u.min(1), v.max(1) - v.min(1)
-    best = int(np.argmin(du * dv))
-    cu, cv = (u[best].max() + u[best].min()) / 2, (v[best].max() + v[best].min()) / 2
-    a = angles[best]
-    center = np.array([cu * np.cos(a) - cv * np.sin(a), cu * np.sin(a) + cv * np.cos(a)])
-    if du[best] >= dv[best]:
-        return Rect(center, float(du[best]), float(dv[best]), float(a))
-    return Rect(center, float(dv[best]), float(du[best]), float(a + np.pi / 2))
+    center = np.array([cx, cy])
+    if du >= dv:
+        return Rect(center, float(du), float(dv), float(a))
+    return Rect(center, float(dv), float(du), float(a + np.pi / 2))
 
 
 def rect_along(xy: np.ndarray, yaw_rad: float) -> Rect:

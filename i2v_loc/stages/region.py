@@ -1,8 +1,7 @@
 """Stage 3: region of interest (passthrough) and RANSAC ground removal (paper section 3.2).
 
-RANSAC runs on a voxel-downsampled copy of the cloud and scores every hypothesis at once
-(one (samples x hypotheses) distance matrix); planes tilted more than ``max_ground_tilt_deg``
-are never candidates. The best plane is refined by least squares on its inliers and applied to
+RANSAC runs on a voxel-downsampled copy of the cloud and scores every hypothesis in one compiled
+pass over the samples; planes tilted more than ``max_ground_tilt_deg`` are never candidates. The best plane is refined by least squares on its inliers and applied to
 the full-resolution cloud: points less than the threshold above it (or below it) are ground.
 If no admissible plane is found the cloud passes through and ``ground_found`` is False.
 """
@@ -14,6 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from i2v_loc.params import RegionParams
+from i2v_loc.stages import kernels
 from i2v_loc.stages.primitives import voxel_centroids
 
 
@@ -52,6 +52,9 @@ class Region:
         self.rng = np.random.default_rng(seed)
         self._plane: GroundPlane | None = None
         self._frames_since_fit = 0
+        self._low = np.array([params.x_min_m, params.y_min_m, params.z_min_m], dtype=np.float32)
+        self._high = np.array([params.x_max_m, params.y_max_m, params.z_max_m], dtype=np.float32)
+        kernels.warm_up()
 
     def process(
         self, points: np.ndarray, in_region: np.ndarray | None = None, candidates: np.ndarray | None = None
@@ -59,44 +62,49 @@ class Region:
         """Points inside the region and off the ground. ``in_region`` (bool mask) replaces the
         passthrough box; ``candidates`` (bool mask inside the region, e.g. the foreground) limits
         which points are kept, while the ground is still fitted on the whole region."""
+        points = np.ascontiguousarray(points)
         in_region = self.roi_mask(points) if in_region is None else in_region
-        roi_index = np.flatnonzero(in_region)
-        plane = self.ground(points[roi_index])
-        index = roi_index if candidates is None else np.flatnonzero(candidates)
-        kept = points[index]
+        plane = self.ground(points, in_region)
+        take = in_region if candidates is None else candidates
         if plane is None:
-            return RegionResult(kept, None, len(roi_index), 0, index)
-        above = plane.height_m(kept) > self.params.ground_distance_threshold_m
-        return RegionResult(kept[above], plane, len(roi_index), int(len(kept) - above.sum()), index[above])
+            index = np.flatnonzero(take)
+            return RegionResult(points[index], None, int(np.count_nonzero(in_region)), 0, index)
+        index = np.empty(len(points), dtype=np.int64)
+        n_kept, n_taken = kernels.above_plane(
+            points, take, plane.normal, plane.offset, self.params.ground_distance_threshold_m, index
+        )
+        index = index[:n_kept]
+        roi_points = n_taken if candidates is None else int(np.count_nonzero(in_region))
+        return RegionResult(points[index], plane, roi_points, n_taken - n_kept, index)
 
-    def ground(self, roi: np.ndarray) -> GroundPlane | None:
-        """The ground plane, refitted every ``ground_refit_frames`` frames (and while none is found)."""
+    def ground(self, points: np.ndarray, in_region: np.ndarray | None = None) -> GroundPlane | None:
+        """The ground plane of the points in the region, refitted every ``ground_refit_frames`` frames
+        (and while none is found)."""
         self._frames_since_fit += 1
         if self._plane is None or self._frames_since_fit >= self.params.ground_refit_frames:
-            self._plane = self.fit_ground(roi)
+            self._plane = self.fit_ground(points, in_region)
             self._frames_since_fit = 0
         return self._plane
 
     def roi_mask(self, points: np.ndarray) -> np.ndarray:
-        p = self.params
-        low = np.array([p.x_min_m, p.y_min_m, p.z_min_m], dtype=np.float32)
-        high = np.array([p.x_max_m, p.y_max_m, p.z_max_m], dtype=np.float32)
-        return ((points >= low) & (points <= high)).all(axis=1)
+        mask = np.empty(len(points), dtype=bool)
+        kernels.box_mask(np.ascontiguousarray(points, dtype=np.float32), self._low, self._high, mask)
+        return mask
 
-    def fit_ground(self, points: np.ndarray) -> GroundPlane | None:
+    def fit_ground(self, points: np.ndarray, in_region: np.ndarray | None = None) -> GroundPlane | None:
+        """RANSAC on the voxel centroids (float64) of the points in the region (all without a mask)."""
         p = self.params
-        sample, _ = voxel_centroids(points.astype(np.float64), p.ransac_sample_voxel_m)
+        sample, _ = voxel_centroids(points, p.ransac_sample_voxel_m, take=in_region, float64=True)
         if len(sample) < 3:
             return None
         normals, offsets = self._hypotheses(sample)
         if len(normals) == 0:
             return None
-        distances = np.abs(sample @ normals.T + offsets)  # (samples, hypotheses)
-        scores = (distances < p.ground_distance_threshold_m).sum(axis=0)
+        scores = kernels.plane_scores(sample, normals, offsets, p.ground_distance_threshold_m)
         best = int(np.argmax(scores))
         if scores[best] < max(3, p.min_ground_fraction * len(sample)):
             return None
-        inliers = sample[distances[:, best] < p.ground_distance_threshold_m]
+        inliers = sample[np.abs(sample @ normals[best] + offsets[best]) < p.ground_distance_threshold_m]
         return self._refine(inliers, normals[best], offsets[best], scores[best] / len(sample))
 
     def _hypotheses(self, sample: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -116,7 +124,8 @@ class Region:
     def _refine(self, inliers: np.ndarray, normal: np.ndarray, offset: float, fraction: float) -> GroundPlane | None:
         if len(inliers) >= 3:
             centre = inliers.mean(axis=0)
-            refined = np.linalg.svd(inliers - centre, full_matrices=False)[2][2]
+            spread = inliers - centre
+            refined = np.linalg.eigh(spread.T @ spread)[1][:, 0]  # least-squares normal: the smallest axis
             refined *= np.sign(refined[2] + 1e-12)
             if refined[2] >= np.cos(np.radians(self.params.max_ground_tilt_deg)):
                 normal, offset = refined, -float(refined @ centre)

@@ -1,0 +1,702 @@
+"""Compiled (numba) kernels of the shared front end: one pass over the points each, no Python loop
+per point or per voxel. Compiled once and cached on disk (``cache=True``); ``warm_up()`` loads or
+compiles every specialisation the pipeline uses, so no frame pays for compilation.
+
+Arithmetic follows the numpy code these kernels replaced operation by operation (float32 where it
+was float32, the same rounding order), so the outputs are the same points and decisions.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+_JIT = {"cache": True, "nogil": True}
+
+# voxel grouping: a dense slot per key when the key range is at most this times the points (plus
+# a constant), else an open-addressing hash table
+DENSE_KEYS_PER_POINT = 8
+DENSE_KEYS_MIN = 1 << 16
+EMPTY = np.int64(-1)
+
+
+# ----------------------------------------------------------------------------- merge
+
+
+@njit(**_JIT)
+def sweep_to_yard(points, offsets, rot, trans, min_r2, max_r2, out_points, out_offsets, start):
+    """Clean one sweep (finite, within the range limits) and write its points in the yard frame
+    to ``out_points[start:]`` (their time offsets beside). Returns (points kept, non-finite points).
+
+    The rotation is the fused multiply-add chain of the float32 matrix product it replaces
+    (x r0 rounded, then y r1 and z r2 each added with one rounding), so the points are bit-equal.
+    """
+    k = start
+    n_bad = 0
+    for i in range(points.shape[0]):
+        x, y, z, off = points[i, 0], points[i, 1], points[i, 2], offsets[i]
+        if not (np.isfinite(x) and np.isfinite(y) and np.isfinite(z) and np.isfinite(off)):
+            n_bad += 1
+            continue
+        xd, yd, zd = np.float64(x), np.float64(y), np.float64(z)
+        r2 = xd * xd + yd * yd + zd * zd
+        if r2 < min_r2 or r2 > max_r2:
+            continue
+        for a in range(3):
+            acc = x * rot[a, 0]
+            acc = np.float32(yd * np.float64(rot[a, 1]) + np.float64(acc))
+            acc = np.float32(zd * np.float64(rot[a, 2]) + np.float64(acc))
+            out_points[k, a] = acc + trans[a]
+        out_offsets[k] = off
+        k += 1
+    return k - start, n_bad
+
+
+@njit(**_JIT)
+def interpolate(points, lag_s, boxes):
+    """Move each point inside a box to the reference time (in place); the first box holding a
+    point moves it. ``boxes`` rows: centre x, y, cos yaw, sin yaw, half length, half width,
+    velocity x, y, yaw rate."""
+    for i in range(points.shape[0]):
+        for b in range(boxes.shape[0]):
+            dx = points[i, 0] - np.float32(boxes[b, 0])
+            dy = points[i, 1] - np.float32(boxes[b, 1])
+            c, s = boxes[b, 2], boxes[b, 3]
+            along = np.float64(dx) * c + np.float64(dy) * s
+            across = -np.float64(dx) * s + np.float64(dy) * c
+            if abs(along) <= boxes[b, 4] and abs(across) <= boxes[b, 5]:
+                vx, vy = np.float32(boxes[b, 6]), np.float32(boxes[b, 7])
+                rate = boxes[b, 8]
+                if rate != 0.0:
+                    vx = vx + np.float32(rate) * -dy
+                    vy = vy + np.float32(rate) * dx
+                points[i, 0] += lag_s[i] * vx
+                points[i, 1] += lag_s[i] * vy
+                break
+
+
+# ----------------------------------------------------------------------------- background
+
+
+@njit(**_JIT)
+def background_pass(
+    points,
+    shift,
+    scale,
+    upper,
+    strides,
+    region_bits,
+    free_bits,
+    ready,
+    keep_columns,
+    learn,
+    protect_columns,
+    counts,
+    seen,
+    in_region,
+    foreground,
+    learned,
+    evaluate,
+    threshold,
+    is_background,
+    flips,
+):
+    """Per point: its voxel of the padded grid, in the region, foreground (the map before this
+    frame: ``region_bits`` and ``free_bits``, a bit per voxel, small enough to stay in cache); on a
+    learning frame each region voxel outside the protected columns counts once.
+    ``keep_columns`` / ``protect_columns`` are empty when no box is protected; ``seen`` is a bit per
+    voxel, all clear between calls (an eighth of a byte array: it stays in cache). With ``evaluate``
+    (the window is full and the old sample already taken off the counts) a counted voxel that
+    reaches ``threshold`` and is not background is listed in ``flips``: with fixed thresholds and
+    every voxel decided, that is the only way a count going up changes a decision. Returns the
+    number of voxels counted (their indices in ``learned``) and of voxels listed."""
+    nz = strides[1]
+    use_keep = keep_columns.shape[0] > 0 and ready
+    use_protect = protect_columns.shape[0] > 0
+    n = 0
+    n_flips = 0
+    for i in range(points.shape[0]):
+        flat = np.int64(0)
+        for a in range(3):
+            q = (points[i, a] - shift[a]) * scale
+            q = min(max(q, np.float32(0.0)), upper[a])
+            flat += np.int64(q) * strides[a]
+        byte, bit = flat >> 3, np.uint8(1) << np.uint8(flat & 7)
+        inside = (region_bits[byte] & bit) != 0
+        fg = (free_bits[byte] & bit) != 0 if ready else inside
+        column = flat // nz
+        if use_keep and inside and keep_columns[column]:
+            fg = True
+        in_region[i] = inside
+        foreground[i] = fg
+        if learn and inside and not (use_protect and protect_columns[column]):
+            if not seen[byte] & bit:
+                seen[byte] |= bit
+                counts[flat] += 1
+                learned[n] = flat
+                n += 1
+                if evaluate and counts[flat] == threshold and not is_background[flat]:
+                    flips[n_flips] = flat
+                    n_flips += 1
+    for j in range(n):
+        seen[learned[j] >> 3] = 0
+    return n, n_flips
+
+
+@njit(**_JIT)
+def forget_counts(cells, counts):
+    """Take one sample (its voxels, each once) off the counts."""
+    for c in cells:
+        counts[c] -= 1
+
+
+@njit(**_JIT)
+def forgotten(cells, counts, is_background, threshold, forget, flips, n_flips):
+    """List in ``flips`` (from ``n_flips`` on) the background voxels of a sample taken off the
+    window whose final count is below both thresholds (fixed thresholds, every voxel decided: the
+    only way a count going down changes a decision). Returns the new length of the list."""
+    for c in cells:
+        count = counts[c]
+        if count < threshold and count <= forget and is_background[c]:
+            flips[n_flips] = c
+            n_flips += 1
+    return n_flips
+
+
+@njit(**_JIT)
+def _count_neighbourhood(c, offsets, dilated, free_bits, step):
+    """Add ``step`` (+1 or -1) to the background count of the voxels around ``c``; a voxel whose
+    count leaves or reaches 0 loses or gets its foreground bit."""
+    for o in offsets:
+        v = c + o
+        if step > 0:
+            if dilated[v] == 0:
+                free_bits[v >> 3] &= ~(np.uint8(1) << np.uint8(v & 7))
+            dilated[v] += 1
+        else:
+            dilated[v] -= 1
+            if dilated[v] == 0:
+                free_bits[v >> 3] |= np.uint8(1) << np.uint8(v & 7)
+
+
+@njit(**_JIT)
+def flip_cells(cells, is_background, dilated, free_bits, offsets):
+    """Toggle the decision of these (distinct) voxels and the background count of their neighbourhood."""
+    for c in cells:
+        state = not is_background[c]
+        is_background[c] = state
+        _count_neighbourhood(c, offsets, dilated, free_bits, 1 if state else -1)
+
+
+@njit(**_JIT)
+def update_cells(cells, counts, is_background, dilated, free_bits, offsets, threshold, forget):
+    """Re-decide these voxels (repeats allowed); a voxel that changes state updates the background
+    count of its neighbourhood."""
+    for c in cells:
+        current = is_background[c]
+        count = counts[c]
+        state = count >= threshold or (current and count > forget)
+        if state != current:
+            is_background[c] = state
+            _count_neighbourhood(c, offsets, dilated, free_bits, 1 if state else -1)
+
+
+@njit(**_JIT)
+def box_columns(boxes, margin, origin_x, origin_y, voxel, nx, ny, mask):
+    """Mark the (x, y) columns of the padded grid whose centre lies in a box plus ``margin``.
+    ``boxes`` rows: centre x, y, cos yaw, sin yaw, half length, half width."""
+    for b in range(boxes.shape[0]):
+        cx, cy, c, s, hl, hw = boxes[b, 0], boxes[b, 1], boxes[b, 2], boxes[b, 3], boxes[b, 4], boxes[b, 5]
+        reach = math.hypot(hl, hw) + margin
+        lo_i = min(max(int(math.floor((cx - reach - origin_x) / voxel)) + 1, 0), nx - 1)
+        lo_j = min(max(int(math.floor((cy - reach - origin_y) / voxel)) + 1, 0), ny - 1)
+        hi_i = min(max(int(math.ceil((cx + reach - origin_x) / voxel)) + 1, 0), nx - 1)
+        hi_j = min(max(int(math.ceil((cy + reach - origin_y) / voxel)) + 1, 0), ny - 1)
+        for i in range(lo_i, hi_i + 1):
+            dx = origin_x + (i - 0.5) * voxel - cx
+            for j in range(lo_j, hi_j + 1):
+                dy = origin_y + (j - 0.5) * voxel - cy
+                if abs(dx * c + dy * s) <= hl + margin and abs(-dx * s + dy * c) <= hw + margin:
+                    mask[i * ny + j] = True
+
+
+# ----------------------------------------------------------------------------- region
+
+
+@njit(**_JIT)
+def box_mask(points, low, high, out):
+    """Points inside the axis-aligned box [low, high] (bounds included)."""
+    for i in range(points.shape[0]):
+        inside = True
+        for a in range(3):
+            v = points[i, a]
+            if v < low[a] or v > high[a]:
+                inside = False
+                break
+        out[i] = inside
+
+
+@njit(**_JIT)
+def above_plane(points, take, normal, offset, threshold, out_index):
+    """Indices of the taken points more than ``threshold`` above the plane. Returns (kept, taken)."""
+    k = 0
+    taken = 0
+    for i in range(points.shape[0]):
+        if not take[i]:
+            continue
+        taken += 1
+        h = points[i, 0] * normal[0] + points[i, 1] * normal[1] + points[i, 2] * normal[2] + offset
+        if h > threshold:
+            out_index[k] = i
+            k += 1
+    return k, taken
+
+
+@njit(**_JIT)
+def plane_scores(sample, normals, offsets, threshold):
+    """Samples within ``threshold`` of each plane (coordinates as rows: the inner loop runs along
+    contiguous memory and vectorises)."""
+    x, y, z = np.ascontiguousarray(sample[:, 0]), np.ascontiguousarray(sample[:, 1]), np.ascontiguousarray(sample[:, 2])
+    scores = np.zeros(normals.shape[0], dtype=np.int64)
+    for h in range(normals.shape[0]):
+        a, b, c, d = normals[h, 0], normals[h, 1], normals[h, 2], offsets[h]
+        count = 0
+        for i in range(x.shape[0]):
+            count += abs(x[i] * a + y[i] * b + z[i] * c + d) < threshold
+        scores[h] = count
+    return scores
+
+
+# ----------------------------------------------------------------------------- voxel grouping
+
+
+@njit(**_JIT)
+def voxel_grid_keys(points, take, voxel, one):
+    """Key of each taken point's voxel (origin at the taken points' minimum, computed in the type of
+    ``one``/``voxel``: the points' own for float32 grids, float64 for ``one`` = 1.0) and the grid
+    dimensions; untaken points get -1. The offsets from the minimum are never negative, so the
+    integer conversion is the floor."""
+    n = points.shape[0]
+    lo = np.full(3, one)
+    lo[:] = np.inf
+    for i in range(n):
+        if take[i]:
+            for a in range(3):
+                v = points[i, a] * one
+                if v < lo[a]:
+                    lo[a] = v
+    dims = np.ones(3, dtype=np.int64)
+    ijk = np.empty((n, 3), dtype=np.int64)
+    for i in range(n):
+        if take[i]:
+            for a in range(3):
+                q = np.int64((points[i, a] * one - lo[a]) / voxel)
+                ijk[i, a] = q
+                dims[a] = max(dims[a], q + 1)
+    keys = np.full(n, EMPTY, dtype=np.int64)
+    for i in range(n):
+        if take[i]:
+            keys[i] = (ijk[i, 0] * dims[1] + ijk[i, 1]) * dims[2] + ijk[i, 2]
+    return keys, dims
+
+
+@njit(**_JIT)
+def _hash_slot(table_keys, key):
+    """Open addressing, linear probing; the key mixed first (splitmix64's finaliser: grid keys are
+    regular, and probing clusters on them otherwise)."""
+    mask = table_keys.shape[0] - 1
+    x = np.uint64(key)
+    x = (x ^ (x >> np.uint64(33))) * np.uint64(0xFF51AFD7ED558CCD)
+    x = (x ^ (x >> np.uint64(33))) * np.uint64(0xC4CEB9FE1A85EC53)
+    x = x ^ (x >> np.uint64(33))
+    slot = np.int64(x & np.uint64(mask))
+    while table_keys[slot] != EMPTY and table_keys[slot] != key:
+        slot = (slot + 1) & mask
+    return slot
+
+
+@njit(**_JIT)
+def group_keys(keys, n_taken):
+    """Voxel id of each point (-1 for untaken) and the voxel keys. Returns (ids, voxel_keys,
+    lookup_dense, table_keys, table_ids, in_key_order): with a small key range a slot per key
+    (``lookup_dense``) and ids in key order; else a hash table, ids in order of first appearance
+    (``rank_in_key_order`` renumbers them once the keys are sorted)."""
+    n = keys.shape[0]
+    n_keys = np.int64(0)
+    for i in range(n):
+        if keys[i] + 1 > n_keys:
+            n_keys = keys[i] + 1
+    ids = np.full(n, EMPTY, dtype=np.int64)
+    if n_keys <= DENSE_KEYS_PER_POINT * n_taken + DENSE_KEYS_MIN:
+        dense = np.full(n_keys, EMPTY, dtype=np.int64)
+        for i in range(n):
+            if keys[i] >= 0:
+                dense[keys[i]] = 0
+        voxel_keys = np.empty(n_taken, dtype=np.int64)
+        n_vox = 0
+        for key in range(n_keys):
+            if dense[key] == 0:
+                dense[key] = n_vox
+                voxel_keys[n_vox] = key
+                n_vox += 1
+        voxel_keys = voxel_keys[:n_vox]
+        for i in range(n):
+            if keys[i] >= 0:
+                ids[i] = dense[keys[i]]
+        return ids, voxel_keys, dense, np.empty(0, dtype=np.int64), np.empty(0, dtype=np.int64), True
+    size = 1
+    while size < 2 * n_taken + 2:
+        size *= 2
+    table_keys = np.full(size, EMPTY, dtype=np.int64)
+    table_ids = np.full(size, EMPTY, dtype=np.int64)
+    first = np.empty(n_taken, dtype=np.int64)
+    n_vox = 0
+    for i in range(n):
+        if keys[i] < 0:
+            continue
+        slot = _hash_slot(table_keys, keys[i])
+        if table_keys[slot] == EMPTY:
+            table_keys[slot] = keys[i]
+            table_ids[slot] = n_vox
+            first[n_vox] = keys[i]
+            n_vox += 1
+        ids[i] = table_ids[slot]
+    return ids, first[:n_vox], np.empty(0, dtype=np.int64), table_keys, table_ids, False
+
+
+@njit(**_JIT)
+def rank_in_key_order(sorted_keys, ids, table_keys, table_ids):
+    """Renumber the voxels of a hash-table grouping by their rank in ``sorted_keys`` (in place)."""
+    rank = np.empty(sorted_keys.shape[0], dtype=np.int64)
+    for r in range(sorted_keys.shape[0]):
+        slot = _hash_slot(table_keys, sorted_keys[r])
+        rank[table_ids[slot]] = r
+        table_ids[slot] = r
+    for i in range(ids.shape[0]):
+        if ids[i] >= 0:
+            ids[i] = rank[ids[i]]
+
+
+@njit(**_JIT)
+def voxel_sums(points, values, ids, n_vox):
+    """Per voxel: the float64 sums of the points' coordinates and values (in point order) and the counts."""
+    sums = np.zeros((n_vox, 3 + values.shape[1]))
+    counts = np.zeros(n_vox, dtype=np.int64)
+    for i in range(points.shape[0]):
+        v = ids[i]
+        if v < 0:
+            continue
+        counts[v] += 1
+        for a in range(3):
+            sums[v, a] += points[i, a]
+        for a in range(values.shape[1]):
+            sums[v, 3 + a] += values[i, a]
+    return sums, counts
+
+
+@njit(**_JIT)
+def _lookup(key, dense, table_keys, table_ids):
+    if dense.shape[0] > 0:
+        return dense[key] if key < dense.shape[0] else EMPTY
+    slot = _hash_slot(table_keys, key)
+    return table_ids[slot] if table_keys[slot] == key else EMPTY
+
+
+@njit(**_JIT)
+def _root(parent, v):
+    while parent[v] != v:
+        parent[v] = parent[parent[v]]
+        v = parent[v]
+    return v
+
+
+@njit(**_JIT)
+def voxel_components(voxel_keys, dims, dense, table_keys, table_ids):
+    """26-connected components of the occupied voxels, numbered in the order of their first voxel
+    in key (raster) order."""
+    n_vox = voxel_keys.shape[0]
+    parent = np.arange(n_vox)
+    for v in range(n_vox):
+        key = voxel_keys[v]
+        i = key // (dims[1] * dims[2])
+        j = (key // dims[2]) % dims[1]
+        k = key % dims[2]
+        for di in range(0, 2):
+            for dj in range(-1, 2):
+                for dk in range(-1, 2):
+                    if di == 0 and (dj < 0 or (dj == 0 and dk <= 0)):
+                        continue  # the other half of the neighbourhood looks back at this voxel
+                    ni, nj, nk = i + di, j + dj, k + dk
+                    if ni >= dims[0] or nj < 0 or nj >= dims[1] or nk < 0 or nk >= dims[2]:
+                        continue
+                    w = _lookup((ni * dims[1] + nj) * dims[2] + nk, dense, table_keys, table_ids)
+                    if w < 0:
+                        continue
+                    a, b = _root(parent, v), _root(parent, w)
+                    if a != b:
+                        parent[max(a, b)] = min(a, b)
+    label = np.full(n_vox, EMPTY, dtype=np.int64)
+    n_comp = 0
+    for v in range(n_vox):
+        r = _root(parent, v)
+        if label[r] < 0:
+            label[r] = n_comp
+            n_comp += 1
+        label[v] = label[r]
+    return label
+
+
+@njit(**_JIT)
+def radius_components(points, radius):
+    """Connected components of the graph joining points at most ``radius`` apart (squared distances
+    summed over the coordinates in order, as a k-d tree's pair query does), numbered in the order of
+    their first point. Points are binned in cells of ``radius``: a pair can only join across
+    neighbouring cells. ``points`` (N, 3) float64 (a 2-D cloud with a zero third column)."""
+    n = points.shape[0]
+    r2 = radius * radius
+    lo = np.full(3, np.inf)
+    for i in range(n):
+        for a in range(3):
+            lo[a] = min(lo[a], points[i, a])
+    cell = np.empty((n, 3), dtype=np.int64)
+    dims = np.ones(3, dtype=np.int64)
+    for i in range(n):
+        for a in range(3):
+            c = np.int64((points[i, a] - lo[a]) / radius)
+            cell[i, a] = c
+            dims[a] = max(dims[a], c + 1)
+    keys = np.empty(n, dtype=np.int64)
+    for i in range(n):
+        keys[i] = (cell[i, 0] * dims[1] + cell[i, 1]) * dims[2] + cell[i, 2]
+    order = np.argsort(keys)
+    sorted_keys = keys[order]
+    parent = np.arange(n)
+    for s in range(n):
+        i = order[s]
+        for di in range(-1, 2):
+            for dj in range(-1, 2):
+                for dk in range(-1, 2):
+                    ci, cj, ck = cell[i, 0] + di, cell[i, 1] + dj, cell[i, 2] + dk
+                    if ci < 0 or cj < 0 or ck < 0 or ci >= dims[0] or cj >= dims[1] or ck >= dims[2]:
+                        continue
+                    key = (ci * dims[1] + cj) * dims[2] + ck
+                    t = np.searchsorted(sorted_keys, key)
+                    while t < n and sorted_keys[t] == key:
+                        j = order[t]
+                        t += 1
+                        if j <= i:
+                            continue
+                        d = 0.0
+                        for a in range(3):
+                            diff = points[i, a] - points[j, a]
+                            d += diff * diff
+                        if d <= r2:
+                            a_root, b_root = _root(parent, i), _root(parent, j)
+                            if a_root != b_root:
+                                parent[max(a_root, b_root)] = min(a_root, b_root)
+    labels = np.full(n, EMPTY, dtype=np.int64)
+    n_comp = 0
+    for i in range(n):
+        r = _root(parent, i)
+        if labels[r] < 0:
+            labels[r] = n_comp
+            n_comp += 1
+        labels[i] = labels[r]
+    return labels
+
+
+@njit(**_JIT)
+def counting_order(labels, n_labels):
+    """Stable order of the points by label (labels in 0..n_labels-1) and the count of each label."""
+    counts = np.zeros(n_labels, dtype=np.int64)
+    for v in labels:
+        counts[v] += 1
+    start = np.empty(n_labels, dtype=np.int64)
+    total = 0
+    for v in range(n_labels):
+        start[v] = total
+        total += counts[v]
+    order = np.empty(labels.shape[0], dtype=np.int64)
+    for i in range(labels.shape[0]):
+        order[start[labels[i]]] = i
+        start[labels[i]] += 1
+    return order, counts
+
+
+# ----------------------------------------------------------------------------- rectangles
+
+
+@njit(**_JIT)
+def _cross(o, a, b):
+    return (a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0])
+
+
+@njit(**_JIT)
+def _outside_octagon(xy):
+    """The points not strictly inside the polygon of the extreme points along x, y, x + y and x - y
+    (Akl-Toussaint): those strictly inside are inside the hull, never its vertices."""
+    n = xy.shape[0]
+    # support directions counter-clockwise from straight down: the extremes are hull vertices in order
+    dirs = np.array(
+        [[0.0, -1.0], [1.0, -1.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0], [-1.0, 1.0], [-1.0, 0.0], [-1.0, -1.0]]
+    )
+    best = np.full(8, -np.inf)
+    which = np.zeros(8, dtype=np.int64)
+    for i in range(n):
+        for d in range(8):
+            v = dirs[d, 0] * xy[i, 0] + dirs[d, 1] * xy[i, 1]
+            if v > best[d]:
+                best[d], which[d] = v, i
+    edges = np.empty((8, 2), dtype=np.int64)
+    m = 0
+    for d in range(8):
+        a, b = which[d], which[(d + 1) % 8]
+        if xy[a, 0] != xy[b, 0] or xy[a, 1] != xy[b, 1]:
+            edges[m, 0], edges[m, 1] = a, b
+            m += 1
+    if m < 3:
+        return xy
+    keep = np.empty(n, dtype=np.bool_)
+    for i in range(n):
+        inside = True
+        for e in range(m):
+            if _cross(xy[edges[e, 0]], xy[edges[e, 1]], xy[i]) <= 0:
+                inside = False
+                break
+        keep[i] = not inside
+    return xy[keep]
+
+
+@njit(**_JIT)
+def _convex_hull(xy):
+    """Vertices of the convex hull, counter-clockwise, without collinear points (monotone chain on
+    the points the octagon filter leaves)."""
+    xy = _outside_octagon(xy) if xy.shape[0] > 64 else xy
+    n = xy.shape[0]
+    pts = xy[np.argsort(xy[:, 0], kind="mergesort")]  # by x, then (below) by y among equal x
+    i = 0
+    while i < n:
+        j = i
+        while j + 1 < n and pts[j + 1, 0] == pts[i, 0]:
+            j += 1
+        if j > i:
+            block = pts[i : j + 1]
+            pts[i : j + 1] = block[np.argsort(block[:, 1], kind="mergesort")]
+        i = j + 1
+    hull = np.empty((2 * n + 1, 2))
+    k = 0
+    for i in range(n):
+        while k >= 2 and _cross(hull[k - 2], hull[k - 1], pts[i]) <= 0:
+            k -= 1
+        hull[k] = pts[i]
+        k += 1
+    lower = k + 1
+    for i in range(n - 2, -1, -1):
+        while k >= lower and _cross(hull[k - 2], hull[k - 1], pts[i]) <= 0:
+            k -= 1
+        hull[k] = pts[i]
+        k += 1
+    return hull[: max(k - 1, 1)] if n > 0 else hull[:0]
+
+
+@njit(**_JIT)
+def min_area_rect(xy):
+    """Rotating calipers over the hull edges' directions (modulo 90 deg): centre x, y, extent
+    along the best direction, extent across it, the direction; NaN centre when the hull is flat."""
+    hull = _convex_hull(xy)
+    m = hull.shape[0]
+    out = np.full(5, np.nan)
+    if m < 3:
+        return out
+    angles = np.empty(m)
+    for e in range(m):
+        nxt = hull[(e + 1) % m]
+        angles[e] = np.mod(np.arctan2(nxt[1] - hull[e, 1], nxt[0] - hull[e, 0]), np.pi / 2)
+    angles = np.unique(angles)
+    best_area = np.inf
+    for a in angles:
+        c, s = np.cos(a), np.sin(a)
+        u_lo, u_hi, v_lo, v_hi = np.inf, -np.inf, np.inf, -np.inf
+        for p in range(m):
+            u = hull[p, 0] * c + hull[p, 1] * s
+            v = -hull[p, 0] * s + hull[p, 1] * c
+            u_lo, u_hi, v_lo, v_hi = min(u_lo, u), max(u_hi, u), min(v_lo, v), max(v_hi, v)
+        du, dv = u_hi - u_lo, v_hi - v_lo
+        if du * dv < best_area:
+            best_area = du * dv
+            cu, cv = (u_hi + u_lo) / 2, (v_hi + v_lo) / 2
+            out[0] = cu * np.cos(a) - cv * np.sin(a)
+            out[1] = cu * np.sin(a) + cv * np.cos(a)
+            out[2], out[3], out[4] = du, dv, a
+    return out
+
+
+# ----------------------------------------------------------------------------- warm-up
+
+_WARM = False
+
+
+def warm_up() -> None:
+    """Load (or compile, the first time on this machine) every kernel specialisation the pipeline
+    calls, on tiny arrays, so that no frame pays for it."""
+    global _WARM
+    if _WARM:
+        return
+    p32 = np.array([[0.0, 0.0, 0.0], [1.0, 2.0, 0.5], [0.2, 0.1, 0.0]], dtype=np.float32)
+    p64 = p32.astype(np.float64)
+    offsets = np.zeros(3, dtype=np.float32)
+    out_p, out_o = np.empty((3, 3), dtype=np.float32), np.empty(3, dtype=np.float32)
+    sweep_to_yard(p32, offsets, np.eye(3, dtype=np.float32), np.zeros(3, dtype=np.float32), 0.0, 1e4, out_p, out_o, 0)
+    interpolate(p32.copy(), offsets, np.zeros((1, 9)))
+    take = np.ones(3, dtype=np.bool_)
+    cells = np.zeros(64, dtype=np.uint16)
+    flags = np.zeros(64, dtype=np.bool_)
+    background_pass(
+        p32,
+        np.zeros(3, dtype=np.float32),
+        np.float32(1.0),
+        np.full(3, 3.5, dtype=np.float32),
+        np.array([16, 4, 1], dtype=np.int64),
+        np.zeros(8, dtype=np.uint8),
+        np.zeros(8, dtype=np.uint8),
+        True,
+        np.zeros(16, dtype=np.bool_),
+        True,
+        np.zeros(16, dtype=np.bool_),
+        np.zeros(64, dtype=np.uint8),
+        np.zeros(8, dtype=np.uint8),
+        np.empty(3, dtype=np.bool_),
+        np.empty(3, dtype=np.bool_),
+        np.empty(3, dtype=np.int64),
+        True,
+        1,
+        flags,
+        np.empty(3, dtype=np.int64),
+    )
+    one_cell = np.array([5], dtype=np.int64)
+    forget_counts(one_cell, np.ones(64, np.uint8))
+    forgotten(one_cell, np.zeros(64, np.uint8), flags, 1, 0, np.empty(1, dtype=np.int64), 0)
+    bits = np.zeros(8, dtype=np.uint8)
+    flip_cells(one_cell, flags, cells, bits, np.array([0]))
+    flip_cells(one_cell, flags, cells, bits, np.array([0]))
+    update_cells(one_cell, np.zeros(64, np.uint8), flags, cells, bits, np.array([0]), 1, 0)
+    box_columns(np.zeros((1, 6)), 0.1, 0.0, 0.0, 0.2, 4, 4, np.zeros(16, dtype=np.bool_))
+    box_mask(p32, np.zeros(3, dtype=np.float32), np.ones(3, dtype=np.float32), np.empty(3, dtype=np.bool_))
+    above_plane(p32, take, np.array([0.0, 0.0, 1.0]), 0.0, 0.1, np.empty(3, dtype=np.int64))
+    plane_scores(p64, np.array([[0.0, 0.0, 1.0]]), np.zeros(1), 0.1)
+    for points, voxel, one in ((p32, np.float32(0.5), np.float32(1.0)), (p64, 0.5, 1.0), (p32, 0.5, 1.0)):
+        keys, dims = voxel_grid_keys(points, take, voxel, one)
+        for dense_range in (True, False):
+            k = keys if dense_range else keys * np.int64(1 << 40)
+            ids, vkeys, dense, tk, ti, in_order = group_keys(k, 3)
+            if not in_order:
+                vkeys = np.sort(vkeys)
+                rank_in_key_order(vkeys, ids, tk, ti)
+            voxel_sums(points, np.zeros((3, 0)), ids, len(vkeys))
+            voxel_components(vkeys, dims, dense, tk, ti)
+    counting_order(np.array([1, 0, 1], dtype=np.int64), 2)
+    radius_components(p64, 0.5)
+    min_area_rect(np.ascontiguousarray(p64[:, :2]))
+    _WARM = True

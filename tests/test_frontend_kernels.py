@@ -1,0 +1,267 @@
+"""The compiled front end gives what the plain numpy front end gave (tests/frontend_reference.py):
+the same points, the same labels, the same background and ground decisions, on constructed clouds
+and on a simulated recording."""
+
+from __future__ import annotations
+
+import itertools
+
+import frontend_reference as ref
+import numpy as np
+import pytest
+from conftest import SAMPLES
+
+from i2v_loc.frame import SensorScan
+from i2v_loc.params import BackgroundParams, ConcatenationParams, Extrinsics, RegionParams, SensorConfig, load_params
+from i2v_loc.recording import Recording
+from i2v_loc.stages.background import BackgroundMap, ProtectedBox
+from i2v_loc.stages.concatenation import Concatenation, MotionHint
+from i2v_loc.stages.primitives import euclidean_labels, grid_labels, min_area_rect, split_by_label, voxel_centroids
+from i2v_loc.stages.region import Region
+
+
+def blobs(seed, n=4000, spread=30.0, dtype=np.float32):
+    """Clusters of points of different sizes and densities, some touching, some far apart."""
+    rng = np.random.default_rng(seed)
+    centres = rng.uniform(-spread, spread, (12, 3)) * [1, 1, 0.1]
+    sizes = rng.uniform(0.2, 4.0, (12, 3))
+    which = rng.integers(0, 12, n)
+    return (centres[which] + rng.uniform(-0.5, 0.5, (n, 3)) * sizes[which]).astype(dtype)
+
+
+@pytest.fixture(scope="module")
+def recording_frames():
+    recording = Recording(SAMPLES / "man_tgx_docking")
+    params = load_params(recording.sensors_file)
+    return params, list(itertools.islice(recording.frames(), 40))
+
+
+# ----------------------------------------------------------------------------- primitives
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+@pytest.mark.parametrize("voxel_m", [0.1, 0.5, 3.0])  # sparse key range (hash table) to dense (slot per key)
+def test_voxel_centroids_are_the_reference_centroids_in_key_order(dtype, voxel_m):
+    points = blobs(1, dtype=dtype)
+    values = np.random.default_rng(2).normal(size=(len(points), 2))
+    got, got_values = voxel_centroids(points, voxel_m, values)
+    want, want_values = ref.voxel_centroids(points, voxel_m, values)
+    assert got.dtype == dtype and np.array_equal(got, want)
+    assert np.array_equal(got_values, want_values)
+    assert len(got) < len(points)  # voxels were merged: the test is not trivial
+
+
+def test_voxel_centroids_of_a_masked_cloud_in_float64_are_those_of_the_selected_points():
+    points = blobs(3)
+    take = np.random.default_rng(4).random(len(points)) < 0.6
+    got, _ = voxel_centroids(points, 0.5, take=take, float64=True)
+    want, _ = ref.voxel_centroids(points[take].astype(np.float64), 0.5)
+    assert got.dtype == np.float64 and np.array_equal(got, want)
+
+
+@pytest.mark.parametrize("seed", range(4))
+@pytest.mark.parametrize("voxel_m", [0.3, 0.5, 1.5])
+def test_grid_labels_are_the_connected_components_of_scipy_numbered_alike(seed, voxel_m):
+    points = blobs(seed, spread=12.0)
+    got = grid_labels(points, voxel_m)
+    want = ref.grid_labels(points, voxel_m)
+    assert want.max() >= 2  # several components
+    assert np.array_equal(got, want)
+
+
+def test_grid_labels_of_a_cloud_spanning_a_huge_box_use_the_hash_table_and_agree():
+    """Two groups 5 km apart: the grid of their bounding box would not fit in memory."""
+    near, far = blobs(5, n=300), blobs(6, n=300) + np.float32([4000.0, -3000.0, 50.0])
+    points = np.vstack([near, far])
+    origin = points.min(axis=0)
+    want_near = ref.grid_labels(near, np.float32(0.2), origin)
+    want_far = ref.grid_labels(far, np.float32(0.2), origin) + want_near.max() + 1  # further along x: numbered after
+    assert np.array_equal(grid_labels(points, 0.2), np.concatenate([want_near, want_far]))
+
+
+@pytest.mark.parametrize(
+    "labels",
+    [
+        np.random.default_rng(0).integers(0, 30, 5000),
+        np.random.default_rng(1).integers(-5, 3, 200),  # negative labels
+        np.random.default_rng(2).integers(0, 10**9, 50),  # sparse labels
+        np.array([3, 3, 1, 1, 2, 2, 0]),  # ties in size: lower label first
+    ],
+)
+def test_split_by_label_gives_the_reference_groups_in_the_reference_order(labels):
+    got, want = split_by_label(labels), ref.split_by_label(labels)
+    assert len(got) == len(want) and all(np.array_equal(g, w) for g, w in zip(got, want))
+
+
+@pytest.mark.parametrize("seed", range(20))
+def test_min_area_rect_matches_the_qhull_reference(seed):
+    rng = np.random.default_rng(seed)
+    n = int(rng.integers(3, 400))
+    yaw = rng.uniform(-np.pi, np.pi)
+    local = rng.uniform(-1, 1, (n, 2)) * rng.uniform(0.5, 8.0, 2)
+    if seed % 2:  # an L-shaped view of a box edge
+        local[: n // 2, 1] = local[: n // 2, 1].max()
+    rot = np.array([[np.cos(yaw), -np.sin(yaw)], [np.sin(yaw), np.cos(yaw)]])
+    xy = local @ rot.T + rng.uniform(-50, 50, 2)
+    rect = min_area_rect(xy)
+    center, length, width, yaw_ref = ref.min_area_rect(xy)
+    assert rect.center_xy == pytest.approx(center, abs=1e-9)
+    assert (rect.length_m, rect.width_m) == pytest.approx((length, width), abs=1e-9)
+    assert rect.yaw_rad == pytest.approx(yaw_ref, abs=1e-12)
+
+
+def test_min_area_rect_of_a_known_rectangle_and_of_flat_sets():
+    corners = np.array([[0.0, 0.0], [4.0, 0.0], [4.0, 1.0], [0.0, 1.0], [2.0, 0.5], [1.0, 0.0]])
+    rect = min_area_rect(corners)
+    assert (rect.length_m, rect.width_m) == pytest.approx((4.0, 1.0))
+    assert rect.center_xy == pytest.approx([2.0, 0.5])
+    line = min_area_rect(np.array([[0.0, 0.0], [1.0, 1.0], [3.0, 3.0]]))  # collinear: zero width along the line
+    assert (line.length_m, line.width_m) == pytest.approx((np.sqrt(18), 0.0))
+    assert min_area_rect(np.zeros((0, 2))).area_m2 == 0.0
+
+
+# ----------------------------------------------------------------------------- merge and interpolation
+
+
+def test_merge_gives_the_reference_points_lags_and_faults():
+    sensors = [
+        SensorConfig(name="a", extrinsics=Extrinsics(x_m=10, y_m=-3, z_m=4, yaw_deg=37, pitch_deg=2, roll_deg=-1)),
+        SensorConfig(name="b", extrinsics=Extrinsics(x_m=-5, y_m=2, z_m=6, yaw_deg=-120), min_range_m=2.0),
+        SensorConfig(name="c", time_offset_s=-0.5),
+        SensorConfig(name="d"),
+    ]
+    stage = Concatenation(ConcatenationParams(voxel_size_m=0, sync_tolerance_s=0.05), sensors)
+    rng = np.random.default_rng(0)
+
+    def scan(name, stamp, n):
+        points = rng.normal(0, 40, (n, 3)).astype(np.float32)
+        points[::97] = np.nan
+        return SensorScan(name, stamp, points, rng.uniform(0, 0.1, n).astype(np.float32))
+
+    scans = {"a": scan("a", 2.02, 5000), "b": scan("b", 2.0, 4000), "c": scan("c", 2.6, 300), "x": scan("x", 2, 5)}
+    got = stage.merge(scans)
+    points, lag, reference, faults, dropped = ref.merge(stage, scans)
+    assert faults == {"a": "nan_points", "b": "nan_points", "c": "out_of_sync", "d": "missing", "x": "unknown_sensor"}
+    assert (got.stamp_s, got.faults, got.dropped, got.sensors_used) == (reference, faults, dropped, ["a", "b"])
+    assert got.points.shape == points.shape and np.allclose(got.points, points, rtol=0, atol=1e-4)
+    assert np.array_equal(got.lag_s, lag)
+
+
+def test_interpolation_moves_the_reference_points():
+    rng = np.random.default_rng(1)
+    points = rng.uniform(-10, 10, (3000, 3)).astype(np.float32)
+    lag = rng.uniform(0, 0.1, len(points)).astype(np.float32)
+    motion = [
+        MotionHint((1.0, 2.0), 0.3, 4.0, 1.5, (2.0, -1.0), 0.4),
+        MotionHint((-3.0, 2.5), -1.2, 3.0, 1.2, (0.5, 1.5)),  # overlaps the first: points move once
+    ]
+    got, want = points.copy(), points.copy()
+    Concatenation.interpolate(got, lag, motion)
+    ref.interpolate(want, lag, motion)
+    assert np.array_equal(got, want) and not np.array_equal(got, points)
+
+
+# ----------------------------------------------------------------------------- background and region on a recording
+
+
+def merged_frames(params, frames):
+    stage = Concatenation(params.concatenation, params.sensors)
+    return [stage.merge(f.scans).points for f in frames]
+
+
+@pytest.mark.parametrize(
+    "background",
+    [
+        BackgroundParams(enabled=True, window_frames=8, min_samples=4, learn_every_frames=1),  # fills, then slides
+        BackgroundParams(
+            enabled=True, window_frames=10, min_samples=5, learn_every_frames=2, dilation_voxels=2, forget_fraction=0.3
+        ),
+    ],
+)
+def test_background_decisions_and_map_are_the_reference_ones_on_a_recording(recording_frames, background):
+    params, frames = recording_frames
+    clouds = merged_frames(params, frames)
+    got_map, want_map = BackgroundMap(background, params.region), ref.BackgroundMap(background, params.region)
+    foreground_seen = background_seen = 0
+    for k, points in enumerate(clouds):
+        # a box driving through the yard, protected from the 10th frame on
+        box = [ProtectedBox((-20.0 + 1.5 * k, 5.0), 0.2 + 0.01 * k, 8.0, 1.5)] if k >= 10 else []
+        got = got_map.process(points, box)
+        in_region, foreground = want_map.process(points, box)
+        assert np.array_equal(got.in_region, in_region) and np.array_equal(got.foreground, foreground), k
+        foreground_seen += int(foreground.sum())
+        background_seen += int((in_region & ~foreground).sum())
+    assert foreground_seen > 0 and background_seen > 0
+    assert np.array_equal(got_map.counts, want_map.counts)
+    assert np.array_equal(got_map.is_background, want_map.is_background)
+    assert np.array_equal(got_map.dilated, want_map.dilated)
+
+
+def test_region_ground_and_kept_points_are_the_reference_ones_on_a_recording(recording_frames):
+    params, frames = recording_frames
+    region_params = params.region.model_copy(update={"ground_refit_frames": 1})
+    got_stage = Region(region_params, seed=7)
+    rng = np.random.default_rng(7)  # the reference draws the same hypotheses
+    for points in merged_frames(params, frames[:12]):
+        roi = ref.BackgroundMap(BackgroundParams(), region_params).process(points)[0]
+        candidates = roi & (np.arange(len(points)) % 3 > 0)
+        got = got_stage.process(points, roi, candidates)
+        normal, offset = ref.fit_ground(got_stage, points[roi], rng)
+        assert got.ground.normal == pytest.approx(normal, abs=1e-12) and got.ground.offset == pytest.approx(offset)
+        index = np.flatnonzero(candidates)
+        above = points[index] @ normal + offset > region_params.ground_distance_threshold_m
+        assert np.array_equal(got.index, index[above]) and np.array_equal(got.points, points[index[above]])
+        assert (got.roi_points, got.ground_points) == (int(roi.sum()), int((~above).sum()))
+        assert 0 < len(got.points) < int(roi.sum())
+
+
+def test_region_box_is_the_passthrough_box():
+    region = Region(RegionParams(x_min_m=-2, x_max_m=2, y_min_m=-1, y_max_m=1, z_min_m=0, z_max_m=1))
+    points = np.array([[0, 0, 0.5], [2, 1, 1], [2.01, 0, 0.5], [0, 0, -0.01], [-2, -1, 0]], dtype=np.float32)
+    assert region.roi_mask(points).tolist() == [True, True, False, False, True]
+
+
+@pytest.mark.parametrize("method", ["paper", "default", "articulated"])
+def test_no_kernel_is_compiled_while_frames_are_processed(method):
+    """Building the pipeline loads every specialisation its frames call: none is compiled in a frame."""
+    from numba.core.registry import CPUDispatcher
+
+    from i2v_loc.pipelines import build_pipeline
+    from i2v_loc.stages import kernels
+
+    recording = Recording(SAMPLES / "man_tgx_docking")
+    pipeline = build_pipeline(load_params(recording.sensors_file), method)
+    dispatchers = {name: f for name, f in vars(kernels).items() if isinstance(f, CPUDispatcher)}
+    before = {name: set(f.signatures) for name, f in dispatchers.items()}
+    for frame in itertools.islice(recording.frames(), 60):  # the map becomes ready, vehicles are found
+        pipeline.process(frame)
+    assert {name: set(f.signatures) for name, f in dispatchers.items()} == before
+    assert not [name for name, sigs in before.items() if not sigs and not name.startswith("_")]  # all loaded
+
+
+def test_min_area_rect_of_a_dense_blob_with_few_hull_points_matches_qhull():
+    """Most points inside the hull (the filter drops them), a few on it, duplicates and collinear ones."""
+    rng = np.random.default_rng(11)
+    inside = rng.uniform(-1, 1, (20000, 2)) * [6.0, 1.2]
+    edge = np.column_stack([np.linspace(-6, 6, 50), np.full(50, 1.2)])  # collinear along the top side
+    xy = np.vstack([inside, edge, edge[:5], [[-6.0, -1.2], [6.0, -1.2]]]) @ np.array([[0.8, 0.6], [-0.6, 0.8]])
+    rect = min_area_rect(xy)
+    center, length, width, yaw = ref.min_area_rect(xy)
+    assert (rect.length_m, rect.width_m) == pytest.approx((length, width), abs=1e-9)
+    assert rect.center_xy == pytest.approx(center, abs=1e-9) and rect.yaw_rad == pytest.approx(yaw, abs=1e-12)
+    assert (length, width) == pytest.approx((12.0, 2.4), abs=1e-3)
+
+
+@pytest.mark.parametrize("seed", range(4))
+@pytest.mark.parametrize("dims", [2, 3])
+@pytest.mark.parametrize("tolerance_m", [0.3, 0.7])
+def test_euclidean_labels_are_the_k_d_tree_components_numbered_alike(seed, dims, tolerance_m):
+    points = blobs(seed, n=3000, spread=15.0, dtype=np.float64)[:, :dims]
+    got = euclidean_labels(points, tolerance_m)
+    want = ref.euclidean_labels(points, tolerance_m)
+    assert want.max() >= 2 and np.array_equal(got, want)
+
+
+def test_euclidean_labels_join_points_exactly_at_the_tolerance_and_no_further():
+    points = np.array([[0.0, 0.0], [0.5, 0.0], [1.0, 0.0], [1.5000001, 0.0], [0.0, 0.5]])
+    assert euclidean_labels(points, 0.5).tolist() == ref.euclidean_labels(points, 0.5).tolist() == [0, 0, 0, 1, 0]
