@@ -542,13 +542,13 @@ class ArticulatedParams(Section):
         75.0,
         gt=0.0,
         le=180.0,
-        description="A vehicle folded further (a parked trailer beside a container looks jack-knifed) starts only once it moved",
+        description="No vehicle starts folded further (a parked trailer beside a container looks jack-knifed); a tracked one may fold on",
     )
     start_travel_m: float = Field(
         1.5,
         ge=0.0,
         le=50.0,
-        description="A rigid or folded vehicle starts once its seed moved this far (a container or a parked trailer never does)",
+        description="A rigid vehicle starts once its seed moved this far (a container or a parked trailer never does)",
     )
     start_min_explained: float = Field(
         0.8, gt=0.0, le=1.0, description="A seed is a vehicle when the best model explains this share of its points"

@@ -70,11 +70,9 @@ class Seed:
     first_xy: np.ndarray
     frames: int = 1
     seen: bool = True
-    # best explained by one rigid box, or by a tractor and trailer folded beyond start_max_hitch_deg
-    # (a parked trailer beside a container): fitted again once it has moved (rigid: and the map is ready)
+    # best explained by one rigid box: fitted again once it has moved and the map is ready
     rigid: bool = False
-    folded: bool = False
-    first_fit: tuple | None = None  # ((rigid, folded), xy) of its first rigid or folded fit
+    first_fit: np.ndarray | None = None  # xy of its first rigid fit
 
     @property
     def travel_m(self) -> float:
@@ -323,7 +321,7 @@ class VehicleTracker:
             center = seed.center_xy
             track = self._new_track(cluster, seed, float(ground(center[0], center[1])), stamp_s, rigid_allowed)
             if track is None:
-                if not (seed.rigid or seed.folded):  # no vehicle (a wall, a car, a person): tried again after a while
+                if not seed.rigid:  # no vehicle (a wall, a car, a person): tried again after a while
                     seed.frames = -SEED_RETRY_FRAMES
                 continue
             self.seeds.remove(seed)
@@ -332,19 +330,17 @@ class VehicleTracker:
         return reports
 
     def _fit_moved(self, seed: Seed, m: Measurement) -> bool:
-        """A rigid or folded seed's fitted pose moved ``start_travel_m`` since its first such fit (its
-        points' centre alone jumps when a passing vehicle hides part of a container)."""
-        if not (seed.rigid or seed.folded):
+        """A rigid seed's fitted pose moved ``start_travel_m`` since its first rigid fit (its points'
+        centre alone jumps when a passing vehicle hides part of a container)."""
+        if not seed.rigid:
             return True
-        kind = (seed.rigid, seed.folded)
-        if seed.first_fit is None or seed.first_fit[0] != kind:
-            seed.first_fit = (kind, m.vector[:2].copy())
-        return float(np.hypot(*(m.vector[:2] - seed.first_fit[1]))) >= self.params.start_travel_m
+        if seed.first_fit is None:
+            seed.first_fit = m.vector[:2].copy()
+        return float(np.hypot(*(m.vector[:2] - seed.first_fit))) >= self.params.start_travel_m
 
     def _may_start(self, seed: Seed, rigid_allowed: bool) -> bool:
-        """A rigid seed once the background is learned and it moved; a folded one once it moved."""
-        moved = seed.travel_m >= self.params.start_travel_m
-        return (not seed.rigid or (rigid_allowed and moved)) and (not seed.folded or moved)
+        """A rigid seed once the background is learned and it moved."""
+        return not seed.rigid or (rigid_allowed and seed.travel_m >= self.params.start_travel_m)
 
     def _seed_clusters(self, points: np.ndarray, ground) -> list[np.ndarray]:
         """Connected components tall enough to be a vehicle, those closer than ``start_join_m`` joined
@@ -377,8 +373,7 @@ class VehicleTracker:
             return None
         model, m = chosen
         seed.rigid = not model.articulated
-        seed.folded = model.articulated and abs(m.hitch_rad) > np.radians(self.params.start_max_hitch_deg)
-        fit_moved = self._fit_moved(seed, m)  # its first rigid or folded fit is remembered
+        fit_moved = self._fit_moved(seed, m)  # its first rigid fit is remembered
         if not (fit_moved and self._may_start(seed, rigid_allowed)):
             return None
         if (
@@ -471,6 +466,8 @@ class VehicleTracker:
         best_art = min(articulated, key=lambda h: h[2].cost, default=None)
         best_rigid = min(rigid, key=lambda h: h[2].cost, default=None)
         if best_art is not None and (best_rigid is None or best_art[2].cost < RIGID_COST_RATIO * best_rigid[2].cost):
+            if abs(best_art[2].hitch_rad) > np.radians(self.params.start_max_hitch_deg):
+                return None  # it looks jack-knifed: a parked trailer beside a container, more likely
             pool = [h for h in articulated if h[0] is best_art[0]]
         else:
             pool = [h for h in rigid if h[0].tractor.length_m >= self.params.rigid_min_length_m]
