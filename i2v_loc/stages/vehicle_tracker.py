@@ -542,10 +542,15 @@ def _join_near(parts: list[np.ndarray], distance_m: float) -> list[list[int]]:
             i = parent[i]
         return i
 
-    trees = [cKDTree(part[:, :2]) for part in parts]
-    for i in range(len(parts)):
-        for j in range(i + 1, len(parts)):
-            if root(i) != root(j) and trees[i].sparse_distance_matrix(trees[j], distance_m).nnz:
+    # only parts whose footprints, grown by the distance, overlap can hold such a pair
+    low = np.array([part[:, :2].min(axis=0) for part in parts]) - distance_m / 2
+    high = np.array([part[:, :2].max(axis=0) for part in parts]) + distance_m / 2
+    overlap = np.all((low[:, None] <= high[None]) & (low[None] <= high[:, None]), axis=2)
+    trees: dict[int, cKDTree] = {}
+    for i, j in zip(*np.nonzero(np.triu(overlap, 1))):
+        if root(i) != root(j):
+            tree = trees.setdefault(i, cKDTree(parts[i][:, :2]))
+            if np.isfinite(tree.query(parts[j][:, :2], distance_upper_bound=distance_m)[0]).any():
                 parent[root(j)] = root(i)
     groups: dict[int, list[int]] = {}
     for i in range(len(parts)):
