@@ -343,3 +343,20 @@ def test_a_vehicle_folded_beyond_the_start_limit_does_not_start(hitch_deg):
     pos, yaw, hitch = errors(reports[0], frames[-1][2][0])
     assert pos < 0.05 and abs(yaw) < 0.5 and abs(hitch) < 0.5
     assert reports[0].state.jackknife and reports[0].model.name == "volvo_fh"
+
+
+def test_seed_parts_are_joined_by_their_nearest_points():
+    """Parts closer than the distance (point to point) are one group, chained; none, one, or parts
+    whose footprints overlap without close points are handled."""
+    from i2v_loc.stages.vehicle_tracker import _join_near
+
+    def part(*xy):
+        return np.column_stack([np.array(xy, float).reshape(-1, 2), np.zeros(len(xy))])
+
+    assert _join_near([], 2.0) == []
+    assert _join_near([part((0, 0))], 2.0) == [[0]]
+    a, b, c, d = part((0, 0), (1, 0)), part((2.9, 0)), part((4.5, 0.5)), part((1.5, 1.5), (10, 10))
+    groups = _join_near([a, b, c, d], 2.0)  # a-b 1.9, b-c 1.67: chained; d's nearest point 1.58 from a
+    assert sorted(sorted(g) for g in groups) == [[0, 1, 2, 3]]
+    far = part((0, 3), (6, 3))  # its footprint overlaps a's grown one, but no point is within 2 m
+    assert sorted(sorted(g) for g in _join_near([a, far], 2.0)) == [[0], [1]]

@@ -543,8 +543,8 @@ def _join_near(parts: list[np.ndarray], distance_m: float) -> list[list[int]]:
         return i
 
     # only parts whose footprints, grown by the distance, overlap can hold such a pair
-    low = np.array([part[:, :2].min(axis=0) for part in parts]) - distance_m / 2
-    high = np.array([part[:, :2].max(axis=0) for part in parts]) + distance_m / 2
+    low = np.array([part[:, :2].min(axis=0) for part in parts]).reshape(-1, 2) - distance_m / 2
+    high = np.array([part[:, :2].max(axis=0) for part in parts]).reshape(-1, 2) + distance_m / 2
     overlap = np.all((low[:, None] <= high[None]) & (low[None] <= high[:, None]), axis=2)
     trees: dict[int, cKDTree] = {}
     for i, j in zip(*np.nonzero(np.triu(overlap, 1))):
