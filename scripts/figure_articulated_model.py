@@ -15,16 +15,11 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+from i2v_loc.geometry import box_corners  # noqa: E402
 from i2v_loc.params import Params  # noqa: E402
 from i2v_loc.stages.vehicle_model import VehicleModel  # noqa: E402
 
 OUT = Path(__file__).resolve().parents[1] / "docs" / "figures" / "articulated_model.png"
-
-
-def corners(center_xy, yaw, box) -> np.ndarray:
-    c, s = np.cos(yaw), np.sin(yaw)
-    local = np.array([[1, 1], [-1, 1], [-1, -1], [1, -1], [1, 1]]) * [box.length_m / 2, box.width_m / 2]
-    return center_xy + local @ np.array([[c, s], [-s, c]])
 
 
 def main(out: Path) -> None:
@@ -40,7 +35,7 @@ def main(out: Path) -> None:
         (tractor_c, yaw1, model.tractor, "tractor (cab) box"),
         (trailer_c, yaw1 + hitch, model.trailer, "trailer box"),
     ):
-        p = corners(c, yaw, box)
+        p = box_corners(c, box.length_m, box.width_m, yaw)[[0, 1, 2, 3, 0]]
         ax.fill(p[:, 0], p[:, 1], alpha=0.15)
         ax.plot(p[:, 0], p[:, 1], lw=1.5, label=name)
     ax.plot(*axle, "ko")

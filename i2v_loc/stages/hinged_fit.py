@@ -179,7 +179,7 @@ def faces(
     along = xy @ table[:, 2:4].T - table[:, 5]
     excess = np.maximum(np.abs(along) - table[:, 6], 0.0)
     dist2 = perp * perp + excess * excess
-    boxes = [model.tractor] + ([model.trailer] if model.trailer is not None else [])
+    boxes = model.boxes
     # on the roof, or under the floor (wheels, landing gear, chassis: set in from the sides)
     roof = np.zeros((n, len(boxes)), dtype=bool)
     for u, box in enumerate(boxes):

@@ -413,6 +413,28 @@ def _root(parent, v):
 
 
 @njit(**_JIT)
+def _union(parent, a, b):
+    """Joins the trees of a and b under the smaller root."""
+    a, b = _root(parent, a), _root(parent, b)
+    if a != b:
+        parent[max(a, b)] = min(a, b)
+
+
+@njit(**_JIT)
+def _component_labels(parent):
+    """Each element's component, numbered in the order of the components' first elements."""
+    labels = np.full(len(parent), EMPTY, dtype=np.int64)
+    n_comp = 0
+    for v in range(len(parent)):
+        r = _root(parent, v)
+        if labels[r] < 0:
+            labels[r] = n_comp
+            n_comp += 1
+        labels[v] = labels[r]
+    return labels
+
+
+@njit(**_JIT)
 def voxel_components(voxel_keys, dims, dense, table_keys, table_ids):
     """26-connected components of the occupied voxels, numbered in the order of their first voxel
     in key (raster) order."""
@@ -434,18 +456,8 @@ def voxel_components(voxel_keys, dims, dense, table_keys, table_ids):
                     w = _lookup((ni * dims[1] + nj) * dims[2] + nk, dense, table_keys, table_ids)
                     if w < 0:
                         continue
-                    a, b = _root(parent, v), _root(parent, w)
-                    if a != b:
-                        parent[max(a, b)] = min(a, b)
-    label = np.full(n_vox, EMPTY, dtype=np.int64)
-    n_comp = 0
-    for v in range(n_vox):
-        r = _root(parent, v)
-        if label[r] < 0:
-            label[r] = n_comp
-            n_comp += 1
-        label[v] = label[r]
-    return label
+                    _union(parent, v, w)
+    return _component_labels(parent)
 
 
 @njit(**_JIT)
@@ -493,18 +505,8 @@ def radius_components(points, radius):
                             diff = points[i, a] - points[j, a]
                             d += diff * diff
                         if d <= r2:
-                            a_root, b_root = _root(parent, i), _root(parent, j)
-                            if a_root != b_root:
-                                parent[max(a_root, b_root)] = min(a_root, b_root)
-    labels = np.full(n, EMPTY, dtype=np.int64)
-    n_comp = 0
-    for i in range(n):
-        r = _root(parent, i)
-        if labels[r] < 0:
-            labels[r] = n_comp
-            n_comp += 1
-        labels[i] = labels[r]
-    return labels
+                            _union(parent, i, j)
+    return _component_labels(parent)
 
 
 @njit(**_JIT)

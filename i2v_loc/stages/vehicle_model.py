@@ -56,6 +56,11 @@ class VehicleModel:
     def articulated(self) -> bool:
         return self.trailer is not None
 
+    @property
+    def boxes(self) -> list[Box]:
+        """The units' boxes: the tractor's, then the trailer's if any."""
+        return [self.tractor] + ([self.trailer] if self.trailer is not None else [])
+
     @classmethod
     def from_config(cls, name: str, v: VehicleConfig) -> VehicleModel:
         t, r = v.truck, v.trailer

@@ -194,7 +194,7 @@ class VehicleTracker:
 
     def _learn(self, track: _Track, m: Measurement) -> None:
         model = track.model
-        boxes = [model.tractor] + ([model.trailer] if model.trailer is not None else [])
+        boxes = model.boxes
         local = unit_frames(m.points, m.vector, model)
         new_boxes = []
         for u, box in enumerate(boxes):
@@ -394,7 +394,7 @@ class VehicleTracker:
             self.params,
         )
         window = self.params.dimension_window
-        boxes = [model.tractor] + ([model.trailer] if model.trailer is not None else [])
+        boxes = model.boxes
         widths = [_Extent(box.width_m, window) for box in boxes]
         length = kingpin = front = None
         if model.trailer is not None:
@@ -488,7 +488,7 @@ def _supported(m: Measurement, model: VehicleModel, ground_z_m: float) -> bool:
     ``UNIT_SUPPORT`` of its height above its floor (a car's side on a trailer's faces is no truck)
     and are at least ``UNIT_SUPPORT`` of the unit's share of the side area (a parked trailer's
     landing gear is no tractor)."""
-    boxes = [model.tractor] + ([model.trailer] if model.trailer is not None else [])
+    boxes = model.boxes
     z_rel = m.points[:, 2] - ground_z_m
     areas = np.array([box.length_m * box.height_m for box in boxes])
     explained = max(int(np.sum(m.unit >= 0)), 1)
@@ -598,7 +598,7 @@ def box_distance(points: np.ndarray, prior: Prior) -> np.ndarray:
     reaches ``trailer_slack_m`` further back."""
     model = prior.model
     v = prior.vector
-    boxes = [(model.tractor, 0.0)] + ([(model.trailer, prior.trailer_slack_m)] if model.trailer is not None else [])
+    boxes = zip(model.boxes, (0.0, prior.trailer_slack_m))
     best = np.full(len(points), np.inf)
     for (box, slack), q in zip(boxes, unit_frames(points, v, model)):
         dx = np.maximum(np.maximum(box.rear_m - slack - q[:, 0], q[:, 0] - box.front_m), 0.0)
