@@ -15,6 +15,7 @@ from i2v_loc.pipelines import build_pipeline
 from i2v_loc.pipelines.articulated import ArticulatedPipeline
 from i2v_loc.pipelines.paper import PaperPipeline
 from i2v_loc.sim.kinematics import Articulation, step
+from i2v_loc.stages.hinged_fit import Prior, fit
 from i2v_loc.stages.vehicle_model import VehicleModel
 from i2v_loc.stages.vehicle_tracker import VehicleTracker
 
@@ -360,3 +361,68 @@ def test_seed_parts_are_joined_by_their_nearest_points():
     assert sorted(sorted(g) for g in groups) == [[0, 1, 2, 3]]
     far = part((0, 3), (6, 3))  # its footprint overlaps a's grown one, but no point is within 2 m
     assert sorted(sorted(g) for g in _join_near([a, far], 2.0)) == [[0], [1]]
+
+
+def dock(x_m: float, y_m: float, yaw_rad: float) -> np.ndarray:
+    """Points of a 12 m wide, 6 m tall dock wall whose face passes through (x, y) facing ``yaw_rad``,
+    with two 0.4 m rubber bumpers standing 0.15 m out of it at 0.9-1.3 m, 1.1 m either side of the
+    centre line."""
+    e, n = np.array([np.cos(yaw_rad), np.sin(yaw_rad)]), np.array([-np.sin(yaw_rad), np.cos(yaw_rad)])
+    across, up = np.meshgrid(np.arange(-6.0, 6.0, 0.15), np.arange(0.1, 6.0, 0.15))
+    wall = np.column_stack([np.outer(across.ravel(), n) + [x_m, y_m], up.ravel()])
+    bumpers = []
+    for side in (-1.1, 1.1):
+        a, u = np.meshgrid(np.arange(side - 0.15, side + 0.15, 0.05), np.arange(0.9, 1.3, 0.05))
+        xy = np.outer(a.ravel(), n) + 0.15 * e + [x_m, y_m]
+        bumpers.append(np.column_stack([xy, u.ravel()]))
+    return np.vstack([wall, *bumpers])
+
+
+def test_a_vehicle_standing_at_a_dock_starts_and_keeps_its_trailer_length():
+    """Docked from the first frame, before any background: its trailer's rear 0.25 m from a wall
+    taller than any vehicle (one connected component with it). It starts as the Volvo, and neither
+    the bumpers behind it nor the wall lengthen its trailer when it stands or pulls away."""
+    model = volvo()
+    yaw = 0.3
+    e = np.array([np.cos(yaw), np.sin(yaw)])
+    axle = np.array([2.0, 3.0])
+    rear = axle - (model.kingpin_behind_axle_m + model.trailer.length_m - model.trailer.front_m) * e
+    wall = dock(*(rear - 0.25 * e), yaw)
+    tracker = VehicleTracker(PARAMS.articulated, PARAMS.vehicles)
+    lengths = []
+    for t, points, (truth,) in drive([(model, (*axle, yaw, yaw))], 8.0, lambda t: 0.0 if t < 2.0 else 1.0, 0.0):
+        reports = tracker.process(np.vstack([points, wall]), flat, t, background_ready=False)
+        if t >= 0.25:
+            assert len(reports) == 1 and reports[0].model.name == "volvo_fh"
+            assert errors(reports[0], truth)[0] < 0.1
+            lengths.append(reports[0].model.trailer.length_m)
+    assert len(lengths) > 70 and np.abs(np.array(lengths) - model.trailer.length_m).max() < 0.15
+
+
+def test_a_rigid_track_becomes_articulated_when_it_moves():
+    """Driving straight, a tractor and trailer can be taken for one long box. While the track moves
+    it is fitted again as every model: it becomes the Volvo (same id) and its hitch is right."""
+    model = volvo()
+    yaw = 0.0
+    e = np.array([np.cos(yaw), np.sin(yaw)])
+    axle = np.array([-12.0, 4.0])
+    front = axle + model.tractor.front_m * e
+    rear = axle - (model.kingpin_behind_axle_m + model.trailer.length_m - model.trailer.front_m) * e
+    box = VehicleModel.rigid("rigid", float(np.hypot(*(front - rear))), model.trailer.width_m, 4.0)
+    tracker = VehicleTracker(PARAMS.articulated, PARAMS.vehicles)
+    frames = drive([(model, (*axle, yaw, yaw))], 6.0, 2.0, lambda t: 0.15 if t > 1.0 else 0.0)
+    t, points, _ = next(frames)
+    center = (front + rear) / 2
+    m = fit(points, Prior(*center, yaw, 0.0, box), PARAMS.articulated, iterations=20)
+    tracker.tracks.append(tracker._track(7, box, m, 0.0, t, 2.0))
+    kinds = []
+    truth = None
+    for t, points, (state,) in frames:
+        (report,) = tracker.process(points, flat, t)
+        assert report.id == 7
+        kinds.append(report.model.articulated)
+        truth = state
+    assert not kinds[0] and kinds[-1] and kinds.index(True) <= 25
+    assert report.model.name == "volvo_fh"
+    pos, yaw_err, hitch = errors(report, truth)
+    assert pos < 0.05 and abs(yaw_err) < 0.5 and abs(hitch) < 0.5 and abs(np.degrees(truth[3] - truth[2])) > 5.0

@@ -20,7 +20,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from i2v_loc.params import ArticulatedParams, VehicleConfig
-from i2v_loc.stages.hinged_fit import LEFT, RIGHT, Measurement, Prior, fit
+from i2v_loc.stages.hinged_fit import LEFT, RIGHT, TRAILER_LENGTH_RANGE_M, Measurement, Prior, fit
 from i2v_loc.stages.kinematic_filter import FilterState, KinematicFilter
 from i2v_loc.stages.primitives import grid_labels, min_area_rect, split_by_label
 from i2v_loc.stages.vehicle_model import VehicleModel
@@ -32,10 +32,11 @@ START_SIGMAS = np.array([0.3, 0.3, np.radians(3.0), np.radians(5.0)])  # added t
 START_SCALE_M = 0.8  # first loss scale of the start fits (a placed model is off by up to metres)
 DIRECTION_COST_RATIO = 0.8  # one end's fit must cost this much less than the other's to decide the direction
 RIGID_COST_RATIO = 0.7  # an articulated model must cost this much less than one rigid box
-MAX_TRAILER_LENGTH_M = 16.5
+MAX_TRAILER_LENGTH_M = TRAILER_LENGTH_RANGE_M[1]
 REAR_FACE_MIN_POINTS = 3
 SIDE_MIN_POINTS = 5
 MAX_VEHICLE_HEIGHT_M = 4.6  # 4.0 m in the EU, 4.3 m in the US, plus the roof's clutter and noise
+TALL_COLUMN_MIN_POINTS = 2  # points above a vehicle's height that make a column a structure (not one noise point)
 RIGID_MIN_WIDTH_M = 1.6  # a rigid vehicle starts once its width is seen (an end face or both sides)
 KINGPIN_MIN_HITCH_RAD = np.radians(20.0)  # the kingpin's offset shows only at a hitch angle
 KINGPIN_SETTLED = 50  # observations of the kingpin's offset: learned
@@ -47,7 +48,9 @@ SETTLED_SLACK_M = 0.5
 FACE_SEEN_SPAN = 0.6  # an end face is seen when its points span this share of the unit's width
 END_BAND_M = 0.4
 MAX_BODY_GAP_M = 1.0
+WALL_BESIDE_M = (0.35, 0.8)  # a face with points this far out past a trailer's side is wider than it
 UNIT_SUPPORT = 0.5
+RECHECK_MIN_SPEED_M_S = 0.5  # a rigid track is fitted again as every model while it moves this fast
 SEED_RETRY_FRAMES = 20  # a seed that is no vehicle is fitted again after this many frames (the fits cost ~0.1 s)
 
 
@@ -81,23 +84,40 @@ class Seed:
 
 @dataclass
 class _Extent:
-    """Per-frame observations of one dimension; the estimate is their median (the prior before any)."""
+    """Per-frame observations of one dimension; the estimate is their median (the prior before any).
+    Per-frame lower bounds (the unit reaches at least that far) count through their median too: a
+    dock's bumpers right behind a trailer reach on from it for some frames, then fall behind."""
 
     prior: float
     window: int
     values: deque = field(default_factory=deque)
-    lower_bound: float = -np.inf
+    bounds: deque = field(default_factory=deque)
     median: float | None = None
+    lower_bound: float = -np.inf
 
     def add(self, value: float) -> None:
-        self.values.append(value)
-        while len(self.values) > self.window:
-            self.values.popleft()
-        self.median = float(np.median(self.values))
+        self.median = _windowed_median(self.values, value, self.window)
+
+    def add_bound(self, value: float) -> None:
+        self.lower_bound = _windowed_median(self.bounds, value, self.window)
+
+    @property
+    def settled(self) -> bool:
+        return len(self.values) >= LENGTH_CONVERGED_OBSERVATIONS
 
     @property
     def estimate(self) -> float:
-        return max(self.prior if self.median is None else self.median, self.lower_bound)
+        """The median, or the prior before any; at least the lower bound until settled (a face seen
+        outweighs points that only reach further)."""
+        value = self.prior if self.median is None else self.median
+        return value if self.settled else max(value, self.lower_bound)
+
+
+def _windowed_median(window: deque, value: float, size: int) -> float:
+    window.append(value)
+    while len(window) > size:
+        window.popleft()
+    return float(np.median(window))
 
 
 @dataclass(eq=False)
@@ -114,6 +134,7 @@ class _Track:
     ground_z_m: float = 0.0  # under the vehicle, this frame
     kingpin: _Extent | None = None  # its offset behind the rear axle (fitted at a hitch angle only)
     trailer_front: _Extent | None = None  # the trailer's front face ahead of the kingpin (with it)
+    frames: int = 0  # measured frames
 
     def report(self, measured: bool) -> VehicleReport:
         s = self.filter.state
@@ -145,7 +166,7 @@ class VehicleTracker:
         owner = self._claim(points, priors)
         reports = []
         for i, (track, prior) in enumerate(zip(self.tracks, priors)):
-            reports.append(self._step(track, prior, points[owner == i]))
+            reports.append(self._step(track, prior, points[owner == i], stamp_s))
         self.tracks = [t for t in self.tracks if t.missed < self.params.leave_frames]
         reports = [r for r in reports if any(t.id == r.id for t in self.tracks)]
         reports += self._start(points[owner < 0], ground, stamp_s, rigid_allowed=background_ready)
@@ -155,10 +176,9 @@ class VehicleTracker:
         s = track.filter.predict(stamp_s)
         slack = 0.0
         if track.model.trailer is not None and track.trailer_length is not None:
-            settled = len(track.trailer_length.values) >= LENGTH_CONVERGED_OBSERVATIONS
             slack = (
                 SETTLED_SLACK_M
-                if settled
+                if track.trailer_length.settled
                 else max(MAX_TRAILER_LENGTH_M - track.model.trailer.length_m, SETTLED_SLACK_M)
             )
         return Prior(s.x_m, s.y_m, s.yaw_rad, s.hitch_rad, track.model, float(ground(s.x_m, s.y_m)), slack)
@@ -174,7 +194,7 @@ class VehicleTracker:
             owner[take], best[take] = i, d[take]
         return owner
 
-    def _step(self, track: _Track, prior: Prior, points: np.ndarray) -> VehicleReport:
+    def _step(self, track: _Track, prior: Prior, points: np.ndarray, stamp_s: float) -> VehicleReport:
         track.ground_z_m = prior.ground_z_m
         m = fit(points, prior, self.params) if len(points) else None
         measured = False
@@ -186,6 +206,7 @@ class VehicleTracker:
             if self.params.learn_dimensions:
                 self._learn_kingpin(track, prior, points)
                 self._learn(track, m)
+            track = self._recheck_rigid(track, points, stamp_s)
         else:
             track.missed += 1
         return track.report(measured)
@@ -245,29 +266,40 @@ class VehicleTracker:
 
     def _learn_trailer_length(self, track: _Track, m: Measurement, q: np.ndarray, width_m: float) -> None:
         """The rear face: the hindmost of the trailer body's points (within its width and height band,
-        reached from the front without a gap longer than ``MAX_BODY_GAP_M``). A length when points
-        across the middle of the face are seen there (not only the ends of the two sides), else a
-        lower bound (the trailer reaches at least that far back)."""
+        reached from the front without a gap longer than ``MAX_BODY_GAP_M``, ahead of any face that
+        runs on past the trailer's sides: a wall). A length when points across the middle of the
+        face are seen there (not only the ends of the two sides), else a lower bound (the trailer
+        reaches at least that far back)."""
         trailer = track.model.trailer
         z_rel = m.points[:, 2] - track.ground_z_m
-        band = (np.abs(q[:, 1]) <= width_m / 2 + self.params.fit_inlier_m) & (q[:, 0] <= trailer.front_m + END_BAND_M)
-        band &= (z_rel >= trailer.floor_m - END_BAND_M) & (z_rel <= trailer.top_m + END_BAND_M)
+        tall = (z_rel >= trailer.floor_m - END_BAND_M) & (z_rel <= trailer.top_m + END_BAND_M)
+        tall &= q[:, 0] <= trailer.front_m + END_BAND_M
+        side = np.abs(q[:, 1]) - width_m / 2
+        band = tall & (side <= self.params.fit_inlier_m)
         if band.sum() < 5:
             return
+        # a face running on past both sides is a wall behind the trailer (one side: a pillar beside
+        # it, a neighbour, or at a hitch angle the cab, which is not counted)
+        beside = tall & (m.unit != 0) & (side >= WALL_BESIDE_M[0]) & (side <= WALL_BESIDE_M[1])
+        left, right = q[beside & (q[:, 1] > 0), 0], q[beside & (q[:, 1] < 0), 0]
         order = np.argsort(-q[band][:, 0])
         qb, zb = q[band][order], z_rel[band][order]
-        gaps = np.flatnonzero(-np.diff(qb[:, 0]) > MAX_BODY_GAP_M)
-        keep = gaps[0] + 1 if len(gaps) else len(qb)
+        ends = -np.diff(qb[:, 0]) > MAX_BODY_GAP_M
+        if len(left) and len(right):
+            ends |= _near_any(qb[1:, 0], left, END_BAND_M / 2) & _near_any(qb[1:, 0], right, END_BAND_M / 2)
+        cut = np.flatnonzero(ends)
+        keep = cut[0] + 1 if len(cut) else len(qb)
         qb, zb = qb[:keep], zb[:keep]
         rear = float(qb[-1, 0])
         at_end = qb[:, 0] <= rear + END_BAND_M
         end = qb[at_end]
         # the face's middle below the roof (roof points near the edge lie up to END_BAND_M ahead of it)
         middle = end[(np.abs(end[:, 1]) <= width_m / 4) & (zb[at_end] < trailer.top_m - self.params.fit_top_band_m)]
-        if len(middle) >= 2 and np.ptp(end[:, 1]) >= FACE_SEEN_SPAN * width_m:
-            track.trailer_length.add(trailer.front_m - float(np.median(middle[:, 0])))
+        length = trailer.front_m - float(np.median(middle[:, 0])) if len(middle) else 0.0
+        if len(middle) >= 2 and np.ptp(end[:, 1]) >= FACE_SEEN_SPAN * width_m and length >= TRAILER_LENGTH_RANGE_M[0]:
+            track.trailer_length.add(length)
         bound = min(trailer.front_m - rear - END_BAND_M, MAX_TRAILER_LENGTH_M)
-        track.trailer_length.lower_bound = max(track.trailer_length.lower_bound, bound)
+        track.trailer_length.add_bound(bound)
 
     def _trailer_axle(self, track: _Track) -> float:
         """L2 scaled with the trailer's length behind the kingpin (the catalogue's proportion)."""
@@ -346,9 +378,10 @@ class VehicleTracker:
         """Connected components tall enough to be a vehicle, those closer than ``start_join_m`` joined
         (a cab and its trailer are apart by up to about 1.5 m), of a vehicle's length and at least
         ``start_min_width_m`` wide (a wall, or a vehicle seen from one side only, is a plane)."""
+        p = self.params
+        points = _below_tall_structures(points, ground, p.start_voxel_m)
         if len(points) == 0:
             return []
-        p = self.params
         parts = [
             points[idx]
             for idx in split_by_label(grid_labels(points, p.start_voxel_m))
@@ -365,6 +398,16 @@ class VehicleTracker:
     def _new_track(
         self, cluster: np.ndarray, seed: Seed, ground_z_m: float, stamp_s: float, rigid_allowed: bool
     ) -> _Track | None:
+        chosen = self._candidate(cluster, seed, ground_z_m, rigid_allowed)
+        if chosen is None:
+            return None
+        model, m = chosen
+        return self._track(next(self._ids), model, m, ground_z_m, stamp_s, 0.0)
+
+    def _candidate(
+        self, cluster: np.ndarray, seed: Seed, ground_z_m: float, rigid_allowed: bool
+    ) -> tuple[VehicleModel, Measurement] | None:
+        """The best-explaining model and its fit, if it passes the start's checks."""
         hypotheses = self._hypotheses(cluster, ground_z_m)
         if not hypotheses:
             return None
@@ -382,6 +425,11 @@ class VehicleTracker:
             or _gap_filled(cluster, m, model, ground_z_m)
         ):
             return None
+        return model, m
+
+    def _track(
+        self, track_id: int, model: VehicleModel, m: Measurement, ground_z_m: float, stamp_s: float, speed_m_s: float
+    ) -> _Track:
         # the seed's points are not de-skewed (no motion known yet): the first pose is a rough one
         start_cov = m.covariance + np.diag(START_SIGMAS[: len(m.vector)] ** 2)
         filt = KinematicFilter(
@@ -392,10 +440,10 @@ class VehicleTracker:
             model.trailer_axle_m,
             model.articulated,
             self.params,
+            speed_m_s,
         )
         window = self.params.dimension_window
-        boxes = model.boxes
-        widths = [_Extent(box.width_m, window) for box in boxes]
+        widths = [_Extent(box.width_m, window) for box in model.boxes]
         length = kingpin = front = None
         if model.trailer is not None:
             length, kingpin = _Extent(model.trailer.length_m, window), _Extent(model.kingpin_behind_axle_m, window)
@@ -403,19 +451,28 @@ class VehicleTracker:
             if m.rear_points >= REAR_FACE_MIN_POINTS:  # the start fit saw where the trailer ends
                 length.add(model.trailer.length_m)
         return _Track(
-            next(self._ids),
-            model,
-            filt,
-            model.name,
-            length,
-            widths,
-            0,
-            m,
-            np.array(m.vector[:2]),
-            ground_z_m,
-            kingpin,
-            front,
+            track_id, model, filt, model.name, length, widths, 0, m, np.array(m.vector[:2]), ground_z_m, kingpin, front
         )
+
+    def _recheck_rigid(self, track: _Track, points: np.ndarray, stamp_s: float) -> _Track:
+        """A rigid track is fitted again as every model every ``SEED_RETRY_FRAMES`` frames while it
+        moves: a tractor and trailer driving straight can look like one long box, a hinge shows
+        later (it becomes articulated, with its id)."""
+        track.frames += 1
+        s = track.filter.state
+        if track.model.articulated or track.frames % SEED_RETRY_FRAMES or abs(s.speed_m_s) < RECHECK_MIN_SPEED_M_S:
+            return track
+        heading = np.array([np.cos(s.yaw_rad), np.sin(s.yaw_rad)]) * np.sign(s.speed_m_s)
+        here = np.array([s.x_m, s.y_m])
+        probe = Seed(here, here - heading)  # the direction of travel, for a tie between the two ends
+        chosen = self._candidate(points, probe, track.ground_z_m, rigid_allowed=False)
+        if chosen is None:
+            return track
+        model, m = chosen
+        new = self._track(track.id, model, m, track.ground_z_m, stamp_s, s.speed_m_s)
+        new.first_xy = track.first_xy
+        self.tracks[self.tracks.index(track)] = new
+        return new
 
     def _hypotheses(self, cluster: np.ndarray, ground_z_m: float) -> list[tuple[VehicleModel, float, Measurement]]:
         """(model, direction sign, fit) of every catalogue vehicle in both directions (best start hitch
@@ -525,6 +582,36 @@ def _gap_filled(cluster: np.ndarray, m: Measurement, model: VehicleModel, ground
     in_gap = int(np.sum(band & (q[:, 0] >= start) & (q[:, 0] <= start + length)))
     in_cab = int(np.sum(band & (q[:, 0] >= cab_rear) & (q[:, 0] <= cab_rear + length)))
     return in_cab >= GAP_MIN_POINTS and in_gap > GAP_FILL_RATIO * in_cab
+
+
+def _below_tall_structures(points: np.ndarray, ground, cell_m: float) -> np.ndarray:
+    """``points`` without the ``cell_m`` columns that reach higher than any vehicle: a dock wall, a
+    building or a tree's crown (before the background map is learned, a trailer standing at a dock
+    is one component with the wall)."""
+    if len(points) == 0:
+        return points
+    above = points[:, 2] - ground_heights(ground, points[:, :2]) > MAX_VEHICLE_HEIGHT_M
+    if np.count_nonzero(above) < TALL_COLUMN_MIN_POINTS:
+        return points
+    keys = np.floor(points[:, :2] / cell_m).astype(np.int64)
+    _, index = np.unique(keys, axis=0, return_inverse=True)
+    index = index.reshape(-1)
+    tall = np.bincount(index, weights=above) >= TALL_COLUMN_MIN_POINTS
+    return points[~tall[index]]
+
+
+def ground_heights(ground, xy: np.ndarray) -> np.ndarray:
+    """The ground's height under each of ``xy`` (N, 2): it is a plane, so three samples give it."""
+    z0 = ground(0.0, 0.0)
+    return z0 + (ground(1.0, 0.0) - z0) * xy[:, 0] + (ground(0.0, 1.0) - z0) * xy[:, 1]
+
+
+def _near_any(x: np.ndarray, marks: np.ndarray, tolerance: float) -> np.ndarray:
+    """Whether each of ``x`` lies within ``tolerance`` of one of ``marks``."""
+    marks = np.sort(marks)
+    i = np.clip(np.searchsorted(marks, x), 1, len(marks) - 1) if len(marks) > 1 else np.zeros(len(x), int)
+    nearest = np.minimum(np.abs(x - marks[i]), np.abs(x - marks[np.maximum(i - 1, 0)]))
+    return nearest <= tolerance
 
 
 def _height(points: np.ndarray, ground) -> float:
