@@ -184,3 +184,33 @@ def test_plots_draw_every_method_side_by_side(tmp_path):
 
     one, two = widths(["paper"]), widths(["paper", "default"])
     assert two["rec_bev.png"] == 2 * one["rec_bev.png"] and two["rec_hitch.png"] == 2 * one["rec_hitch.png"]
+
+
+def test_sensor_subset_tables_show_coverage_beside_the_rmse():
+    """A subset that reports the vehicle in only some frames shows that share next to its RMSEs."""
+    from i2v_loc.evaluation.report import _subset_tables
+
+    def stats(success, both):
+        return {
+            "gt_vehicle_frames": 100,
+            "success_rate": success,
+            "both_units_rate": both,
+            "truck_pos_rmse_m": 0.05,
+            "truck_yaw_rmse_deg": 0.4,
+            "trailer_pos_rmse_m": 0.04,
+            "trailer_yaw_rmse_deg": 0.2,
+            "hitch_rmse_deg": 0.5,
+            "latency_ms_mean": 9.0,
+        }
+
+    res = {"default": {"l1": {"by_vehicle": {"man_tgx": stats(0.3, 0.42)}}, "all": {"by_vehicle": {}}}}
+    lines = _subset_tables(res, ["default"], ["l1", "all"])
+    header = next(line for line in lines if line.startswith("| l1 |"))
+    row = next(line for line in lines if "ours: default" in line)
+    cells = [c.strip() for c in row.strip("|").split("|")]
+    columns = [c.strip() for c in header.strip("|").split("|")]
+    assert cells[columns.index("Success")] == "30.0 %"
+    assert cells[columns.index("Coverage both")] == "42.0 %"
+    assert cells[columns.index("RMSE HAE [deg]")] == "0.50"
+    published = next(line for line in lines if "*published" in line)
+    assert len(published.strip("|").split("|")) == len(columns)
