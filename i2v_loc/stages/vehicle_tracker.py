@@ -51,7 +51,10 @@ MAX_BODY_GAP_M = 1.0
 WALL_BESIDE_M = (0.35, 0.8)  # a face with points this far out past a trailer's side is wider than it
 UNIT_SUPPORT = 0.5
 RECHECK_MIN_SPEED_M_S = 0.5  # a rigid track is fitted again as every model while it moves this fast
-SEED_RETRY_FRAMES = 20  # a seed that is no vehicle is fitted again after this many frames (the fits cost ~0.1 s)
+RECHECK_FRAMES = 20  # a moving rigid track is fitted as every model every this many frames (the fits cost ~0.1 s)
+SEED_RETRY_FRAMES = 20  # a seed that was no vehicle is fitted again after this many frames
+SHAPE_CHANGE_M = 0.5  # if its extent or centre moved this much
+SHAPE_POINTS_CHANGE = 0.3  # or its point count changed by this share
 
 
 @dataclass(frozen=True)
@@ -67,6 +70,28 @@ class VehicleReport:
     travel_m: float  # tractor reference point's distance from where the vehicle started
 
 
+@dataclass(frozen=True)
+class _Shape:
+    """A seed's cluster as far as a start fit could tell (points, extent, centre) and whether rigid
+    vehicles could start: the fits cost ~0.1 s, a container's or a wall's seed is not fitted
+    again every few frames while it stays as it was."""
+
+    points: int
+    length_m: float
+    width_m: float
+    center_xy: np.ndarray
+    rigid_allowed: bool
+
+    def changed(self, now: _Shape) -> bool:
+        return (
+            now.rigid_allowed != self.rigid_allowed
+            or abs(now.points - self.points) > SHAPE_POINTS_CHANGE * self.points
+            or abs(now.length_m - self.length_m) > SHAPE_CHANGE_M
+            or abs(now.width_m - self.width_m) > SHAPE_CHANGE_M
+            or float(np.hypot(*(now.center_xy - self.center_xy))) > SHAPE_CHANGE_M
+        )
+
+
 @dataclass(eq=False)
 class Seed:
     center_xy: np.ndarray
@@ -76,6 +101,7 @@ class Seed:
     # best explained by one rigid box: fitted again once it has moved and the map is ready
     rigid: bool = False
     first_fit: np.ndarray | None = None  # xy of its first rigid fit
+    failed: _Shape | None = None  # its shape when it was last fitted and was no vehicle
 
     @property
     def travel_m(self) -> float:
@@ -334,7 +360,8 @@ class VehicleTracker:
             seed.seen = False
         ready = []
         for cluster in clusters:
-            center = min_area_rect(cluster[:, :2]).center_xy
+            rect = min_area_rect(cluster[:, :2])
+            center = rect.center_xy
             seed = min(self.seeds, key=lambda s: float(np.hypot(*(s.center_xy - center))), default=None)
             if (
                 seed is not None
@@ -345,16 +372,20 @@ class VehicleTracker:
             else:
                 seed = Seed(center, center)
                 self.seeds.append(seed)
-            if seed.frames >= self.params.start_frames and self._may_start(seed, rigid_allowed):
-                ready.append((seed, cluster))
+            shape = _Shape(len(cluster), rect.length_m, rect.width_m, center, rigid_allowed)
+            if (
+                seed.frames >= self.params.start_frames
+                and self._may_start(seed, rigid_allowed)
+                and (seed.failed is None or (seed.frames >= SEED_RETRY_FRAMES and seed.failed.changed(shape)))
+            ):
+                ready.append((seed, cluster, shape))
         self.seeds = [s for s in self.seeds if s.seen]
         reports = []
-        for seed, cluster in ready:
+        for seed, cluster, shape in ready:
             center = seed.center_xy
             track = self._new_track(cluster, seed, float(ground(center[0], center[1])), stamp_s, rigid_allowed)
-            if track is None:
-                if not seed.rigid:  # no vehicle (a wall, a car, a person): tried again after a while
-                    seed.frames = -SEED_RETRY_FRAMES
+            if track is None:  # no vehicle (yet): fitted again after a while if its shape changed
+                seed.failed, seed.frames = shape, 0
                 continue
             self.seeds.remove(seed)
             self.tracks.append(track)
@@ -455,12 +486,12 @@ class VehicleTracker:
         )
 
     def _recheck_rigid(self, track: _Track, points: np.ndarray, stamp_s: float) -> _Track:
-        """A rigid track is fitted again as every model every ``SEED_RETRY_FRAMES`` frames while it
+        """A rigid track is fitted again as every model every ``RECHECK_FRAMES`` frames while it
         moves: a tractor and trailer driving straight can look like one long box, a hinge shows
         later (it becomes articulated, with its id)."""
         track.frames += 1
         s = track.filter.state
-        if track.model.articulated or track.frames % SEED_RETRY_FRAMES or abs(s.speed_m_s) < RECHECK_MIN_SPEED_M_S:
+        if track.model.articulated or track.frames % RECHECK_FRAMES or abs(s.speed_m_s) < RECHECK_MIN_SPEED_M_S:
             return track
         heading = np.array([np.cos(s.yaw_rad), np.sin(s.yaw_rad)]) * np.sign(s.speed_m_s)
         here = np.array([s.x_m, s.y_m])
