@@ -102,6 +102,12 @@ class Seed:
     rigid: bool = False
     first_fit: np.ndarray | None = None  # xy of its first rigid fit
     failed: _Shape | None = None  # its shape when it was last fitted and was no vehicle
+    failed_frame: int = 0  # its frame count then
+
+    @property
+    def retry_due(self) -> bool:
+        """A rigid seed waits only for its shape to change (it must move); any other after a while."""
+        return self.rigid or self.frames - self.failed_frame >= SEED_RETRY_FRAMES
 
     @property
     def travel_m(self) -> float:
@@ -376,7 +382,7 @@ class VehicleTracker:
             if (
                 seed.frames >= self.params.start_frames
                 and self._may_start(seed, rigid_allowed)
-                and (seed.failed is None or (seed.frames >= SEED_RETRY_FRAMES and seed.failed.changed(shape)))
+                and (seed.failed is None or (seed.retry_due and seed.failed.changed(shape)))
             ):
                 ready.append((seed, cluster, shape))
         self.seeds = [s for s in self.seeds if s.seen]
@@ -385,7 +391,7 @@ class VehicleTracker:
             center = seed.center_xy
             track = self._new_track(cluster, seed, float(ground(center[0], center[1])), stamp_s, rigid_allowed)
             if track is None:  # no vehicle (yet): fitted again after a while if its shape changed
-                seed.failed, seed.frames = shape, 0
+                seed.failed, seed.failed_frame = shape, seed.frames
                 continue
             self.seeds.remove(seed)
             self.tracks.append(track)
