@@ -106,7 +106,7 @@ class Seed:
 
     @property
     def retry_due(self) -> bool:
-        """A rigid seed waits only for its shape to change (it must move); any other after a while."""
+        """A rigid seed (it may start: it moved) at once; any other after a while."""
         return self.rigid or self.frames - self.failed_frame >= SEED_RETRY_FRAMES
 
     @property
