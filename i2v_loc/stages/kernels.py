@@ -11,7 +11,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+from numba import njit, types
+from numba.extending import intrinsic
 
 _JIT = {"cache": True, "nogil": True}
 
@@ -637,6 +638,17 @@ def min_area_rect(xy):
 
 # ----------------------------------------------------------------------------- hinged fit
 
+
+@intrinsic
+def _fma(typingctx, a, b, c):
+    """a * b + c with one rounding (LLVM's fma: the hardware instruction where there is one)."""
+
+    def codegen(context, builder, signature, args):
+        return builder.fma(*args)
+
+    return types.float64(types.float64, types.float64, types.float64), codegen
+
+
 # the rows of a unit's face table: front, rear, left, right as (local normal x, y)
 _FACE_NORMALS = ((1.0, 0.0), (-1.0, 0.0), (0.0, 1.0), (0.0, -1.0))
 
@@ -686,7 +698,11 @@ def nearest_faces(xy, z_rel, geometry, top_band, n_params):
     (x, y, yaw, hitch), unit, distance to the face itself (beyond its ends too; inf above every
     roof) and face number (0 front, 1 rear, 2 left, 3 right). A point on a unit's roof or under its
     floor, inside its footprint (the trailer's reaching ``slack`` further back), is at distance 0
-    from each of that unit's faces; picked so, it gets residual 0, a zero row and face -1."""
+    from each of that unit's faces; picked so, it gets residual 0, a zero row and face -1.
+
+    Beyond a box's corner two faces are at the same distance: which one is picked is decided by the
+    last bit, so the dot products are rounded like the (n, 2) x (2, faces) matrix products of the numpy
+    code this replaced (OpenBLAS: y * b fused onto the rounded x * a), and the picks are the same."""
     table = _face_table(geometry)
     n_faces = table.shape[0]
     n_units = n_faces // 4
@@ -704,8 +720,8 @@ def nearest_faces(xy, z_rel, geometry, top_band, n_params):
     for i in range(n):
         px, py, z = xy[i, 0], xy[i, 1], z_rel[i]
         for f in range(n_faces):
-            perp[f] = px * table[f, 0] + py * table[f, 1] - table[f, 4]
-            along[f] = px * table[f, 2] + py * table[f, 3] - table[f, 5]
+            perp[f] = _fma(py, table[f, 1], px * table[f, 0]) - table[f, 4]
+            along[f] = _fma(py, table[f, 3], px * table[f, 2]) - table[f, 5]
             excess = max(abs(along[f]) - table[f, 6], 0.0)
             dist2[f] = perp[f] * perp[f] + excess * excess
         for u in range(n_units):
