@@ -15,6 +15,7 @@ at the prediction; the covariance then says they were not measured.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -162,10 +163,11 @@ def fit(
     if len(sample) < params.fit_min_points:
         return None
     xy, z_rel = np.ascontiguousarray(sample[:, :2]), sample[:, 2] - prior.ground_z_m
-    v0 = np.r_[prior.vector, prior.extra]
+    v0 = np.concatenate([prior.vector, prior.extra])
     scale = params.fit_loss_scale_m
     sigmas = _weak_prior_sigmas(prior)
-    prior_info = np.diag((scale / sigmas) ** 2)
+    prior_weights = (scale / sigmas) ** 2  # the diagonal of the weak prior's information
+    prior_info = np.diag(prior_weights)
     v = v0.copy()
     for k in range(iterations or params.fit_iterations):
         # graduated: a wide loss first so that faces a prediction misses by decimetres still pull
@@ -173,13 +175,13 @@ def fit(
         at = _faces_of(v, xy, z_rel, prior, params)
         w = 1.0 / (1.0 + (at.residual / c) ** 2)  # Cauchy weights: iteratively reweighted Gauss-Newton
         jw = at.jacobian * w[:, None]
-        step = np.linalg.solve(jw.T @ at.jacobian + prior_info, -(jw.T @ at.residual + prior_info @ (v - v0)))
+        step = np.linalg.solve(jw.T @ at.jacobian + prior_info, -(jw.T @ at.residual + prior_weights * (v - v0)))
         v = v + step
         if prior.fits_length:
             v[4] = np.clip(v[4], *TRAILER_LENGTH_RANGE_M)
         if prior.fits_kingpin:
             v[-2] = np.clip(v[-2], *KINGPIN_RANGE_M)
-        if c == scale and np.abs(step[:2]).max() < 1e-3 and np.abs(step[2:4]).max() < 1e-4:
+        if c == scale and max(abs(step[0]), abs(step[1])) < 1e-3 and max(abs(step[2:4])) < 1e-4:
             break  # residuals and faces of the last step stand for the solution (it moved < 1 mm)
     cost = float(np.mean(np.log1p((at.residual / scale) ** 2))) * scale**2 / 2
     covariance = _covariance(at, sigmas, params)
@@ -208,10 +210,11 @@ def fit(
 
 
 def _weak_prior_sigmas(prior: Prior) -> np.ndarray:
-    pose = WEAK_PRIOR_SIGMAS[: len(prior.vector)]
-    return np.r_[
-        pose, [WEAK_LENGTH_SIGMA_M] * int(prior.fits_length), [WEAK_KINGPIN_SIGMA_M] * 2 * int(prior.fits_kingpin)
-    ]
+    pose = WEAK_PRIOR_SIGMAS[: 4 if prior.model.articulated else 3]
+    if not (prior.fits_length or prior.fits_kingpin):
+        return pose
+    extra = [WEAK_LENGTH_SIGMA_M] * int(prior.fits_length) + [WEAK_KINGPIN_SIGMA_M] * 2 * int(prior.fits_kingpin)
+    return np.concatenate([pose, extra])
 
 
 def _faces_of(v: np.ndarray, xy: np.ndarray, z_rel: np.ndarray, prior: Prior, params: ArticulatedParams) -> _Faces:
@@ -247,10 +250,6 @@ def _covariance(at: _Faces, sigmas: np.ndarray, params: ArticulatedParams) -> np
     inliers = np.abs(r) <= params.fit_inlier_m
     sigma2 = max(float(np.median(r[inliers] ** 2)) / 0.455 if inliers.any() else scale**2, params.fit_noise_floor_m**2)
     info = (at.jacobian * w[:, None]).T @ at.jacobian / sigma2 + np.diag(1.0 / sigmas**2)
-    floor = np.r_[
-        params.fit_position_floor_m,
-        params.fit_position_floor_m,
-        np.radians(params.fit_angle_floor_deg),
-        np.radians(params.fit_angle_floor_deg),
-    ][: min(len(sigmas), 4)]
+    position, angle = params.fit_position_floor_m, math.radians(params.fit_angle_floor_deg)
+    floor = np.array([position, position, angle, angle][: min(len(sigmas), 4)])
     return np.linalg.inv(info)[:4, :4] + np.diag(floor**2)
