@@ -1,6 +1,7 @@
-"""Compiled (numba) kernels of the shared front end: one pass over the points each, no Python loop
-per point or per voxel. Compiled once and cached on disk (``cache=True``); ``warm_up()`` loads or
-compiles every specialisation the pipeline uses, so no frame pays for compilation.
+"""Compiled (numba) kernels of the shared front end and of the hinged fit's nearest faces: one pass
+over the points each, no Python loop per point or per voxel. Compiled once and cached on disk
+(``cache=True``); ``warm_up()`` loads or compiles every specialisation the pipeline uses, so no
+frame pays for compilation.
 
 Arithmetic follows the numpy code these kernels replaced operation by operation (float32 where it
 was float32, the same rounding order), so the outputs are the same points and decisions.
@@ -824,5 +825,5 @@ def warm_up() -> None:
     min_area_rect(np.ascontiguousarray(p64[:, :2]))
     for n_boxes in (1, 2):
         geometry = np.r_[np.zeros(5), 1.0, np.tile([2.0, 4.0, 2.0, 0.5, 3.0], n_boxes)]
-        nearest_faces(np.ascontiguousarray(p64[:, :2]), p64[:, 2], geometry, 0.25, 2 + n_boxes)
+        nearest_faces(np.ascontiguousarray(p64[:, :2]), np.ascontiguousarray(p64[:, 2]), geometry, 0.25, 2 + n_boxes)
     _WARM = True
