@@ -198,3 +198,12 @@ def test_fitted_dimensions_move_the_faces_like_a_rebuilt_model(free_length, free
     got = hinged_fit._faces_of(v, xy, z, prior, PARAMS.articulated)
     assert_same(got, ref_faces_of(v, xy, z, prior, TOP_BAND_M))
     assert got.on_rear.any() and got.jacobian.shape[1] == len(v)
+
+
+@pytest.mark.parametrize("n", [1, 2, 3, 4, 57, 200, 201])
+def test_the_covariance_median_is_numpy_median(n):
+    rng = np.random.default_rng(n)
+    for rounded in (False, True):  # with repeated values too
+        values = rng.random(n) ** 2 * 1e-3
+        values = np.round(values, 5) if rounded else values
+        assert hinged_fit._median(values) == float(np.median(values))

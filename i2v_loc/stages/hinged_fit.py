@@ -248,8 +248,18 @@ def _covariance(at: _Faces, sigmas: np.ndarray, params: ArticulatedParams) -> np
     r = at.residual
     w = 1.0 / (1.0 + (r / scale) ** 2)
     inliers = np.abs(r) <= params.fit_inlier_m
-    sigma2 = max(float(np.median(r[inliers] ** 2)) / 0.455 if inliers.any() else scale**2, params.fit_noise_floor_m**2)
+    sigma2 = max(_median(r[inliers] ** 2) / 0.455 if inliers.any() else scale**2, params.fit_noise_floor_m**2)
     info = (at.jacobian * w[:, None]).T @ at.jacobian / sigma2 + np.diag(1.0 / sigmas**2)
     position, angle = params.fit_position_floor_m, math.radians(params.fit_angle_floor_deg)
     floor = np.array([position, position, angle, angle][: min(len(sigmas), 4)])
     return np.linalg.inv(info)[:4, :4] + np.diag(floor**2)
+
+
+def _median(values: np.ndarray) -> float:
+    """``np.median`` of a non-empty 1-D array without NaNs (the same value: the middle order
+    statistic, or the mean of the two) at a fifth of its call overhead."""
+    half = len(values) // 2
+    if len(values) % 2:
+        return float(np.partition(values, half)[half])
+    low, high = np.partition(values, [half - 1, half])[half - 1 : half + 1]
+    return (float(low) + float(high)) / 2
