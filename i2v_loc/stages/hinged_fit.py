@@ -25,9 +25,8 @@ from i2v_loc.params import ArticulatedParams
 from i2v_loc.stages import kernels
 from i2v_loc.stages.vehicle_model import VehicleModel
 
-# Face normals in the unit's frame: front, rear, left, right.
-FACE_NORMALS = np.array([[1.0, 0.0], [-1.0, 0.0], [0.0, 1.0], [0.0, -1.0]])
 WEAK_PRIOR_SIGMAS = np.array([2.0, 2.0, np.radians(20.0), np.radians(30.0)])  # m, m, rad, rad
+WEAK_PRIOR_SIGMAS.flags.writeable = False  # fits use slices of it
 WEAK_LENGTH_SIGMA_M, WEAK_KINGPIN_SIGMA_M = 4.0, 0.5
 FRONT, REAR, LEFT, RIGHT = 0, 1, 2, 3  # face numbers of a unit (the face table's rows modulo 4)
 TRAILER_LENGTH_RANGE_M = (2.0, 16.5)
