@@ -1,6 +1,7 @@
-"""Compiled (numba) kernels of the shared front end: one pass over the points each, no Python loop
-per point or per voxel. Compiled once and cached on disk (``cache=True``); ``warm_up()`` loads or
-compiles every specialisation the pipeline uses, so no frame pays for compilation.
+"""Compiled (numba) kernels of the shared front end and of the hinged fit's nearest faces: one pass
+over the points each, no Python loop per point or per voxel. Compiled once and cached on disk
+(``cache=True``); ``warm_up()`` loads or compiles every specialisation the pipeline uses, so no
+frame pays for compilation.
 
 Arithmetic follows the numpy code these kernels replaced operation by operation (float32 where it
 was float32, the same rounding order), so the outputs are the same points and decisions.
@@ -11,7 +12,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+from numba import njit, types
+from numba.extending import intrinsic
 
 _JIT = {"cache": True, "nogil": True}
 
@@ -635,6 +637,126 @@ def min_area_rect(xy):
     return out
 
 
+# ----------------------------------------------------------------------------- hinged fit
+
+
+@intrinsic
+def _fma(typingctx, a, b, c):
+    """a * b + c with one rounding (LLVM's fma: the hardware instruction where there is one)."""
+
+    def codegen(context, builder, signature, args):
+        return builder.fma(*args)
+
+    return types.float64(types.float64, types.float64, types.float64), codegen
+
+
+# the rows of a unit's face table: front, rear, left, right as (local normal x, y)
+_FACE_NORMALS = ((1.0, 0.0), (-1.0, 0.0), (0.0, 1.0), (0.0, -1.0))
+
+
+@njit(**_JIT)
+def _face_table(geometry):
+    """(4 per unit, 10) per face (front, rear, left, right) in yard coordinates: normal N (2),
+    tangent T (2), plane offset, tangent offset, half extent along T, tangent coordinate of the face
+    centre in the unit's frame, extra yaw lever (the kingpin moves with the tractor's yaw), unit.
+    ``geometry``: tractor x, y, yaw, hitch, kingpin behind the axle, trailer slack, then per box
+    front, length, width, floor, height."""
+    n_units = (geometry.shape[0] - 6) // 5
+    x, y, yaw1, kingpin = geometry[0], geometry[1], geometry[2], geometry[4]
+    c1, s1 = math.cos(yaw1), math.sin(yaw1)
+    table = np.empty((4 * n_units, 10))
+    for u in range(n_units):
+        ox, oy, yaw, slack = x, y, yaw1, 0.0
+        if u == 1:
+            ox, oy, yaw, slack = x - kingpin * c1, y - kingpin * s1, yaw1 + geometry[3], geometry[5]
+        front, length, width = geometry[6 + 5 * u], geometry[7 + 5 * u], geometry[8 + 5 * u]
+        c, s = math.cos(yaw), math.sin(yaw)
+        half_w, half_l = width / 2, length / 2 + slack / 2
+        mid_x = (front - length / 2) - slack / 2
+        for f in range(4):
+            nx, ny = _FACE_NORMALS[f]
+            if f == 0:
+                mx, my, half = front, 0.0, half_w
+            elif f == 1:
+                mx, my, half = front - length, 0.0, half_w
+            else:
+                mx, my, half = mid_x, half_w if f == 2 else -half_w, half_l
+            big_nx, big_ny = c * nx - s * ny, s * nx + c * ny
+            cx, cy = ox + c * mx - s * my, oy + s * mx + c * my
+            row = table[4 * u + f]
+            row[0], row[1], row[2], row[3] = big_nx, big_ny, -big_ny, big_nx
+            row[4], row[5] = big_nx * cx + big_ny * cy, -big_ny * cx + big_nx * cy
+            row[6], row[7] = half, -ny * mx + nx * my
+            row[8] = kingpin * (-big_nx * s1 + big_ny * c1) if u == 1 else 0.0
+            row[9] = u
+    return table
+
+
+@njit(**_JIT)
+def nearest_faces(xy, z_rel, geometry, top_band, n_params):
+    """Per point the nearest face of either unit box (``_face_table``'s rows; the first on a tie):
+    signed distance to its plane (the residual), Jacobian row over the first ``n_params`` of
+    (x, y, yaw, hitch), unit, distance to the face itself (beyond its ends too; inf above every
+    roof) and face number (0 front, 1 rear, 2 left, 3 right). A point on a unit's roof or under its
+    floor, inside its footprint (the trailer's reaching ``slack`` further back), is at distance 0
+    from each of that unit's faces; picked so, it gets residual 0, a zero row and face -1.
+
+    Beyond a box's corner two faces are at the same distance: which one is picked is decided by the
+    last bit, so the dot products are rounded like the (n, 2) x (2, faces) matrix products of the numpy
+    code this replaced (OpenBLAS: y * b fused onto the rounded x * a), and the picks are the same."""
+    table = _face_table(geometry)
+    n_faces = table.shape[0]
+    n_units = n_faces // 4
+    slack = geometry[5]
+    n = xy.shape[0]
+    residual = np.zeros(n)
+    jacobian = np.zeros((n, n_params))
+    unit = np.empty(n, dtype=np.int64)
+    distance = np.empty(n)
+    face = np.empty(n, dtype=np.int64)
+    perp = np.empty(n_faces)
+    along = np.empty(n_faces)
+    dist2 = np.empty(n_faces)
+    roof = np.zeros(n_units, dtype=np.bool_)
+    for i in range(n):
+        px, py, z = xy[i, 0], xy[i, 1], z_rel[i]
+        for f in range(n_faces):
+            perp[f] = _fma(py, table[f, 1], px * table[f, 0]) - table[f, 4]
+            along[f] = _fma(py, table[f, 3], px * table[f, 2]) - table[f, 5]
+            excess = max(abs(along[f]) - table[f, 6], 0.0)
+            dist2[f] = perp[f] * perp[f] + excess * excess
+        for u in range(n_units):
+            c = 4 * u
+            outside = max(max(perp[c], perp[c + 1]), max(perp[c + 2], perp[c + 3]))
+            if u == 1 and slack > 0:  # the roof reaches as far back as the sides may
+                outside = max(max(perp[4], perp[6]), max(perp[7], perp[5] - slack))
+            top, floor = geometry[9 + 5 * u] + geometry[10 + 5 * u], geometry[9 + 5 * u]
+            flat = abs(z - top) <= top_band or z < floor - top_band
+            roof[u] = flat and outside <= 0.0
+            for f in range(c, c + 4):
+                if roof[u]:
+                    dist2[f] = 0.0
+                if z > top + top_band:
+                    dist2[f] = np.inf
+        pick = 0
+        for f in range(1, n_faces):
+            if dist2[f] < dist2[pick]:
+                pick = f
+        u = np.int64(table[pick, 9])
+        unit[i] = u
+        distance[i] = math.sqrt(dist2[pick])
+        if roof[u]:  # a roof or undercarriage point says nothing about the pose
+            face[i] = -1
+            continue
+        face[i] = pick % 4
+        residual[i] = perp[pick]
+        lever = along[pick] + table[pick, 7]  # N_perp . (p - unit origin)
+        jacobian[i, 0], jacobian[i, 1], jacobian[i, 2] = -table[pick, 0], -table[pick, 1], lever + table[pick, 8]
+        if n_units == 2 and u == 1:
+            jacobian[i, 3] = lever
+    return residual, jacobian, unit, distance, face
+
+
 # ----------------------------------------------------------------------------- warm-up
 
 _WARM = False
@@ -701,4 +823,7 @@ def warm_up() -> None:
     counting_order(np.array([1, 0, 1], dtype=np.int64), 2)
     radius_components(p64, 0.5)
     min_area_rect(np.ascontiguousarray(p64[:, :2]))
+    for n_boxes in (1, 2):
+        geometry = np.r_[np.zeros(5), 1.0, np.tile([2.0, 4.0, 2.0, 0.5, 3.0], n_boxes)]
+        nearest_faces(np.ascontiguousarray(p64[:, :2]), np.ascontiguousarray(p64[:, 2]), geometry, 0.25, 2 + n_boxes)
     _WARM = True

@@ -1,0 +1,209 @@
+"""The compiled nearest-face kernel of the hinged fit (kernels.nearest_faces behind hinged_fit.faces)
+gives what the plain numpy implementation it replaced gave: kept below as the reference, checked on
+random points around, inside, above and under rigid and articulated models at many hitch angles."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+import numpy as np
+import pytest
+from hinged_points import vehicle_points
+
+from i2v_loc.params import Params
+from i2v_loc.stages import hinged_fit
+from i2v_loc.stages.hinged_fit import Prior, faces
+from i2v_loc.stages.vehicle_model import VehicleModel
+
+PARAMS = Params()
+TOP_BAND_M = PARAMS.articulated.fit_top_band_m
+
+
+# ----------------------------------------------------------------------------- the numpy reference
+
+
+def ref_face_table(v, model, trailer_slack_m):
+    x, y, yaw1 = float(v[0]), float(v[1]), float(v[2])
+    c1, s1 = math.cos(yaw1), math.sin(yaw1)
+    units = [(model.tractor, x, y, yaw1, 0.0)]
+    if model.trailer is not None:
+        m = model.kingpin_behind_axle_m
+        units.append((model.trailer, x - m * c1, y - m * s1, yaw1 + float(v[3]), trailer_slack_m))
+    rows = []
+    for u, (box, ox, oy, yaw, slack) in enumerate(units):
+        c, s = math.cos(yaw), math.sin(yaw)
+        half_w, half_l = box.width_m / 2, box.length_m / 2 + slack / 2
+        mid_x = box.center_x_m - slack / 2
+        for nx, ny, mx, my, half in (
+            (1.0, 0.0, box.front_m, 0.0, half_w),
+            (-1.0, 0.0, box.rear_m, 0.0, half_w),
+            (0.0, 1.0, mid_x, half_w, half_l),
+            (0.0, -1.0, mid_x, -half_w, half_l),
+        ):
+            big_nx, big_ny = c * nx - s * ny, s * nx + c * ny
+            cx, cy = ox + c * mx - s * my, oy + s * mx + c * my
+            lever = model.kingpin_behind_axle_m * (-big_nx * s1 + big_ny * c1) if u == 1 else 0.0
+            rows.append(
+                (
+                    big_nx,
+                    big_ny,
+                    -big_ny,
+                    big_nx,
+                    big_nx * cx + big_ny * cy,
+                    -big_ny * cx + big_nx * cy,
+                    half,
+                    -ny * mx + nx * my,
+                    lever,
+                    u,
+                )
+            )
+    return np.array(rows)
+
+
+def ref_faces(v, xy, z_rel, model, top_band_m, trailer_slack_m=0.0):
+    """Returns (residual, jacobian, unit, distance, face)."""
+    table = ref_face_table(v, model, trailer_slack_m)
+    n = len(xy)
+    perp = xy @ table[:, 0:2].T - table[:, 4]
+    along = xy @ table[:, 2:4].T - table[:, 5]
+    excess = np.maximum(np.abs(along) - table[:, 6], 0.0)
+    dist2 = perp * perp + excess * excess
+    boxes = model.boxes
+    roof = np.zeros((n, len(boxes)), dtype=bool)
+    for u, box in enumerate(boxes):
+        cols = slice(4 * u, 4 * u + 4)
+        inside = perp[:, cols].max(axis=1) <= 0.0
+        if u == 1 and trailer_slack_m > 0:
+            inside = np.maximum(perp[:, [4, 6, 7]].max(axis=1), perp[:, 5] - trailer_slack_m) <= 0.0
+        flat = (np.abs(z_rel - box.top_m) <= top_band_m) | (z_rel < box.floor_m - top_band_m)
+        roof[:, u] = flat & inside
+        dist2[roof[:, u], cols] = 0.0
+        dist2[z_rel > box.top_m + top_band_m, cols] = np.inf
+    pick = np.argmin(dist2, axis=1)
+    rows = np.arange(n)
+    face = table[pick]
+    unit = face[:, 9].astype(np.int64)
+    residual = perp[rows, pick]
+    lever = along[rows, pick] + face[:, 7]
+    jac = np.zeros((n, len(v)))
+    jac[:, 0], jac[:, 1], jac[:, 2] = -face[:, 0], -face[:, 1], lever + face[:, 8]
+    if model.articulated:
+        jac[:, 3] = np.where(unit == 1, lever, 0.0)
+    on_roof = roof[rows, unit]
+    residual[on_roof] = 0.0
+    jac[on_roof] = 0.0
+    return residual, jac, unit, np.sqrt(dist2[rows, pick]), np.where(on_roof, -1, pick % 4)
+
+
+def ref_faces_of(v, xy, z_rel, prior, top_band_m):
+    """The reference of ``hinged_fit._faces_of`` with fitted dimensions (the model rebuilt from them)."""
+    model = prior.model
+    if prior.fits_length:
+        model = model.with_boxes(model.tractor, replace(model.trailer, length_m=float(v[4])))
+    if prior.fits_kingpin:
+        trailer = replace(model.trailer, front_m=float(v[-1]))
+        model = replace(model.with_boxes(model.tractor, trailer), kingpin_behind_axle_m=float(v[-2]))
+    residual, jac, unit, distance, face = ref_faces(v[:4], xy, z_rel, model, top_band_m)
+    columns = [jac]
+    if prior.fits_length:
+        columns.append(-((unit == 1) & (face == hinged_fit.REAR)).astype(float))
+    if prior.fits_kingpin:
+        trailer = (unit == 1) & (face >= 0)
+        for yaw, sign in ((v[2], -1.0), (v[2] + v[3], 1.0)):
+            along = jac[:, 0] * np.cos(yaw) + jac[:, 1] * np.sin(yaw)
+            columns.append(np.where(trailer, sign * along, 0.0))
+    return residual, np.column_stack(columns), unit, distance, face
+
+
+# ----------------------------------------------------------------------------- cases
+
+
+def models() -> list[VehicleModel]:
+    articulated = [VehicleModel.from_config(name, config) for name, config in PARAMS.vehicles.items()]
+    return articulated + [VehicleModel.rigid("bus", 11.6, 2.55, 3.1), VehicleModel.rigid("van", 5.2, 2.0, 2.4, 0.3)]
+
+
+def random_points(model: VehicleModel, v: np.ndarray, seed: int, n: int = 3000) -> tuple[np.ndarray, np.ndarray]:
+    """xy anywhere around and inside the boxes (3 m beyond them); z spread over under the floor,
+    the body, the roof band and above every roof, plus points exactly at the band's edges."""
+    rng = np.random.default_rng(seed)
+    reach = max(abs(b.front_m) + b.length_m for b in model.boxes) + abs(model.kingpin_behind_axle_m) + 3.0
+    xy = v[:2] + rng.uniform(-reach, reach, (n, 2))
+    top = max(b.top_m for b in model.boxes)
+    z = rng.uniform(-0.5, top + 1.0, n)
+    edges = [b.top_m + s * TOP_BAND_M for b in model.boxes for s in (-1.0, 1.0)]
+    edges += [b.floor_m - TOP_BAND_M for b in model.boxes]
+    pick = rng.random(n) < 0.15
+    z[pick] = rng.choice(edges, pick.sum())
+    on_faces = vehicle_points(model, *v[:3], v[3] if model.articulated else 0.0, noise_m=0.05, seed=seed)[::5]
+    return np.vstack([xy, on_faces[:, :2]]), np.r_[z, on_faces[:, 2]]
+
+
+def assert_same(got, want) -> None:
+    """Bit-equal: beyond a box's corner two faces are at the same distance, and the last bit of
+    the distances decides which one is picked (random points beyond corners find any difference)."""
+    residual, jac, unit, distance, face = want
+    for name, a, b in zip(
+        ("residual", "jacobian", "unit", "distance", "face"),
+        (got.residual, got.jacobian, got.unit, got.distance, got.face),
+        want,
+    ):
+        np.testing.assert_array_equal(a, b, err_msg=name)  # inf where the reference has inf
+        assert a.dtype == b.dtype and a.shape == b.shape, name
+
+
+@pytest.mark.parametrize("model", models(), ids=lambda m: m.name)
+@pytest.mark.parametrize("hitch_deg", [0.0, 45.0, -45.0, 80.0, -80.0])
+@pytest.mark.parametrize("slack_m", [0.0, 1.5])
+def test_kernel_faces_are_the_numpy_faces(model, hitch_deg, slack_m):
+    seed = int(hitch_deg) + 200 + int(10 * slack_m) + 7 * len(model.name)
+    v = np.array([3.0, -2.0, 0.7, np.radians(hitch_deg)])[: 4 if model.articulated else 3]
+    xy, z = random_points(model, v, seed)
+    got = faces(v, xy, z, model, TOP_BAND_M, slack_m)
+    want = ref_faces(v, xy, z, model, TOP_BAND_M, slack_m)
+    assert_same(got, want)
+    # every branch was exercised: roof / undercarriage points, points above every roof, both units
+    assert (got.face == -1).any() and np.isinf(got.distance).any() and (got.face >= 0).any()
+    assert set(np.unique(got.unit)) == set(range(len(model.boxes)))
+
+
+def test_a_point_over_every_roof_takes_the_first_face_like_argmin():
+    model = models()[2]
+    v = np.array([0.0, 0.0, 0.3, 0.4])
+    xy = np.array([[0.0, 0.0], [50.0, 3.0], [-4.0, 1.0]])
+    z = np.full(3, 10.0)
+    got = faces(v, xy, z, model, TOP_BAND_M)
+    assert_same(got, ref_faces(v, xy, z, model, TOP_BAND_M))
+    assert np.isinf(got.distance).all() and (got.face == 0).all() and (got.unit == 0).all()
+
+
+@pytest.mark.parametrize("model", [models()[0], models()[3]], ids=lambda m: m.name)
+def test_no_points_give_empty_faces(model):
+    v = np.zeros(4 if model.articulated else 3)
+    got = faces(v, np.zeros((0, 2)), np.zeros(0), model, TOP_BAND_M, 1.0)
+    assert_same(got, ref_faces(v, np.zeros((0, 2)), np.zeros(0), model, TOP_BAND_M, 1.0))
+    assert got.jacobian.shape == (0, len(v))
+
+
+@pytest.mark.parametrize("free_length, free_kingpin", [(True, False), (False, True), (True, True)])
+@pytest.mark.parametrize("hitch_deg", [0.0, 45.0, -80.0])
+def test_fitted_dimensions_move_the_faces_like_a_rebuilt_model(free_length, free_kingpin, hitch_deg):
+    model = models()[2]
+    prior = Prior(
+        3.0, -2.0, 0.7, np.radians(hitch_deg), model, free_trailer_length=free_length, free_kingpin=free_kingpin
+    )
+    v = np.r_[prior.vector, [9.1] if free_length else [], [0.4, 1.3] if free_kingpin else []]  # not the model's
+    xy, z = random_points(model, v, int(hitch_deg) + 300)
+    got = hinged_fit._faces_of(v, xy, z, prior, PARAMS.articulated)
+    assert_same(got, ref_faces_of(v, xy, z, prior, TOP_BAND_M))
+    assert got.on_rear.any() and got.jacobian.shape[1] == len(v)
+
+
+@pytest.mark.parametrize("n", [1, 2, 3, 4, 57, 200, 201])
+def test_the_covariance_median_is_numpy_median(n):
+    rng = np.random.default_rng(n)
+    for rounded in (False, True):  # with repeated values too
+        values = rng.random(n) ** 2 * 1e-3
+        values = np.round(values, 5) if rounded else values
+        assert hinged_fit._median(values) == float(np.median(values))
