@@ -141,16 +141,19 @@ def random_points(model: VehicleModel, v: np.ndarray, seed: int, n: int = 3000) 
 
 
 def assert_same(got, want) -> None:
-    """Bit-equal: beyond a box's corner two faces are at the same distance, and the last bit of
-    the distances decides which one is picked (random points beyond corners find any difference)."""
+    """The same nearest distance for every point (whichever face is picked, a wrong pick is
+    farther), and the same face, unit, residual and Jacobian row wherever the pick is the same.
+    Beyond a box's corner two faces can be equally near: the last bit of the distances (how the
+    BLAS under numpy rounds, fused multiply-add or not) decides which one the reference picks."""
     residual, jac, unit, distance, face = want
-    for name, a, b in zip(
-        ("residual", "jacobian", "unit", "distance", "face"),
-        (got.residual, got.jacobian, got.unit, got.distance, got.face),
-        want,
-    ):
-        np.testing.assert_array_equal(a, b, err_msg=name)  # inf where the reference has inf
+    for a, b, name in ((got.residual, residual, "residual"), (got.jacobian, jac, "jacobian")):
         assert a.dtype == b.dtype and a.shape == b.shape, name
+    assert got.unit.dtype == unit.dtype and got.face.dtype == face.dtype and got.distance.shape == distance.shape
+    np.testing.assert_allclose(got.distance, distance, rtol=0.0, atol=1e-9)  # inf where the reference has inf
+    same = (got.face == face) & (got.unit == unit)
+    assert same.sum() >= 0.99 * len(same)
+    np.testing.assert_allclose(got.residual[same], residual[same], rtol=0.0, atol=1e-9)
+    np.testing.assert_allclose(got.jacobian[same], jac[same], rtol=0.0, atol=1e-9)
 
 
 @pytest.mark.parametrize("model", models(), ids=lambda m: m.name)
