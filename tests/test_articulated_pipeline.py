@@ -426,3 +426,26 @@ def test_a_rigid_track_becomes_articulated_when_it_moves():
     assert report.model.name == "volvo_fh"
     pos, yaw_err, hitch = errors(report, truth)
     assert pos < 0.05 and abs(yaw_err) < 0.5 and abs(hitch) < 0.5 and abs(np.degrees(truth[3] - truth[2])) > 5.0
+
+
+def test_a_lower_bound_on_the_trailer_length_does_not_rename_the_vehicle():
+    """Points that only reach further back (a door jamb in line with the trailer's side) bound its
+    length from below: the box grows, but the name follows measured lengths only."""
+    model = volvo()
+    points = vehicle_points(model, 0.0, 3.0, 0.2, sensors=SENSORS)
+    m = fit(points, Prior(0.0, 3.0, 0.2, 0.0, model), PARAMS.articulated, iterations=20)
+    tracker = VehicleTracker(PARAMS.articulated, PARAMS.vehicles)
+    track = tracker._track(1, model, m, 0.0, 0.0, 0.0)
+
+    def sized() -> VehicleModel:  # as the tracker's learning step sizes the box
+        return model.with_boxes(model.tractor, replace(model.trailer, length_m=track.trailer_length.estimate))
+
+    for _ in range(3):
+        track.trailer_length.add_bound(model.trailer.length_m + 1.5)
+    track.model = sized()
+    assert track.model.trailer.length_m == pytest.approx(model.trailer.length_m + 1.5)
+    assert tracker._type_name(track) == "volvo_fh"
+    for _ in range(5):
+        track.trailer_length.add(model.trailer.length_m + 1.5)
+    track.model = sized()
+    assert tracker._type_name(track) == "unknown"

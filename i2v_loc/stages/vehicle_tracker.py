@@ -342,15 +342,23 @@ class VehicleTracker:
         return prior.trailer_axle_m * (track.model.trailer.length_m - track.model.trailer.front_m) / behind
 
     def _type_name(self, track: _Track) -> str:
+        """The catalogue vehicle whose sizes all lie within ``type_max_error_m`` of the measured
+        ones, else ``unknown``. The trailer's length is the measured one (the start's before any),
+        not a lower bound: a bound says how long at least, not what it is (a Twizy pulling out of
+        its dock, the door jamb in line with its trailer's side, was named ``unknown``)."""
         model = track.model
         if model.trailer is None:
             return "rigid"
+        extent = track.trailer_length
+        length = (
+            model.trailer.length_m if extent is None else (extent.prior if extent.median is None else extent.median)
+        )
         best, best_err = "unknown", self.params.type_max_error_m
         for name, c in self.catalogue.items():
             if c.trailer is None:
                 continue
             err = max(
-                abs(c.trailer.length_m - model.trailer.length_m),
+                abs(c.trailer.length_m - length),
                 abs(c.trailer.width_m - model.trailer.width_m),
                 abs(c.tractor.width_m - model.tractor.width_m),
             )
