@@ -449,3 +449,21 @@ def test_a_lower_bound_on_the_trailer_length_does_not_rename_the_vehicle():
         track.trailer_length.add(model.trailer.length_m + 1.5)
     track.model = sized()
     assert tracker._type_name(track) == "unknown"
+
+
+def test_a_seed_longer_than_any_rigid_vehicle_starts_articulated():
+    """A straight 16 m trailer's tractor-trailer seen from one side: longer than any coach (15 m),
+    it is no rigid vehicle, even where one box explains its side almost as well; it starts in its
+    3rd frame as an articulated vehicle."""
+    model = volvo()
+    l2 = model.trailer_axle_m * (16.0 - model.trailer.front_m) / (model.trailer.length_m - model.trailer.front_m)
+    long_trailer = replace(model, name="truth", trailer=replace(model.trailer, length_m=16.0), trailer_axle_m=l2)
+    tracker = VehicleTracker(PARAMS.articulated, PARAMS.vehicles)
+    reports, truth = [], None
+    for t, points, (state,) in drive([(long_trailer, (-4.0, 5.0, 0.05, 0.05))], 1.0, 2.0, 0.0, SENSORS[:1]):
+        reports, truth = tracker.process(points, flat, t), state
+        if t >= 0.15:
+            assert len(reports) == 1 and reports[0].model.articulated
+    assert abs(reports[0].model.trailer.length_m - 16.0) < 1.0  # its rear face is not seen from that side yet
+    _, yaw, hitch = errors(reports[0], truth)  # its cab is the catalogue's nearest, not the truth's: no axle to compare
+    assert abs(yaw) < 1.0 and abs(hitch) < 1.0

@@ -37,6 +37,7 @@ REAR_FACE_MIN_POINTS = 3
 SIDE_MIN_POINTS = 5
 MAX_VEHICLE_HEIGHT_M = 4.6  # 4.0 m in the EU, 4.3 m in the US, plus the roof's clutter and noise
 TALL_COLUMN_MIN_POINTS = 2  # points above a vehicle's height that make a column a structure (not one noise point)
+RIGID_MAX_LENGTH_M = 15.0  # the longest rigid vehicles: three-axle coaches (EU 15 m; rigid trucks 12 m)
 RIGID_MIN_WIDTH_M = 1.6  # a rigid vehicle starts once its width is seen (an end face or both sides)
 KINGPIN_MIN_HITCH_RAD = np.radians(20.0)  # the kingpin's offset shows only at a hitch angle
 KINGPIN_SETTLED = 50  # observations of the kingpin's offset: learned
@@ -452,25 +453,37 @@ class VehicleTracker:
     def _candidate(
         self, cluster: np.ndarray, seed: Seed, ground_z_m: float, rigid_allowed: bool
     ) -> tuple[VehicleModel, Measurement] | None:
-        """The best-explaining model and its fit, if it passes the start's checks."""
+        """The best-explaining model and its fit, if it passes the start's checks. A seed longer
+        than any rigid vehicle is articulated: the catalogue models are tried cheapest first (an
+        unknown tractor's cab puts a model's gap on the real trailer's front)."""
         hypotheses = self._hypotheses(cluster, ground_z_m)
         if not hypotheses:
             return None
-        chosen = self._choose(hypotheses, seed)
-        if chosen is None:
-            return None
-        model, m = chosen
-        seed.rigid = not model.articulated
-        fit_moved = self._fit_moved(seed, m)  # its first rigid fit is remembered
-        if not (fit_moved and self._may_start(seed, rigid_allowed)):
-            return None
-        if (
-            float(np.mean(m.unit >= 0)) < self.params.start_min_explained
-            or not _supported(m, model, ground_z_m)
-            or _gap_filled(cluster, m, model, ground_z_m)
-        ):
-            return None
-        return model, m
+        if min_area_rect(cluster[:, :2]).length_m > RIGID_MAX_LENGTH_M:
+            choices = self._articulated_choices(hypotheses)
+        else:
+            choices = [c for c in [self._choose(hypotheses, seed)] if c is not None]
+        for model, m in choices:
+            seed.rigid = not model.articulated
+            fit_moved = self._fit_moved(seed, m)  # its first rigid fit is remembered
+            if not (fit_moved and self._may_start(seed, rigid_allowed)):
+                return None
+            if (
+                float(np.mean(m.unit >= 0)) >= self.params.start_min_explained
+                and _supported(m, model, ground_z_m)
+                and not _gap_filled(cluster, m, model, ground_z_m)
+            ):
+                return model, m
+        return None
+
+    def _articulated_choices(self, hypotheses) -> list[tuple[VehicleModel, Measurement]]:
+        """Each catalogue model's cheapest fit, cheapest first, none folded beyond the start limit."""
+        best: dict[str, tuple[VehicleModel, Measurement]] = {}
+        for model, _, m in hypotheses:
+            if model.articulated and (model.name not in best or m.cost < best[model.name][1].cost):
+                best[model.name] = (model, m)
+        limit = np.radians(self.params.start_max_hitch_deg)
+        return sorted((c for c in best.values() if abs(c[1].hitch_rad) <= limit), key=lambda c: c[1].cost)
 
     def _track(
         self, track_id: int, model: VehicleModel, m: Measurement, ground_z_m: float, stamp_s: float, speed_m_s: float
@@ -546,6 +559,8 @@ class VehicleTracker:
         height = float(cluster[:, 2].max() - ground_z_m)
         if not (RIGID_MIN_WIDTH_M <= rect.width_m and height <= MAX_VEHICLE_HEIGHT_M):
             return out  # a wall, a hedge or a building is no rigid vehicle
+        if rect.length_m > RIGID_MAX_LENGTH_M:
+            return out  # nor is anything longer than a coach
         rigid = VehicleModel.rigid("rigid", rect.length_m, rect.width_m, height)
         for sign in (1.0, -1.0):
             yaw = rect.yaw_rad + (0.0 if sign > 0 else np.pi)
