@@ -22,7 +22,7 @@ from scipy.spatial import cKDTree
 from i2v_loc.params import ArticulatedParams, VehicleConfig
 from i2v_loc.stages.hinged_fit import LEFT, RIGHT, TRAILER_LENGTH_RANGE_M, Measurement, Prior, fit
 from i2v_loc.stages.kinematic_filter import FilterState, KinematicFilter
-from i2v_loc.stages.primitives import grid_labels, min_area_rect, split_by_label
+from i2v_loc.stages.primitives import Rect, grid_labels, min_area_rect, split_by_label, voxel_keys
 from i2v_loc.stages.vehicle_model import VehicleModel
 
 START_HITCHES_DEG = (-90.0, -60.0, -30.0, 0.0, 30.0, 60.0, 90.0)
@@ -139,11 +139,15 @@ class _Extent:
         return len(self.values) >= LENGTH_CONVERGED_OBSERVATIONS
 
     @property
+    def measured(self) -> float:
+        """The median, or the prior before any."""
+        return self.prior if self.median is None else self.median
+
+    @property
     def estimate(self) -> float:
-        """The median, or the prior before any; at least the lower bound until settled (a face seen
-        outweighs points that only reach further)."""
-        value = self.prior if self.median is None else self.median
-        return value if self.settled else max(value, self.lower_bound)
+        """The measured value; at least the lower bound until settled (a face seen outweighs points
+        that only reach further)."""
+        return self.measured if self.settled else max(self.measured, self.lower_bound)
 
 
 def _windowed_median(window: deque, value: float, size: int) -> float:
@@ -328,9 +332,10 @@ class VehicleTracker:
         end = qb[at_end]
         # the face's middle below the roof (roof points near the edge lie up to END_BAND_M ahead of it)
         middle = end[(np.abs(end[:, 1]) <= width_m / 4) & (zb[at_end] < trailer.top_m - self.params.fit_top_band_m)]
-        length = trailer.front_m - float(np.median(middle[:, 0])) if len(middle) else 0.0
-        if len(middle) >= 2 and np.ptp(end[:, 1]) >= FACE_SEEN_SPAN * width_m and length >= TRAILER_LENGTH_RANGE_M[0]:
-            track.trailer_length.add(length)
+        if len(middle) >= 2 and np.ptp(end[:, 1]) >= FACE_SEEN_SPAN * width_m:
+            length = trailer.front_m - float(np.median(middle[:, 0]))
+            if length >= TRAILER_LENGTH_RANGE_M[0]:
+                track.trailer_length.add(length)
         bound = min(trailer.front_m - rear - END_BAND_M, MAX_TRAILER_LENGTH_M)
         track.trailer_length.add_bound(bound)
 
@@ -350,10 +355,7 @@ class VehicleTracker:
         model = track.model
         if model.trailer is None:
             return "rigid"
-        extent = track.trailer_length
-        length = (
-            model.trailer.length_m if extent is None else (extent.prior if extent.median is None else extent.median)
-        )
+        length = track.trailer_length.measured
         best, best_err = "unknown", self.params.type_max_error_m
         for name, c in self.catalogue.items():
             if c.trailer is None:
@@ -374,8 +376,7 @@ class VehicleTracker:
         for seed in self.seeds:
             seed.seen = False
         ready = []
-        for cluster in clusters:
-            rect = min_area_rect(cluster[:, :2])
+        for cluster, rect in clusters:
             center = rect.center_xy
             seed = min(self.seeds, key=lambda s: float(np.hypot(*(s.center_xy - center))), default=None)
             if (
@@ -393,12 +394,12 @@ class VehicleTracker:
                 and self._may_start(seed, rigid_allowed)
                 and (seed.failed is None or (seed.retry_due and seed.failed.changed(shape)))
             ):
-                ready.append((seed, cluster, shape))
+                ready.append((seed, cluster, rect, shape))
         self.seeds = [s for s in self.seeds if s.seen]
         reports = []
-        for seed, cluster, shape in ready:
+        for seed, cluster, rect, shape in ready:
             center = seed.center_xy
-            track = self._new_track(cluster, seed, float(ground(center[0], center[1])), stamp_s, rigid_allowed)
+            track = self._new_track(cluster, rect, seed, float(ground(center[0], center[1])), stamp_s, rigid_allowed)
             if track is None:  # no vehicle (yet): fitted again after a while if its shape changed
                 seed.failed, seed.failed_frame = shape, seed.frames
                 continue
@@ -420,7 +421,7 @@ class VehicleTracker:
         """A rigid seed once the background is learned and it moved."""
         return not seed.rigid or (rigid_allowed and seed.travel_m >= self.params.start_travel_m)
 
-    def _seed_clusters(self, points: np.ndarray, ground) -> list[np.ndarray]:
+    def _seed_clusters(self, points: np.ndarray, ground) -> list[tuple[np.ndarray, Rect]]:
         """Connected components tall enough to be a vehicle, those closer than ``start_join_m`` joined
         (a cab and its trailer are apart by up to about 1.5 m), of a vehicle's length and at least
         ``start_min_width_m`` wide (a wall, or a vehicle seen from one side only, is a plane)."""
@@ -438,31 +439,33 @@ class VehicleTracker:
             cluster = np.vstack([parts[i] for i in group])
             rect = min_area_rect(cluster[:, :2])
             if p.start_min_length_m <= rect.length_m <= p.start_max_length_m and rect.width_m >= p.start_min_width_m:
-                out.append(cluster)
+                out.append((cluster, rect))
         return out
 
     def _new_track(
-        self, cluster: np.ndarray, seed: Seed, ground_z_m: float, stamp_s: float, rigid_allowed: bool
+        self, cluster: np.ndarray, rect: Rect, seed: Seed, ground_z_m: float, stamp_s: float, rigid_allowed: bool
     ) -> _Track | None:
-        chosen = self._candidate(cluster, seed, ground_z_m, rigid_allowed)
+        chosen = self._candidate(cluster, rect, seed, ground_z_m, rigid_allowed)
         if chosen is None:
             return None
         model, m = chosen
         return self._track(next(self._ids), model, m, ground_z_m, stamp_s, 0.0)
 
     def _candidate(
-        self, cluster: np.ndarray, seed: Seed, ground_z_m: float, rigid_allowed: bool
+        self, cluster: np.ndarray, rect: Rect, seed: Seed, ground_z_m: float, rigid_allowed: bool
     ) -> tuple[VehicleModel, Measurement] | None:
-        """The best-explaining model and its fit, if it passes the start's checks. A seed longer
-        than any rigid vehicle is articulated: the catalogue models are tried cheapest first (an
-        unknown tractor's cab puts a model's gap on the real trailer's front)."""
-        hypotheses = self._hypotheses(cluster, ground_z_m)
+        """The best-explaining model and its fit, if it passes the start's checks (``rect``: the
+        cluster's minimum-area rectangle). A seed longer than any rigid vehicle is articulated: the
+        catalogue models are tried cheapest first (an unknown tractor's cab puts a model's gap on
+        the real trailer's front)."""
+        may_be_rigid = rect.length_m <= RIGID_MAX_LENGTH_M
+        hypotheses = self._hypotheses(cluster, rect, ground_z_m, may_be_rigid)
         if not hypotheses:
             return None
-        if min_area_rect(cluster[:, :2]).length_m > RIGID_MAX_LENGTH_M:
-            choices = self._articulated_choices(hypotheses)
-        else:
+        if may_be_rigid:
             choices = [c for c in [self._choose(hypotheses, seed)] if c is not None]
+        else:
+            choices = self._articulated_choices(hypotheses)
         for model, m in choices:
             seed.rigid = not model.articulated
             fit_moved = self._fit_moved(seed, m)  # its first rigid fit is remembered
@@ -523,7 +526,7 @@ class VehicleTracker:
         heading = np.array([np.cos(s.yaw_rad), np.sin(s.yaw_rad)]) * np.sign(s.speed_m_s)
         here = np.array([s.x_m, s.y_m])
         probe = Seed(here, here - heading)  # the direction of travel, for a tie between the two ends
-        chosen = self._candidate(points, probe, track.ground_z_m, rigid_allowed=False)
+        chosen = self._candidate(points, min_area_rect(points[:, :2]), probe, track.ground_z_m, rigid_allowed=False)
         if chosen is None:
             return track
         model, m = chosen
@@ -532,10 +535,11 @@ class VehicleTracker:
         self.tracks[self.tracks.index(track)] = new
         return new
 
-    def _hypotheses(self, cluster: np.ndarray, ground_z_m: float) -> list[tuple[VehicleModel, float, Measurement]]:
+    def _hypotheses(
+        self, cluster: np.ndarray, rect: Rect, ground_z_m: float, may_be_rigid: bool
+    ) -> list[tuple[VehicleModel, float, Measurement]]:
         """(model, direction sign, fit) of every catalogue vehicle in both directions (best start hitch
-        each) and of one rigid box of the cluster's measured size."""
-        rect = min_area_rect(cluster[:, :2])
+        each) and, if ``may_be_rigid``, of one rigid box of the cluster's measured size."""
         out = []
         for model in self.catalogue.values():
             for sign in (1.0, -1.0):
@@ -557,10 +561,8 @@ class VehicleTracker:
                     m = fit(cluster, prior, self.params, START_ITERATIONS, START_SCALE_M)
                     out.append((_with_trailer_length(model, m.trailer_length_m), sign, m))
         height = float(cluster[:, 2].max() - ground_z_m)
-        if not (RIGID_MIN_WIDTH_M <= rect.width_m and height <= MAX_VEHICLE_HEIGHT_M):
-            return out  # a wall, a hedge or a building is no rigid vehicle
-        if rect.length_m > RIGID_MAX_LENGTH_M:
-            return out  # nor is anything longer than a coach
+        if not (may_be_rigid and RIGID_MIN_WIDTH_M <= rect.width_m and height <= MAX_VEHICLE_HEIGHT_M):
+            return out  # a wall, a hedge or a building is no rigid vehicle, nor anything longer than a coach
         rigid = VehicleModel.rigid("rigid", rect.length_m, rect.width_m, height)
         for sign in (1.0, -1.0):
             yaw = rect.yaw_rad + (0.0 if sign > 0 else np.pi)
@@ -653,9 +655,8 @@ def _below_tall_structures(points: np.ndarray, ground, cell_m: float) -> np.ndar
     above = points[:, 2] - ground_heights(ground, points[:, :2]) > MAX_VEHICLE_HEIGHT_M
     if np.count_nonzero(above) < TALL_COLUMN_MIN_POINTS:
         return points
-    keys = np.floor(points[:, :2] / cell_m).astype(np.int64)
-    _, index = np.unique(keys, axis=0, return_inverse=True)
-    index = index.reshape(-1)
+    columns = voxel_keys(np.floor(points[:, :2] / cell_m), 1.0)  # the cells of a grid through the origin
+    _, index = np.unique(columns, return_inverse=True)
     tall = np.bincount(index, weights=above) >= TALL_COLUMN_MIN_POINTS
     return points[~tall[index]]
 
