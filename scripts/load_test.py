@@ -29,6 +29,8 @@ from pathlib import Path
 import httpx
 import websockets
 
+from i2v_loc.commands.bench_service import wait_for_state
+
 REPO = Path(__file__).resolve().parents[1]
 TOKEN = "load-test-token"
 
@@ -48,7 +50,10 @@ def main() -> int:
     server = start_server(args)
     try:
         url = server.url
-        wait_until_processing(url)
+        try:
+            wait_for_state(url)
+        except RuntimeError as err:
+            raise SystemExit(str(err)) from None
         rss_start = rss_mib(server.proc.pid)
         before = scrape(url)
         load = asyncio.run(run_load(url, args))
@@ -116,18 +121,6 @@ def start_server(args) -> Server:
         args.method,
     ]
     return Server(subprocess.Popen(cmd, stderr=subprocess.PIPE, stdout=subprocess.DEVNULL, text=True, env=env))
-
-
-def wait_until_processing(url: str) -> None:
-    deadline = time.monotonic() + 120
-    while time.monotonic() < deadline:
-        try:
-            if httpx.get(url + "api/v1/state", timeout=5).status_code == 200:
-                return
-        except httpx.HTTPError:
-            pass
-        time.sleep(0.5)
-    raise SystemExit("no state after 120 s")
 
 
 def scrape(url: str) -> dict:

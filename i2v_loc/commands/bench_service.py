@@ -24,7 +24,7 @@ def bench_service(rec_path: Path, method: str, n_clients: int, seconds: float, w
 
     proc, url = _start(rec_path, method)
     try:
-        _wait_for_state(url)
+        wait_for_state(url)
         late_before = _late_frames(url)
         to_send, to_client, received = asyncio.run(_listen(url, n_clients, seconds, warmup_s))
         late = _late_frames(url) - late_before
@@ -69,7 +69,8 @@ def _start(rec_path: Path, method: str) -> tuple[subprocess.Popen, str]:
     raise RuntimeError("the service did not start:\n" + "".join(lines[-20:]))
 
 
-def _wait_for_state(url: str) -> None:
+def wait_for_state(url: str) -> None:
+    """Until the service at ``url`` serves a state (it processes frames); RuntimeError after the start-up timeout."""
     import httpx
 
     deadline = time.monotonic() + STARTUP_TIMEOUT_S
