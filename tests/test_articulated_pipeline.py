@@ -17,7 +17,7 @@ from i2v_loc.pipelines.paper import PaperPipeline
 from i2v_loc.sim.kinematics import Articulation, step
 from i2v_loc.stages.hinged_fit import Prior, fit
 from i2v_loc.stages.vehicle_model import VehicleModel
-from i2v_loc.stages.vehicle_tracker import VehicleTracker
+from i2v_loc.stages.vehicle_tracker import VehicleTracker, _gap_filled, _gap_open
 
 PARAMS = Params()
 SENSORS = ((0.0, -15.0, 4.0), (-22.0, 22.0, 4.0), (22.0, 22.0, 4.0))
@@ -467,3 +467,18 @@ def test_a_seed_longer_than_any_rigid_vehicle_starts_articulated():
     assert abs(reports[0].model.trailer.length_m - 16.0) < 1.0  # its rear face is not seen from that side yet
     _, yaw, hitch = errors(reports[0], truth)  # its cab is the catalogue's nearest, not the truth's: no axle to compare
     assert abs(yaw) < 1.0 and abs(hitch) < 1.0
+
+
+def test_an_open_gap_is_two_units_and_a_side_running_through_it_is_not():
+    """Seen from one side, a straight Volvo shows a gap between cab and trailer: open. A panel
+    just inside its side's line across the gap (a wall, or a parked trailer's side) closes it."""
+    model = volvo()
+    points = vehicle_points(model, 0.0, 5.0, 0.05, sensors=SENSORS[:1], spacing=0.15)
+    m = fit(points, Prior(0.0, 5.0, 0.05, 0.0, model), PARAMS.articulated, iterations=20)
+    assert _gap_open(points, m, model, 0.0) and not _gap_filled(points, m, model, 0.0)
+    trailer_front = model.trailer.front_m - model.kingpin_behind_axle_m
+    gap = model.tractor.rear_m - trailer_front
+    panel = VehicleModel.rigid("panel", gap, model.tractor.width_m - 0.1, 2.5, 1.0)
+    centre = (model.tractor.rear_m + trailer_front) / 2 * np.array([np.cos(0.05), np.sin(0.05)]) + [0.0, 5.0]
+    filled = np.vstack([points, vehicle_points(panel, *centre, 0.05, sensors=SENSORS[:1], spacing=0.15)])
+    assert not _gap_open(filled, m, model, 0.0)

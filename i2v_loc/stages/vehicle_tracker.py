@@ -44,6 +44,8 @@ KINGPIN_SETTLED = 50  # observations of the kingpin's offset: learned
 GAP_TEST_MAX_HITCH_RAD = np.radians(10.0)  # beyond, a trailer's front corner swings into the gap
 GAP_FILL_RATIO = 0.5
 GAP_MIN_POINTS = 5
+GAP_OPEN_RATIO = 0.1  # a moving seed with so few points in its gap is two units, however well one box fits
+GAP_OPEN_MIN_POINTS = 10
 LENGTH_CONVERGED_OBSERVATIONS = 5
 SETTLED_SLACK_M = 0.5
 FACE_SEEN_SPAN = 0.6  # an end face is seen when its points span this share of the unit's width
@@ -462,10 +464,9 @@ class VehicleTracker:
         hypotheses = self._hypotheses(cluster, rect, ground_z_m, may_be_rigid)
         if not hypotheses:
             return None
-        if may_be_rigid:
+        choices = self._articulated_choices(hypotheses)
+        if may_be_rigid and not self._two_units(choices, cluster, seed, ground_z_m):
             choices = [c for c in [self._choose(hypotheses, seed)] if c is not None]
-        else:
-            choices = self._articulated_choices(hypotheses)
         for model, m in choices:
             seed.rigid = not model.articulated
             fit_moved = self._fit_moved(seed, m)  # its first rigid fit is remembered
@@ -478,6 +479,15 @@ class VehicleTracker:
             ):
                 return model, m
         return None
+
+    def _two_units(self, choices, cluster: np.ndarray, seed: Seed, ground_z_m: float) -> bool:
+        """A moving seed whose cheapest articulated fit shows an open gap between cab and trailer:
+        driving straight and seen from one side, a tractor and an unknown trailer fit one box of
+        their measured size better than any catalogue model, and started rigid."""
+        if not choices or seed.travel_m < self.params.start_travel_m:
+            return False
+        model, m = choices[0]
+        return _gap_open(cluster, m, model, ground_z_m)
 
     def _articulated_choices(self, hypotheses) -> list[tuple[VehicleModel, Measurement]]:
         """Each catalogue model's cheapest fit, cheapest first, none folded beyond the start limit."""
@@ -587,7 +597,7 @@ class VehicleTracker:
         if best_art is not None and (best_rigid is None or best_art[2].cost < RIGID_COST_RATIO * best_rigid[2].cost):
             if abs(best_art[2].hitch_rad) > np.radians(self.params.start_max_hitch_deg):
                 return None  # it looks jack-knifed: a parked trailer beside a container, more likely
-            pool = [h for h in articulated if h[0] is best_art[0]]
+            pool = [h for h in articulated if h[0].name == best_art[0].name]
         else:
             pool = [h for h in rigid if h[0].tractor.length_m >= self.params.rigid_min_length_m]
             if not pool:
@@ -629,13 +639,28 @@ def _gap_filled(cluster: np.ndarray, m: Measurement, model: VehicleModel, ground
     middle half of the gap, between the trailer's floor and the lower roof, holds more than
     ``GAP_FILL_RATIO`` times the points of as long a slice of the cab just ahead of it (of at least
     ``GAP_MIN_POINTS``)."""
+    counts = _gap_counts(cluster, m, model, ground_z_m)
+    return counts is not None and counts[1] >= GAP_MIN_POINTS and counts[0] > GAP_FILL_RATIO * counts[1]
+
+
+def _gap_open(cluster: np.ndarray, m: Measurement, model: VehicleModel, ground_z_m: float) -> bool:
+    """The gap's middle (``_gap_filled``) holds at most ``GAP_OPEN_RATIO`` times the points of the
+    cab's slice, of at least ``GAP_OPEN_MIN_POINTS``: two units, not one long box."""
+    counts = _gap_counts(cluster, m, model, ground_z_m)
+    return counts is not None and counts[1] >= GAP_OPEN_MIN_POINTS and counts[0] <= GAP_OPEN_RATIO * counts[1]
+
+
+def _gap_counts(cluster: np.ndarray, m: Measurement, model: VehicleModel, ground_z_m: float) -> tuple[int, int] | None:
+    """Points in the middle half of the model's gap between cab and trailer and in as long a slice
+    of the cab just ahead of it (between the trailer's floor and the lower roof, within the cab's
+    width); None unless articulated and nearly straight."""
     if model.trailer is None or abs(m.hitch_rad) > GAP_TEST_MAX_HITCH_RAD:
-        return False
+        return None
     trailer_front = model.trailer.front_m - model.kingpin_behind_axle_m  # in the tractor's frame at hitch 0
     cab_rear = model.tractor.rear_m
     length = (cab_rear - trailer_front) / 2
     if length <= 0.0:
-        return False
+        return None
     (q,) = unit_frames(cluster, m.vector, model.with_boxes(model.tractor, None))
     z_rel = cluster[:, 2] - ground_z_m
     band = (np.abs(q[:, 1]) <= model.tractor.width_m / 2) & (z_rel >= model.trailer.floor_m + END_BAND_M)
@@ -643,7 +668,7 @@ def _gap_filled(cluster: np.ndarray, m: Measurement, model: VehicleModel, ground
     start = trailer_front + length / 2
     in_gap = int(np.sum(band & (q[:, 0] >= start) & (q[:, 0] <= start + length)))
     in_cab = int(np.sum(band & (q[:, 0] >= cab_rear) & (q[:, 0] <= cab_rear + length)))
-    return in_cab >= GAP_MIN_POINTS and in_gap > GAP_FILL_RATIO * in_cab
+    return in_gap, in_cab
 
 
 def _below_tall_structures(points: np.ndarray, ground, cell_m: float) -> np.ndarray:
