@@ -18,6 +18,7 @@ from i2v_loc.pipelines.handoff import ParameterHandoff
 from i2v_loc.results import FrameResult, StageTimer, UnitResult, VehicleResult, _r, count_frame, frame_result
 from i2v_loc.stages.background import BackgroundMap, ProtectedBox, region_box
 from i2v_loc.stages.concatenation import Concatenation, MotionHint
+from i2v_loc.stages.level_frame import LevelFrame
 from i2v_loc.stages.primitives import voxel_centroids
 from i2v_loc.stages.region import Region
 from i2v_loc.stages.vehicle_model import Box
@@ -59,6 +60,8 @@ class ArticulatedPipeline(ParameterHandoff):
         self._init_params(params)
         self.counters: Counter = Counter()
         self.tracker = VehicleTracker(params.articulated, params.vehicles)
+        self.level = LevelFrame()  # the tracker's frame: the ground level in it
+        self._ground = self.level.ground(None)  # the last frame's ground height in the level frame
         self.background: BackgroundMap | None = None
         self._reports: list[VehicleReport] = []
         self._build(params)
@@ -105,10 +108,12 @@ class ArticulatedPipeline(ParameterHandoff):
             self.concatenation.interpolate(points, merged.lag_s[region.index], self._motion_hints())
         points, _ = voxel_centroids(points, params.concatenation.voxel_size_m)
         timer.lap("front_end")
-        ground = region.ground.height_at if region.ground else (lambda x, y: 0.0)
+        self.level.update(region.ground)
+        ground = self._ground = self.level.ground(region.ground)
         if np.isfinite(merged.stamp_s):
             ready = self.background is None or self.background.ready
-            self._reports = self.tracker.process(points, ground, merged.stamp_s, background_ready=ready)
+            level_points = self.level.points(points)
+            self._reports = self.tracker.process(level_points, ground, merged.stamp_s, background_ready=ready)
         timer.lap("vehicles")
         vehicles = [self._result(r, ground) for r in self._reports]
         self._count(merged, region)
@@ -140,14 +145,24 @@ class ArticulatedPipeline(ParameterHandoff):
             s.speed_m_s,
         )
 
-    @staticmethod
-    def _unit(vehicle_id: int, center_xy: np.ndarray, yaw_rad: float, box: Box, points: int, ground) -> UnitResult:
+    def _unit(
+        self, vehicle_id: int, center_xy: np.ndarray, yaw_rad: float, box: Box, points: int, ground
+    ) -> UnitResult:
+        """A unit's box in the yard frame from its level-frame centre and yaw."""
         z = ground(*center_xy) + box.floor_m + box.height_m / 2
-        yaw_deg = float(np.degrees(np.arctan2(np.sin(yaw_rad), np.cos(yaw_rad))))
-        return UnitResult(vehicle_id, np.array([center_xy[0], center_xy[1], z]), yaw_deg, box.dims, points)
+        center = self.level.to_yard(np.array([center_xy[0], center_xy[1], z]))
+        yaw_deg = float(np.degrees(self.level.yaw_to_yard(yaw_rad)))
+        return UnitResult(vehicle_id, center, yaw_deg, box.dims, points)
 
     def _unit_boxes(self):
-        """(centre xy, yaw, box, centre velocity xy, yaw rate, travel, articulated) of every unit of the vehicles of the last frame."""
+        """(centre xy, yaw, box, centre velocity xy, yaw rate, travel, articulated) of every unit of
+        the vehicles of the last frame, in the yard frame."""
+        for center, yaw, box, velocity, rate, travel, articulated in self._level_unit_boxes():
+            on_ground = self.level.to_yard(np.array([center[0], center[1], self._ground(*center)]))
+            velocity = self.level.vector_to_yard(velocity)
+            yield on_ground[:2], self.level.yaw_to_yard(yaw), box, velocity, rate, travel, articulated
+
+    def _level_unit_boxes(self):
         for r in self._reports:
             s, model = r.state, r.model
             centers = model.box_centers(s.x_m, s.y_m, s.yaw_rad, s.hitch_rad)
