@@ -501,3 +501,37 @@ def test_a_moving_car_is_no_vehicle_and_is_not_fitted(monkeypatch):
         points = vehicle_points(twizy, 8.0, -4.0, 0.3, np.radians(15.0), sensors=SENSORS, seed=k)
         reports = tracker.process(points, flat, 5.0 + 0.1 * k)
     assert calls and len(reports) == 1 and reports[0].model.name == "twizy"
+
+
+@pytest.mark.parametrize("size", [3, 4, 50])
+def test_the_windowed_median_is_numpys_median_of_the_window(size):
+    from collections import deque
+
+    from i2v_loc.stages.vehicle_tracker import _Window, _windowed_median
+
+    rng = np.random.default_rng(size)
+    window, reference = _Window(), deque(maxlen=size)
+    for value in np.round(rng.normal(size=400), 1):  # ties too
+        reference.append(float(value))
+        assert _windowed_median(window, float(value), size) == float(np.median(reference))
+    assert list(window) == list(reference) and window.ordered == sorted(reference)
+
+
+def test_seed_heights_are_each_components_top_above_the_ground_under_it():
+    from i2v_loc.stages.vehicle_tracker import _heights
+
+    def sloped(x, y):  # a 2 % grade along x, 0.3 m up at the origin
+        return 0.3 + 0.02 * x
+
+    rng = np.random.default_rng(3)
+    tops, centres = [2.0, 3.7, 1.1], [(-10.0, 2.0), (5.0, -3.0), (20.0, 8.0)]
+    clouds, labels = [], []
+    for label, (top, (x, y)) in enumerate(zip(tops, centres)):
+        xy = rng.normal((x, y), 0.8, (40, 2))
+        xy -= xy.mean(axis=0) - (x, y)  # the centre exactly there
+        z = sloped(x, y) + rng.uniform(0.2, top, 40)
+        z[7] = sloped(x, y) + top
+        clouds.append(np.column_stack([xy, z]))
+        labels += [label] * 40
+    heights = _heights(np.vstack(clouds), np.array(labels), sloped)
+    assert np.allclose(heights, tops, atol=1e-9)

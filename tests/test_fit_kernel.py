@@ -210,3 +210,34 @@ def test_the_covariance_median_is_numpy_median(n):
         values = rng.random(n) ** 2 * 1e-3
         values = np.round(values, 5) if rounded else values
         assert hinged_fit._median(values) == float(np.median(values))
+
+
+# ----------------------------------------------------------------------------- the tracker's gate
+
+
+def ref_box_distance(points, prior):
+    """The numpy gate the kernel replaced: per unit frame, the distance to its box, the nearer."""
+    from i2v_loc.stages.vehicle_tracker import unit_frames
+
+    model = prior.model
+    best = np.full(len(points), np.inf)
+    for box, slack, q in zip(model.boxes, (0.0, prior.trailer_slack_m), unit_frames(points, prior.vector, model)):
+        dx = np.maximum(np.maximum(box.rear_m - slack - q[:, 0], q[:, 0] - box.front_m), 0.0)
+        dy = np.maximum(np.abs(q[:, 1]) - box.width_m / 2, 0.0)
+        best = np.minimum(best, np.hypot(dx, dy))
+    return best
+
+
+@pytest.mark.parametrize("hitch_deg", [-70.0, -20.0, 0.0, 35.0, 90.0])
+@pytest.mark.parametrize("slack_m", [0.0, 3.5])
+def test_the_gates_box_distance_is_the_numpy_one(hitch_deg, slack_m):
+    from i2v_loc.stages.vehicle_tracker import box_distance
+
+    rng = np.random.default_rng(int(hitch_deg * 10 + slack_m * 100) % 2**31)
+    man = VehicleModel.from_config("man_tgx", PARAMS.vehicles["man_tgx"])
+    for model in (man, VehicleModel.rigid("rigid", 11.6, 2.55, 3.1)):
+        prior = Prior(3.0, -2.0, 0.7, math.radians(hitch_deg), model, 0.0, slack_m)
+        points = np.column_stack([rng.uniform(-25, 25, (4000, 2)), rng.uniform(0, 4, 4000)]).astype(np.float32)
+        got, want = box_distance(points, prior), ref_box_distance(points.astype(float), prior)
+        assert np.allclose(got, want, rtol=0, atol=1e-9)
+        assert np.count_nonzero(got == 0.0) > 30 and np.count_nonzero(got > 5.0) > 500  # inside and far

@@ -693,6 +693,24 @@ def _face_table(geometry):
 
 
 @njit(**_JIT)
+def box_distances(xy, boxes):
+    """Planar distance of each point (N, 2) to the nearest of ``boxes`` (K, 6: origin x, y and yaw
+    of the box's unit frame, the box's rear and front along its x, its half width; 0 inside)."""
+    n = xy.shape[0]
+    squared = np.full(n, np.inf)
+    for k in range(boxes.shape[0]):
+        ox, oy, c, s = boxes[k, 0], boxes[k, 1], math.cos(boxes[k, 2]), math.sin(boxes[k, 2])
+        rear, front, half = boxes[k, 3], boxes[k, 4], boxes[k, 5]
+        for i in range(n):
+            d0, d1 = xy[i, 0] - ox, xy[i, 1] - oy
+            qx, qy = c * d0 + s * d1, -s * d0 + c * d1
+            dx = max(max(rear - qx, qx - front), 0.0)
+            dy = max(abs(qy) - half, 0.0)
+            squared[i] = min(squared[i], dx * dx + dy * dy)
+    return np.sqrt(squared)
+
+
+@njit(**_JIT)
 def nearest_faces(xy, z_rel, geometry, top_band, n_params):
     """Per point the nearest face of either unit box (``_face_table``'s rows; the first on a tie):
     signed distance to its plane (the residual), Jacobian row over the first ``n_params`` of
@@ -823,6 +841,7 @@ def warm_up() -> None:
     counting_order(np.array([1, 0, 1], dtype=np.int64), 2)
     radius_components(p64, 0.5)
     min_area_rect(np.ascontiguousarray(p64[:, :2]))
+    box_distances(np.ascontiguousarray(p64[:, :2]), np.zeros((2, 6)))
     for n_boxes in (1, 2):
         geometry = np.r_[np.zeros(5), 1.0, np.tile([2.0, 4.0, 2.0, 0.5, 3.0], n_boxes)]
         nearest_faces(np.ascontiguousarray(p64[:, :2]), np.ascontiguousarray(p64[:, 2]), geometry, 0.25, 2 + n_boxes)

@@ -11,6 +11,7 @@ widths are re-estimated from the points seen in each unit's frame (the catalogue
 
 from __future__ import annotations
 
+import bisect
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
@@ -20,6 +21,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from i2v_loc.params import ArticulatedParams, VehicleConfig
+from i2v_loc.stages import kernels
 from i2v_loc.stages.hinged_fit import LEFT, RIGHT, TRAILER_LENGTH_RANGE_M, Measurement, Prior, fit
 from i2v_loc.stages.kinematic_filter import FilterState, KinematicFilter
 from i2v_loc.stages.primitives import Rect, grid_labels, min_area_rect, split_by_label, voxel_keys
@@ -118,6 +120,14 @@ class Seed:
         return float(np.hypot(*(self.center_xy - self.first_xy)))
 
 
+class _Window(deque):
+    """The observations in arrival order, and sorted."""
+
+    def __init__(self, *args) -> None:
+        super().__init__(*args)
+        self.ordered: list[float] = sorted(self)
+
+
 @dataclass
 class _Extent:
     """Per-frame observations of one dimension; the estimate is their median (the prior before any).
@@ -126,8 +136,8 @@ class _Extent:
 
     prior: float
     window: int
-    values: deque = field(default_factory=deque)
-    bounds: deque = field(default_factory=deque)
+    values: _Window = field(default_factory=_Window)
+    bounds: _Window = field(default_factory=_Window)
     median: float | None = None
     lower_bound: float = -np.inf
 
@@ -153,11 +163,17 @@ class _Extent:
         return self.measured if self.settled else max(self.measured, self.lower_bound)
 
 
-def _windowed_median(window: deque, value: float, size: int) -> float:
+def _windowed_median(window: _Window, value: float, size: int) -> float:
+    """``value`` appended to ``window`` (the oldest dropped beyond ``size``), the median of what is in
+    it: ``np.median``'s value, from a sorted copy kept beside it (np.median sorted all of it every
+    frame, for each dimension of each vehicle)."""
+    ordered = window.ordered
     window.append(value)
+    bisect.insort(ordered, value)
     while len(window) > size:
-        window.popleft()
-    return float(np.median(window))
+        del ordered[bisect.bisect_left(ordered, window.popleft())]
+    half = len(ordered) // 2
+    return float(ordered[half]) if len(ordered) % 2 else (float(ordered[half - 1]) + float(ordered[half])) / 2
 
 
 @dataclass(eq=False)
@@ -432,14 +448,14 @@ class VehicleTracker:
         points = _below_tall_structures(points, ground, p.start_voxel_m)
         if len(points) == 0:
             return []
-        parts = [
-            points[idx]
-            for idx in split_by_label(grid_labels(points, p.start_voxel_m))
-            if len(idx) >= p.fit_min_points and _height(points[idx], ground) >= p.start_min_height_m
-        ]
+        labels = grid_labels(points, p.start_voxel_m)
+        tall = _heights(points, labels, ground) >= p.start_min_height_m
+        parts = [points[idx] for idx in split_by_label(labels) if len(idx) >= p.fit_min_points and tall[labels[idx[0]]]]
         out = []
         for group in _join_near(parts, p.start_join_m):
             cluster = np.vstack([parts[i] for i in group])
+            if np.hypot(*np.ptp(cluster[:, :2], axis=0)) < p.start_min_length_m:
+                continue  # no rectangle around it is that long
             rect = min_area_rect(cluster[:, :2])
             if p.start_min_length_m <= rect.length_m <= p.start_max_length_m and rect.width_m >= p.start_min_width_m:
                 out.append((cluster, rect))
@@ -709,9 +725,13 @@ def _near_any(x: np.ndarray, marks: np.ndarray, tolerance: float) -> np.ndarray:
     return nearest <= tolerance
 
 
-def _height(points: np.ndarray, ground) -> float:
-    centre = points[:, :2].mean(axis=0)
-    return float(points[:, 2].max() - ground(centre[0], centre[1]))
+def _heights(points: np.ndarray, labels: np.ndarray, ground) -> np.ndarray:
+    """Per label, its highest point above the ground under its points' centre."""
+    counts = np.bincount(labels)
+    centres = np.column_stack([np.bincount(labels, points[:, i]) for i in (0, 1)]) / counts[:, None]
+    top = np.full(len(counts), -np.inf)
+    np.maximum.at(top, labels, points[:, 2])
+    return top - ground_heights(ground, centres)
 
 
 def _join_near(parts: list[np.ndarray], distance_m: float) -> list[list[int]]:
@@ -778,12 +798,12 @@ def unit_frames(points: np.ndarray, v: np.ndarray, model: VehicleModel) -> list[
 def box_distance(points: np.ndarray, prior: Prior) -> np.ndarray:
     """Planar distance of each point to the nearer of the prior's boxes (0 inside); the trailer's box
     reaches ``trailer_slack_m`` further back."""
-    model = prior.model
-    v = prior.vector
-    boxes = zip(model.boxes, (0.0, prior.trailer_slack_m))
-    best = np.full(len(points), np.inf)
-    for (box, slack), q in zip(boxes, unit_frames(points, v, model)):
-        dx = np.maximum(np.maximum(box.rear_m - slack - q[:, 0], q[:, 0] - box.front_m), 0.0)
-        dy = np.maximum(np.abs(q[:, 1]) - box.width_m / 2, 0.0)
-        best = np.minimum(best, np.hypot(dx, dy))
-    return best
+    model, v = prior.model, prior.vector
+    frames = [(v[0], v[1], v[2])]
+    if model.trailer is not None:
+        frames.append((*model.kingpin_xy(v[0], v[1], v[2]), v[2] + v[3]))
+    boxes = [
+        (*origin, box.rear_m - slack, box.front_m, box.width_m / 2)
+        for origin, box, slack in zip(frames, model.boxes, (0.0, prior.trailer_slack_m))
+    ]
+    return kernels.box_distances(np.ascontiguousarray(points[:, :2], dtype=float), np.array(boxes, dtype=float))
