@@ -535,3 +535,18 @@ def test_seed_heights_are_each_components_top_above_the_ground_under_it():
         labels += [label] * 40
     heights = _heights(np.vstack(clouds), np.array(labels), sloped)
     assert np.allclose(heights, tops, atol=1e-9)
+
+
+def test_a_unit_whose_points_lie_mostly_under_its_floor_is_not_supported():
+    """A row of kerbs and parked cars with a lamp post among them, fitted as a tractor and trailer:
+    the posts reach the roofs, but most points lie below the bodies' floors."""
+    from i2v_loc.stages.vehicle_tracker import _supported
+
+    model = volvo()
+    points = vehicle_points(model, 0.0, 3.0, 0.2, np.radians(10.0), sensors=SENSORS)
+    m = fit(points, Prior(0.0, 3.0, 0.2, np.radians(10.0), model), PARAMS.articulated, iterations=20)
+    assert _supported(m, model, 0.0)
+    kerbs = m.points.copy()
+    low = np.random.default_rng(0).random(len(kerbs)) < 0.6
+    kerbs[low, 2] = 0.2  # the same footprint, at kerb height
+    assert not _supported(replace(m, points=kerbs), model, 0.0)

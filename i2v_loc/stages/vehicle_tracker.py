@@ -641,7 +641,8 @@ def _supported(m: Measurement, model: VehicleModel, ground_z_m: float) -> bool:
     """Each unit's explained points span at least ``UNIT_SUPPORT`` of its length, reach
     ``UNIT_SUPPORT`` of its height above its floor (a car's side on a trailer's faces is no truck)
     and are at least ``UNIT_SUPPORT`` of the unit's share of the side area (a parked trailer's
-    landing gear is no tractor)."""
+    landing gear is no tractor), and at most ``UNIT_SUPPORT`` of them lie below its floor (a row of
+    kerbs and parked cars with a lamp post among them is no trailer)."""
     boxes = model.boxes
     z_rel = m.points[:, 2] - ground_z_m
     areas = np.array([box.length_m * box.height_m for box in boxes])
@@ -653,6 +654,7 @@ def _supported(m: Measurement, model: VehicleModel, ground_z_m: float) -> bool:
             or mine.sum() / explained < UNIT_SUPPORT * areas[u] / areas.sum()
             or np.ptp(q[mine, 0]) < UNIT_SUPPORT * box.length_m
             or z_rel[mine].max() < box.floor_m + UNIT_SUPPORT * box.height_m
+            or np.mean(z_rel[mine] < box.floor_m) > UNIT_SUPPORT
         ):
             return False
     return True
