@@ -88,8 +88,7 @@ def background_pass(
     shift,
     scale,
     upper,
-    strides,
-    region_bits,
+    grid,
     free_bits,
     ready,
     keep_columns,
@@ -105,46 +104,62 @@ def background_pass(
     is_background,
     flips,
 ):
-    """Per point: its voxel of the padded grid, in the region, foreground (the map before this
-    frame: ``region_bits`` and ``free_bits``, a bit per voxel, small enough to stay in cache); on a
-    learning frame each region voxel outside the protected columns counts once.
+    """Per point: its voxel of the padded grid (``grid``: voxels along x, y, z and the padding), in
+    the region (inside the padding), foreground (the map before this frame: ``free_bits``, a bit per
+    voxel, small enough to stay in cache); on a learning frame each region voxel outside the
+    protected columns counts once.
     ``keep_columns`` / ``protect_columns`` are empty when no box is protected; ``seen`` is a bit per
     voxel, all clear between calls (an eighth of a byte array: it stays in cache). With ``evaluate``
     (the window is full and the old sample already taken off the counts) a counted voxel that
     reaches ``threshold`` and is not background is listed in ``flips``: with fixed thresholds and
     every voxel decided, that is the only way a count going up changes a decision. Returns the
-    number of voxels counted (their indices in ``learned``) and of voxels listed."""
-    nz = strides[1]
+    number of voxels counted (their indices in ``learned``) and of voxels listed.
+
+    The point loop only finds the voxels (no integer division, no scattered count); the counts
+    and the decisions follow in loops without branches to mispredict, so their cache misses overlap."""
+    ny, nz, pad = grid[1], grid[2], grid[3]
+    hi_x, hi_y, hi_z = grid[0] - pad, ny - pad, nz - pad
     use_keep = keep_columns.shape[0] > 0 and ready
     use_protect = protect_columns.shape[0] > 0
+    s0, s1, s2 = shift[0], shift[1], shift[2]
+    u0, u1, u2 = upper[0], upper[1], upper[2]
     n = 0
-    n_flips = 0
     for i in range(points.shape[0]):
-        flat = np.int64(0)
-        for a in range(3):
-            q = (points[i, a] - shift[a]) * scale
-            q = min(max(q, np.float32(0.0)), upper[a])
-            flat += np.int64(q) * strides[a]
+        ix = np.int64(_clip_grid((points[i, 0] - s0) * scale, u0))
+        iy = np.int64(_clip_grid((points[i, 1] - s1) * scale, u1))
+        iz = np.int64(_clip_grid((points[i, 2] - s2) * scale, u2))
+        column = ix * ny + iy
+        flat = column * nz + iz
+        inside = (ix >= pad) & (ix < hi_x) & (iy >= pad) & (iy < hi_y) & (iz >= pad) & (iz < hi_z)
         byte, bit = flat >> 3, np.uint8(1) << np.uint8(flat & 7)
-        inside = (region_bits[byte] & bit) != 0
         fg = (free_bits[byte] & bit) != 0 if ready else inside
-        column = flat // nz
-        if use_keep and inside and keep_columns[column]:
-            fg = True
+        if use_keep and inside and not fg:
+            fg = keep_columns[column]
         in_region[i] = inside
         foreground[i] = fg
-        if learn and inside and not (use_protect and protect_columns[column]):
-            if not seen[byte] & bit:
-                seen[byte] |= bit
-                counts[flat] += 1
-                learned[n] = flat
-                n += 1
-                if evaluate and counts[flat] == threshold and not is_background[flat]:
-                    flips[n_flips] = flat
-                    n_flips += 1
+        if learn and inside and not (use_protect and protect_columns[column]) and not seen[byte] & bit:
+            seen[byte] |= bit
+            learned[n] = flat
+            n += 1
+    for j in range(n):
+        counts[learned[j]] += 1
+    n_flips = 0
+    if evaluate:
+        for j in range(n):
+            flat = learned[j]
+            if counts[flat] == threshold and not is_background[flat]:
+                flips[n_flips] = flat
+                n_flips += 1
     for j in range(n):
         seen[learned[j] >> 3] = 0
     return n, n_flips
+
+
+@njit(**_JIT)
+def _clip_grid(q, upper):
+    """``q`` clipped to [0, upper] (the padded grid: outside points land in the padding)."""
+    q = q if q > np.float32(0.0) else np.float32(0.0)
+    return q if q < upper else upper
 
 
 @njit(**_JIT)
@@ -782,8 +797,7 @@ def warm_up() -> None:
         np.zeros(3, dtype=np.float32),
         np.float32(1.0),
         np.full(3, 3.5, dtype=np.float32),
-        np.array([16, 4, 1], dtype=np.int64),
-        np.zeros(8, dtype=np.uint8),
+        np.array([4, 4, 4, 1], dtype=np.int64),
         np.zeros(8, dtype=np.uint8),
         True,
         np.zeros(16, dtype=np.bool_),
