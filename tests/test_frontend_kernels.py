@@ -14,6 +14,7 @@ from conftest import SAMPLES
 from i2v_loc.frame import SensorScan
 from i2v_loc.params import BackgroundParams, ConcatenationParams, Extrinsics, RegionParams, SensorConfig, load_params
 from i2v_loc.recording import Recording
+from i2v_loc.stages import kernels
 from i2v_loc.stages.background import BackgroundMap, ProtectedBox
 from i2v_loc.stages.concatenation import Concatenation, MotionHint
 from i2v_loc.stages.primitives import euclidean_labels, grid_labels, min_area_rect, split_by_label, voxel_centroids
@@ -57,6 +58,26 @@ def test_voxel_centroids_of_a_masked_cloud_in_float64_are_those_of_the_selected_
     got, _ = voxel_centroids(points, 0.5, take=take, float64=True)
     want, _ = ref.voxel_centroids(points[take].astype(np.float64), 0.5)
     assert got.dtype == np.float64 and np.array_equal(got, want)
+
+
+@pytest.mark.parametrize("spread", [3.0, 3e5])  # occupancy bits, hash table
+@pytest.mark.parametrize("seed", range(3))
+def test_voxel_ids_and_lookup_are_the_reference_voxels_of_the_taken_points(spread, seed):
+    rng = np.random.default_rng(seed)
+    points = blobs(seed, n=3000, spread=spread, dtype=np.float64)
+    take = rng.random(len(points)) < 0.7
+    ids, voxel_keys, dims, bits, word_rank, table_keys, table_ids = kernels.voxel_ids(points, take, 0.25, 1.0)
+    assert (len(bits) > 0) == (spread < 10)  # both groupings are exercised
+    if not len(bits):
+        voxel_keys = np.sort(voxel_keys)
+        kernels.rank_in_key_order(voxel_keys, ids, table_keys, table_ids)
+    want_keys, inverse = np.unique(ref.voxel_keys(points[take], 0.25), return_inverse=True)
+    assert np.array_equal(voxel_keys, want_keys) and np.all(ids[~take] == -1)
+    assert np.array_equal(ids[take], inverse.reshape(-1))
+    probes = np.concatenate([want_keys, rng.integers(0, int(np.prod(dims)), 500)])
+    want = {int(k): v for v, k in enumerate(want_keys)}
+    got = [kernels._lookup(int(k), bits, word_rank, table_keys, table_ids) for k in probes]
+    assert got == [want.get(int(k), -1) for k in probes]
 
 
 @pytest.mark.parametrize("seed", range(4))

@@ -17,8 +17,8 @@ from numba.extending import intrinsic
 
 _JIT = {"cache": True, "nogil": True}
 
-# voxel grouping: a dense slot per key when the key range is at most this times the points (plus
-# a constant), else an open-addressing hash table
+# voxel grouping: an occupancy bit per key when the key range is at most this times the points
+# (plus a constant), else an open-addressing hash table
 DENSE_KEYS_PER_POINT = 8
 DENSE_KEYS_MIN = 1 << 16
 EMPTY = np.int64(-1)
@@ -289,23 +289,41 @@ def plane_scores(sample, normals, offsets, threshold):
 # ----------------------------------------------------------------------------- voxel grouping
 
 
+@intrinsic
+def _popcount(typingctx, x):
+    """Set bits of a uint64 (LLVM's ctpop: the hardware instruction where there is one)."""
+
+    def codegen(context, builder, signature, args):
+        return builder.ctpop(args[0])
+
+    return types.uint64(types.uint64), codegen
+
+
 @njit(**_JIT)
-def voxel_grid_keys(points, take, voxel, one):
-    """Key of each taken point's voxel (origin at the taken points' minimum, computed in the type of
-    ``one``/``voxel``: the points' own for float32 grids, float64 for ``one`` = 1.0) and the grid
-    dimensions; untaken points get -1. The offsets from the minimum are never negative, so the
-    integer conversion is the floor."""
+def voxel_ids(points, take, voxel, one):
+    """Voxel id of each taken point (-1 for the others) and the voxel keys (raster order, origin at
+    the taken points' minimum). Returns (ids, voxel_keys, dims, bits, word_rank, table_keys,
+    table_ids): with a small key range an occupancy bit per key (``bits``, uint64 words) and the
+    voxels before each word (``word_rank``), so the grouping touches a few kB, and the ids in key
+    order; else an open-addressing hash table of key -> id (``bits`` empty) and the ids in order of
+    first appearance (``rank_in_key_order`` renumbers them once the keys are sorted). See ``_lookup``.
+
+    The grid is computed in the type of ``one``/``voxel`` (the points' own for float32 grids,
+    float64 for ``one`` = 1.0); the offsets from the minimum are never negative, so the integer
+    conversion is the floor."""
     n = points.shape[0]
     lo = np.full(3, one)
     lo[:] = np.inf
+    n_taken = 0
     for i in range(n):
         if take[i]:
+            n_taken += 1
             for a in range(3):
                 v = points[i, a] * one
                 if v < lo[a]:
                     lo[a] = v
     dims = np.ones(3, dtype=np.int64)
-    ijk = np.empty((n, 3), dtype=np.int64)
+    ijk = np.empty((n, 3), dtype=np.int32)  # below 2**31 voxels along an axis (the key needs less)
     for i in range(n):
         if take[i]:
             for a in range(3):
@@ -315,54 +333,35 @@ def voxel_grid_keys(points, take, voxel, one):
     keys = np.full(n, EMPTY, dtype=np.int64)
     for i in range(n):
         if take[i]:
-            keys[i] = (ijk[i, 0] * dims[1] + ijk[i, 1]) * dims[2] + ijk[i, 2]
-    return keys, dims
-
-
-@njit(**_JIT)
-def _hash_slot(table_keys, key):
-    """Open addressing, linear probing; the key mixed first (splitmix64's finaliser: grid keys are
-    regular, and probing clusters on them otherwise)."""
-    mask = table_keys.shape[0] - 1
-    x = np.uint64(key)
-    x = (x ^ (x >> np.uint64(33))) * np.uint64(0xFF51AFD7ED558CCD)
-    x = (x ^ (x >> np.uint64(33))) * np.uint64(0xC4CEB9FE1A85EC53)
-    x = x ^ (x >> np.uint64(33))
-    slot = np.int64(x & np.uint64(mask))
-    while table_keys[slot] != EMPTY and table_keys[slot] != key:
-        slot = (slot + 1) & mask
-    return slot
-
-
-@njit(**_JIT)
-def group_keys(keys, n_taken):
-    """Voxel id of each point (-1 for untaken) and the voxel keys. Returns (ids, voxel_keys,
-    lookup_dense, table_keys, table_ids, in_key_order): with a small key range a slot per key
-    (``lookup_dense``) and ids in key order; else a hash table, ids in order of first appearance
-    (``rank_in_key_order`` renumbers them once the keys are sorted)."""
-    n = keys.shape[0]
-    n_keys = np.int64(0)
-    for i in range(n):
-        if keys[i] + 1 > n_keys:
-            n_keys = keys[i] + 1
+            keys[i] = (np.int64(ijk[i, 0]) * dims[1] + ijk[i, 1]) * dims[2] + ijk[i, 2]
     ids = np.full(n, EMPTY, dtype=np.int64)
+    no_table = np.empty(0, dtype=np.int64)
+    n_keys = dims[0] * dims[1] * dims[2]
     if n_keys <= DENSE_KEYS_PER_POINT * n_taken + DENSE_KEYS_MIN:
-        dense = np.full(n_keys, EMPTY, dtype=np.int64)
+        bits = np.zeros((n_keys + 63) >> 6, dtype=np.uint64)
         for i in range(n):
             if keys[i] >= 0:
-                dense[keys[i]] = 0
-        voxel_keys = np.empty(n_taken, dtype=np.int64)
+                bits[keys[i] >> 6] |= np.uint64(1) << np.uint64(keys[i] & 63)
+        word_rank = np.empty(bits.shape[0], dtype=np.int64)
         n_vox = 0
-        for key in range(n_keys):
-            if dense[key] == 0:
-                dense[key] = n_vox
-                voxel_keys[n_vox] = key
-                n_vox += 1
-        voxel_keys = voxel_keys[:n_vox]
+        for w in range(bits.shape[0]):
+            word_rank[w] = n_vox
+            n_vox += np.int64(_popcount(bits[w]))
+        voxel_keys = np.empty(n_vox, dtype=np.int64)
+        v = 0
+        for w in range(bits.shape[0]):
+            word = bits[w]
+            while word:
+                low = word & (~word + np.uint64(1))  # the lowest set bit
+                voxel_keys[v] = w * 64 + np.int64(_popcount(low - np.uint64(1)))
+                v += 1
+                word ^= low
         for i in range(n):
-            if keys[i] >= 0:
-                ids[i] = dense[keys[i]]
-        return ids, voxel_keys, dense, np.empty(0, dtype=np.int64), np.empty(0, dtype=np.int64), True
+            key = keys[i]
+            if key >= 0:  # the voxels before its word and before it in its word
+                word, bit = bits[key >> 6], np.uint64(1) << np.uint64(key & 63)
+                ids[i] = word_rank[key >> 6] + np.int64(_popcount(word & (bit - np.uint64(1))))
+        return ids, voxel_keys, dims, bits, word_rank, no_table, no_table
     size = 1
     while size < 2 * n_taken + 2:
         size *= 2
@@ -380,7 +379,8 @@ def group_keys(keys, n_taken):
             first[n_vox] = keys[i]
             n_vox += 1
         ids[i] = table_ids[slot]
-    return ids, first[:n_vox], np.empty(0, dtype=np.int64), table_keys, table_ids, False
+    no_bits = np.empty(0, dtype=np.uint64)
+    return ids, first[:n_vox], dims, no_bits, no_table, table_keys, table_ids
 
 
 @njit(**_JIT)
@@ -394,6 +394,21 @@ def rank_in_key_order(sorted_keys, ids, table_keys, table_ids):
     for i in range(ids.shape[0]):
         if ids[i] >= 0:
             ids[i] = rank[ids[i]]
+
+
+@njit(**_JIT)
+def _hash_slot(table_keys, key):
+    """Open addressing, linear probing; the key mixed first (splitmix64's finaliser: grid keys are
+    regular, and probing clusters on them otherwise)."""
+    mask = table_keys.shape[0] - 1
+    x = np.uint64(key)
+    x = (x ^ (x >> np.uint64(33))) * np.uint64(0xFF51AFD7ED558CCD)
+    x = (x ^ (x >> np.uint64(33))) * np.uint64(0xC4CEB9FE1A85EC53)
+    x = x ^ (x >> np.uint64(33))
+    slot = np.int64(x & np.uint64(mask))
+    while table_keys[slot] != EMPTY and table_keys[slot] != key:
+        slot = (slot + 1) & mask
+    return slot
 
 
 @njit(**_JIT)
@@ -414,9 +429,16 @@ def voxel_sums(points, values, ids, n_vox):
 
 
 @njit(**_JIT)
-def _lookup(key, dense, table_keys, table_ids):
-    if dense.shape[0] > 0:
-        return dense[key] if key < dense.shape[0] else EMPTY
+def _lookup(key, bits, word_rank, table_keys, table_ids):
+    """Id of the voxel of ``key`` (a key of the grid) in a grouping of ``voxel_ids``, -1 if none."""
+    if bits.shape[0] > 0:
+        w = key >> 6
+        if w >= bits.shape[0]:
+            return EMPTY
+        word, bit = bits[w], np.uint64(1) << np.uint64(key & 63)
+        if not word & bit:
+            return EMPTY
+        return word_rank[w] + np.int64(_popcount(word & (bit - np.uint64(1))))
     slot = _hash_slot(table_keys, key)
     return table_ids[slot] if table_keys[slot] == key else EMPTY
 
@@ -452,7 +474,7 @@ def _component_labels(parent):
 
 
 @njit(**_JIT)
-def voxel_components(voxel_keys, dims, dense, table_keys, table_ids):
+def voxel_components(voxel_keys, dims, bits, word_rank, table_keys, table_ids):
     """26-connected components of the occupied voxels, numbered in the order of their first voxel
     in key (raster) order."""
     n_vox = voxel_keys.shape[0]
@@ -470,7 +492,7 @@ def voxel_components(voxel_keys, dims, dense, table_keys, table_ids):
                     ni, nj, nk = i + di, j + dj, k + dk
                     if ni >= dims[0] or nj < 0 or nj >= dims[1] or nk < 0 or nk >= dims[2]:
                         continue
-                    w = _lookup((ni * dims[1] + nj) * dims[2] + nk, dense, table_keys, table_ids)
+                    w = _lookup((ni * dims[1] + nj) * dims[2] + nk, bits, word_rank, table_keys, table_ids)
                     if w < 0:
                         continue
                     _union(parent, v, w)
@@ -824,16 +846,15 @@ def warm_up() -> None:
     box_mask(p32, np.zeros(3, dtype=np.float32), np.ones(3, dtype=np.float32), np.empty(3, dtype=np.bool_))
     above_plane(p32, take, np.array([0.0, 0.0, 1.0]), 0.0, 0.1, np.empty(3, dtype=np.int64))
     plane_scores(p64, np.array([[0.0, 0.0, 1.0]]), np.zeros(1), 0.1)
+    far = p32 * np.float32(1e6)  # a key range too wide for the bits: the hash table
     for points, voxel, one in ((p32, np.float32(0.5), np.float32(1.0)), (p64, 0.5, 1.0), (p32, 0.5, 1.0)):
-        keys, dims = voxel_grid_keys(points, take, voxel, one)
-        for dense_range in (True, False):
-            k = keys if dense_range else keys * np.int64(1 << 40)
-            ids, vkeys, dense, tk, ti, in_order = group_keys(k, 3)
-            if not in_order:
+        for cloud in (points, far.astype(points.dtype)):
+            ids, vkeys, dims, bits, word_rank, tk, ti = voxel_ids(cloud, take, voxel, one)
+            if len(bits) == 0:
                 vkeys = np.sort(vkeys)
                 rank_in_key_order(vkeys, ids, tk, ti)
-            voxel_sums(points, np.zeros((3, 0)), ids, len(vkeys))
-            voxel_components(vkeys, dims, dense, tk, ti)
+            voxel_sums(cloud, np.zeros((3, 0)), ids, len(vkeys))
+            voxel_components(vkeys, dims, bits, word_rank, tk, ti)
     counting_order(np.array([1, 0, 1], dtype=np.int64), 2)
     radius_components(p64, 0.5)
     min_area_rect(np.ascontiguousarray(p64[:, :2]))
