@@ -68,14 +68,15 @@ class Region:
         take = in_region if candidates is None else candidates
         if plane is None:
             index = np.flatnonzero(take)
-            return RegionResult(points[index], None, int(np.count_nonzero(in_region)), 0, index)
+            return RegionResult(np.take(points, index, axis=0), None, int(np.count_nonzero(in_region)), 0, index)
         index = np.empty(len(points), dtype=np.int64)
         n_kept, n_taken = kernels.above_plane(
             points, take, plane.normal, plane.offset, self.params.ground_distance_threshold_m, index
         )
         index = index[:n_kept]
         roi_points = n_taken if candidates is None else int(np.count_nonzero(in_region))
-        return RegionResult(points[index], plane, roi_points, n_taken - n_kept, index)
+        # np.take: a quarter of the time of the fancy index on rows
+        return RegionResult(np.take(points, index, axis=0), plane, roi_points, n_taken - n_kept, index)
 
     def ground(self, points: np.ndarray, in_region: np.ndarray | None = None) -> GroundPlane | None:
         """The ground plane of the points in the region, refitted every ``ground_refit_frames`` frames
