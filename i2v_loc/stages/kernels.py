@@ -34,25 +34,24 @@ def sweep_to_yard(points, offsets, rot, trans, min_r2, max_r2, out_points, out_o
 
     The rotation is the fused multiply-add chain of the float32 matrix product it replaces
     (x r0 rounded, then y r1 and z r2 each added with one rounding), so the points are bit-equal.
-    """
+    Every point is written at the next free row and the row is kept or not: no branch to mispredict
+    (the rows written stay within the sweep's own)."""
     k = start
     n_bad = 0
+    r00, r01, r02 = rot[0, 0], np.float64(rot[0, 1]), np.float64(rot[0, 2])
+    r10, r11, r12 = rot[1, 0], np.float64(rot[1, 1]), np.float64(rot[1, 2])
+    r20, r21, r22 = rot[2, 0], np.float64(rot[2, 1]), np.float64(rot[2, 2])
     for i in range(points.shape[0]):
-        x, y, z, off = points[i, 0], points[i, 1], points[i, 2], offsets[i]
-        if not (np.isfinite(x) and np.isfinite(y) and np.isfinite(z) and np.isfinite(off)):
-            n_bad += 1
-            continue
-        xd, yd, zd = np.float64(x), np.float64(y), np.float64(z)
-        r2 = xd * xd + yd * yd + zd * zd
-        if r2 < min_r2 or r2 > max_r2:
-            continue
-        for a in range(3):
-            acc = x * rot[a, 0]
-            acc = np.float32(yd * np.float64(rot[a, 1]) + np.float64(acc))
-            acc = np.float32(zd * np.float64(rot[a, 2]) + np.float64(acc))
-            out_points[k, a] = acc + trans[a]
+        x, off = points[i, 0], offsets[i]
+        xd, yd, zd = np.float64(x), np.float64(points[i, 1]), np.float64(points[i, 2])
+        r2 = xd * xd + yd * yd + zd * zd  # not finite exactly when a coordinate is not (squares add up)
+        out_points[k, 0] = np.float32(zd * r02 + np.float64(np.float32(yd * r01 + np.float64(x * r00)))) + trans[0]
+        out_points[k, 1] = np.float32(zd * r12 + np.float64(np.float32(yd * r11 + np.float64(x * r10)))) + trans[1]
+        out_points[k, 2] = np.float32(zd * r22 + np.float64(np.float32(yd * r21 + np.float64(x * r20)))) + trans[2]
         out_offsets[k] = off
-        k += 1
+        finite = np.isfinite(r2) and np.isfinite(off)
+        k += finite and min_r2 <= r2 <= max_r2
+        n_bad += not finite
     return k - start, n_bad
 
 
