@@ -117,7 +117,8 @@ def background_pass(
     The point loop only finds the voxels (no integer division, no scattered count); the counts
     and the decisions follow in loops without branches to mispredict, so their cache misses overlap."""
     ny, nz, pad = grid[1], grid[2], grid[3]
-    hi_x, hi_y, hi_z = grid[0] - pad, ny - pad, nz - pad
+    # in the region: pad <= index < size - pad, one unsigned comparison per axis
+    wx, wy, wz = np.uint64(grid[0] - 2 * pad), np.uint64(ny - 2 * pad), np.uint64(nz - 2 * pad)
     use_keep = keep_columns.shape[0] > 0 and ready
     use_protect = protect_columns.shape[0] > 0
     s0, s1, s2 = shift[0], shift[1], shift[2]
@@ -129,7 +130,7 @@ def background_pass(
         iz = np.int64(_clip_grid((points[i, 2] - s2) * scale, u2))
         column = ix * ny + iy
         flat = column * nz + iz
-        inside = (ix >= pad) & (ix < hi_x) & (iy >= pad) & (iy < hi_y) & (iz >= pad) & (iz < hi_z)
+        inside = (np.uint64(ix - pad) < wx) & (np.uint64(iy - pad) < wy) & (np.uint64(iz - pad) < wz)
         byte, bit = flat >> 3, np.uint8(1) << np.uint8(flat & 7)
         fg = (free_bits[byte] & bit) != 0 if ready else inside
         if use_keep and inside and not fg:
