@@ -60,6 +60,14 @@ def test_voxel_centroids_of_a_masked_cloud_in_float64_are_those_of_the_selected_
     assert got.dtype == np.float64 and np.array_equal(got, want)
 
 
+@pytest.mark.parametrize("seed", range(3))
+def test_row_mean_is_numpys_mean_over_rows_to_the_bit(seed):
+    rng = np.random.default_rng(seed)
+    for n in (1, 2, 7, 1000, int(rng.integers(2000, 20000))):
+        rows = rng.normal(size=(n, 3)) * rng.uniform(0.1, 100.0) + rng.normal(size=3) * 50.0
+        assert np.array_equal(kernels.row_mean(rows), rows.mean(axis=0)), n
+
+
 @pytest.mark.parametrize("spread", [3.0, 3e5])  # occupancy bits, hash table
 @pytest.mark.parametrize("seed", range(3))
 def test_voxel_ids_and_lookup_are_the_reference_voxels_of_the_taken_points(spread, seed):
