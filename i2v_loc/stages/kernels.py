@@ -34,8 +34,8 @@ def sweep_to_yard(points, offsets, rot, trans, min_r2, max_r2, out_points, out_o
 
     The rotation is the fused multiply-add chain of the float32 matrix product it replaces
     (x r0 rounded, then y r1 and z r2 each added with one rounding), so the points are bit-equal.
-    Every point is written at the next free row and the row is kept or not: no branch to mispredict
-    (the rows written stay within the sweep's own)."""
+    Every point is written at the next free row, which is then kept or not (no branch around the
+    writes; the rows written stay within the sweep's own)."""
     k = start
     n_bad = 0
     r00, r01, r02 = rot[0, 0], np.float64(rot[0, 1]), np.float64(rot[0, 2])
@@ -115,7 +115,7 @@ def background_pass(
     number of voxels counted (their indices in ``learned``) and of voxels listed.
 
     The point loop only finds the voxels (no integer division, no scattered count); the counts
-    and the decisions follow in loops without branches to mispredict, so their cache misses overlap."""
+    and the decisions follow in short loops over the counted voxels, whose cache misses overlap."""
     ny, nz, pad = grid[1], grid[2], grid[3]
     # in the region: pad <= index < size - pad, one unsigned comparison per axis
     wx, wy, wz = np.uint64(grid[0] - 2 * pad), np.uint64(ny - 2 * pad), np.uint64(nz - 2 * pad)
@@ -311,6 +311,21 @@ def _popcount(typingctx, x):
 
 
 @njit(**_JIT)
+def _hash_slot(table_keys, key):
+    """Open addressing, linear probing; the key mixed first (splitmix64's finaliser: grid keys are
+    regular, and probing clusters on them otherwise)."""
+    mask = table_keys.shape[0] - 1
+    x = np.uint64(key)
+    x = (x ^ (x >> np.uint64(33))) * np.uint64(0xFF51AFD7ED558CCD)
+    x = (x ^ (x >> np.uint64(33))) * np.uint64(0xC4CEB9FE1A85EC53)
+    x = x ^ (x >> np.uint64(33))
+    slot = np.int64(x & np.uint64(mask))
+    while table_keys[slot] != EMPTY and table_keys[slot] != key:
+        slot = (slot + 1) & mask
+    return slot
+
+
+@njit(**_JIT)
 def voxel_ids(points, take, voxel, one):
     """Voxel id of each taken point (-1 for the others) and the voxel keys (raster order, origin at
     the taken points' minimum). Returns (ids, voxel_keys, dims, bits, word_rank, table_keys,
@@ -334,7 +349,7 @@ def voxel_ids(points, take, voxel, one):
                 if v < lo[a]:
                     lo[a] = v
     dims = np.ones(3, dtype=np.int64)
-    ijk = np.empty((n, 3), dtype=np.int32)  # below 2**31 voxels along an axis (the key needs less)
+    ijk = np.empty((n, 3), dtype=np.int64)
     for i in range(n):
         if take[i]:
             for a in range(3):
@@ -342,12 +357,13 @@ def voxel_ids(points, take, voxel, one):
                 ijk[i, a] = q
                 dims[a] = max(dims[a], q + 1)
     keys = np.full(n, EMPTY, dtype=np.int64)
+    n_keys = np.int64(0)
     for i in range(n):
         if take[i]:
-            keys[i] = (np.int64(ijk[i, 0]) * dims[1] + ijk[i, 1]) * dims[2] + ijk[i, 2]
+            keys[i] = (ijk[i, 0] * dims[1] + ijk[i, 1]) * dims[2] + ijk[i, 2]
+            n_keys = max(n_keys, keys[i] + 1)
     ids = np.full(n, EMPTY, dtype=np.int64)
     no_table = np.empty(0, dtype=np.int64)
-    n_keys = dims[0] * dims[1] * dims[2]
     if n_keys <= DENSE_KEYS_PER_POINT * n_taken + DENSE_KEYS_MIN:
         bits = np.zeros((n_keys + 63) >> 6, dtype=np.uint64)
         for i in range(n):
@@ -405,21 +421,6 @@ def rank_in_key_order(sorted_keys, ids, table_keys, table_ids):
     for i in range(ids.shape[0]):
         if ids[i] >= 0:
             ids[i] = rank[ids[i]]
-
-
-@njit(**_JIT)
-def _hash_slot(table_keys, key):
-    """Open addressing, linear probing; the key mixed first (splitmix64's finaliser: grid keys are
-    regular, and probing clusters on them otherwise)."""
-    mask = table_keys.shape[0] - 1
-    x = np.uint64(key)
-    x = (x ^ (x >> np.uint64(33))) * np.uint64(0xFF51AFD7ED558CCD)
-    x = (x ^ (x >> np.uint64(33))) * np.uint64(0xC4CEB9FE1A85EC53)
-    x = x ^ (x >> np.uint64(33))
-    slot = np.int64(x & np.uint64(mask))
-    while table_keys[slot] != EMPTY and table_keys[slot] != key:
-        slot = (slot + 1) & mask
-    return slot
 
 
 @njit(**_JIT)
