@@ -176,6 +176,21 @@ def test_merge_gives_the_reference_points_lags_and_faults():
     assert np.array_equal(got.lag_s, lag)
 
 
+@pytest.mark.parametrize("reference", ["earliest", "latest", "mean"])
+def test_sync_window_is_the_reference_window_on_random_stamps(reference):
+    rng = np.random.default_rng(5)
+    stage = Concatenation(ConcatenationParams(reference=reference, sync_tolerance_s=0.05), [])
+    dropped = 0
+    for _ in range(3000):
+        # up to 6 sweeps: some a period apart, some at the tolerance, some repeated
+        stamps = list(1000.0 + rng.choice([0.0, 0.02, 0.05, 0.1], rng.integers(1, 7)) + rng.uniform(0, 0.06, 1))
+        got_reference, got_members = stage._synchronise(stamps)
+        want_reference, want_members = ref.synchronise(stamps, 0.05, reference)
+        assert got_reference == want_reference and np.array_equal(got_members, want_members), stamps
+        dropped += int((~got_members).sum())
+    assert dropped > 0  # windows that leave sweeps out were exercised
+
+
 def test_interpolation_moves_the_reference_points():
     rng = np.random.default_rng(1)
     points = rng.uniform(-10, 10, (3000, 3)).astype(np.float32)
