@@ -83,6 +83,17 @@ def min_area_rect(xy):
     return center, dv[best], du[best], a + np.pi / 2
 
 
+def synchronise(stamps_s, tol, reference):
+    """(reference stamp, members) of the window start holding the most stamps (ties: the earliest)."""
+    stamps = np.asarray(stamps_s, dtype=np.float64)
+    inside = (stamps[None, :] >= stamps[:, None] - 1e-9) & (stamps[None, :] <= stamps[:, None] + tol + 1e-9)
+    counts = inside.sum(axis=1)
+    best = np.flatnonzero(counts == counts.max())
+    members = inside[best[np.argmin(stamps[best])]]
+    group = stamps[members]
+    return float({"earliest": group.min(), "latest": group.max(), "mean": group.mean()}[reference]), members
+
+
 def merge(stage, scans):
     """(points, lag, reference stamp, faults, dropped) of ``Concatenation.merge``."""
     faults, dropped, sweeps = {}, {"out_of_sync": 0, "empty": 0, "missing": 0, "nan_points": 0}, []

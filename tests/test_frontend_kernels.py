@@ -14,6 +14,7 @@ from conftest import SAMPLES
 from i2v_loc.frame import SensorScan
 from i2v_loc.params import BackgroundParams, ConcatenationParams, Extrinsics, RegionParams, SensorConfig, load_params
 from i2v_loc.recording import Recording
+from i2v_loc.stages import kernels
 from i2v_loc.stages.background import BackgroundMap, ProtectedBox
 from i2v_loc.stages.concatenation import Concatenation, MotionHint
 from i2v_loc.stages.primitives import euclidean_labels, grid_labels, min_area_rect, split_by_label, voxel_centroids
@@ -57,6 +58,34 @@ def test_voxel_centroids_of_a_masked_cloud_in_float64_are_those_of_the_selected_
     got, _ = voxel_centroids(points, 0.5, take=take, float64=True)
     want, _ = ref.voxel_centroids(points[take].astype(np.float64), 0.5)
     assert got.dtype == np.float64 and np.array_equal(got, want)
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_row_mean_is_numpys_mean_over_rows_to_the_bit(seed):
+    rng = np.random.default_rng(seed)
+    for n in (1, 2, 7, 1000, int(rng.integers(2000, 20000))):
+        rows = rng.normal(size=(n, 3)) * rng.uniform(0.1, 100.0) + rng.normal(size=3) * 50.0
+        assert np.array_equal(kernels.row_mean(rows), rows.mean(axis=0)), n
+
+
+@pytest.mark.parametrize("spread", [3.0, 3e5])  # occupancy bits, hash table
+@pytest.mark.parametrize("seed", range(3))
+def test_voxel_ids_and_lookup_are_the_reference_voxels_of_the_taken_points(spread, seed):
+    rng = np.random.default_rng(seed)
+    points = blobs(seed, n=3000, spread=spread, dtype=np.float64)
+    take = rng.random(len(points)) < 0.7
+    ids, voxel_keys, dims, bits, word_rank, table_keys, table_ids = kernels.voxel_ids(points, take, 0.25, 1.0)
+    assert (len(bits) > 0) == (spread < 10)  # both groupings are exercised
+    if not len(bits):
+        voxel_keys = np.sort(voxel_keys)
+        kernels.rank_in_key_order(voxel_keys, ids, table_keys, table_ids)
+    want_keys, inverse = np.unique(ref.voxel_keys(points[take], 0.25), return_inverse=True)
+    assert np.array_equal(voxel_keys, want_keys) and np.all(ids[~take] == -1)
+    assert np.array_equal(ids[take], inverse.reshape(-1))
+    probes = np.concatenate([want_keys, rng.integers(0, int(np.prod(dims)), 500)])
+    want = {int(k): v for v, k in enumerate(want_keys)}
+    got = [kernels._lookup(int(k), bits, word_rank, table_keys, table_ids) for k in probes]
+    assert got == [want.get(int(k), -1) for k in probes]
 
 
 @pytest.mark.parametrize("seed", range(4))
@@ -145,6 +174,21 @@ def test_merge_gives_the_reference_points_lags_and_faults():
     assert (got.stamp_s, got.faults, got.dropped, got.sensors_used) == (reference, faults, dropped, ["a", "b"])
     assert got.points.shape == points.shape and np.allclose(got.points, points, rtol=0, atol=1e-4)
     assert np.array_equal(got.lag_s, lag)
+
+
+@pytest.mark.parametrize("reference", ["earliest", "latest", "mean"])
+def test_sync_window_is_the_reference_window_on_random_stamps(reference):
+    rng = np.random.default_rng(5)
+    stage = Concatenation(ConcatenationParams(reference=reference, sync_tolerance_s=0.05), [])
+    dropped = 0
+    for _ in range(3000):
+        # up to 6 sweeps: some a period apart, some at the tolerance, some repeated
+        stamps = list(1000.0 + rng.choice([0.0, 0.02, 0.05, 0.1], rng.integers(1, 7)) + rng.uniform(0, 0.06, 1))
+        got_reference, got_members = stage._synchronise(stamps)
+        want_reference, want_members = ref.synchronise(stamps, 0.05, reference)
+        assert got_reference == want_reference and np.array_equal(got_members, want_members), stamps
+        dropped += int((~got_members).sum())
+    assert dropped > 0  # windows that leave sweeps out were exercised
 
 
 def test_interpolation_moves_the_reference_points():

@@ -103,7 +103,7 @@ class ArticulatedPipeline(ParameterHandoff):
             region = self.region.process(merged.points, split.in_region, split.foreground)
         else:
             region = self.region.process(merged.points)
-        points = region.points.copy()
+        points = region.points  # the region's own gathered copy: interpolated in place
         if params.concatenation.motion_interpolation and self._reports:
             self.concatenation.interpolate(points, merged.lag_s[region.index], self._motion_hints())
         points, _ = voxel_centroids(points, params.concatenation.voxel_size_m)

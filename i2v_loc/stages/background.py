@@ -105,9 +105,9 @@ class BackgroundMap:
         self.dilated = np.zeros(cells, dtype=np.uint16)
         region_cells = self._region_cells()
         self.dilated[~region_cells] = OUTSIDE
-        # the per-point lookups read bits (in the region; dilated count 0) that stay in cache
-        self._region_bits = np.packbits(region_cells, bitorder="little")
-        self._free_bits = self._region_bits.copy()
+        # the per-point lookup reads a bit (in the region, dilated count 0) that stays in cache
+        self._free_bits = np.packbits(region_cells, bitorder="little")
+        self._grid = np.array([*self.padded, self.pad], dtype=np.int64)
         self.history: deque[np.ndarray] = deque()  # the voxels of each sample, each once
         self.frames_seen = 0
         self._seen = np.zeros(
@@ -159,7 +159,7 @@ class BackgroundMap:
         learned = np.empty(n if learning else 0, dtype=np.int64)
         flips = np.empty(n + len(old) if sliding else 0, dtype=np.int64)
         n_learned, n_flips = kernels.background_pass(
-            points, self._shift, self._scale, self._upper, self._strides, self._region_bits, self._free_bits, self.ready,
+            points, self._shift, self._scale, self._upper, self._grid, self._free_bits, self.ready,
             _NO_COLUMNS if keep is None else keep, learning, _NO_COLUMNS if protect is None else protect,
             self.counts, self._seen, result.in_region, result.foreground, learned,
             sliding, threshold, self.is_background, flips,

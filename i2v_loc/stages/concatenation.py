@@ -130,17 +130,16 @@ class Concatenation:
         """
         if not stamps_s:
             return float("nan"), np.zeros(0, dtype=bool)
-        stamps = np.asarray(stamps_s)
         tol = self.params.sync_tolerance_s
-        # each stamp as the window start; count the sweeps in [start, start + tol]
-        inside = (stamps[None, :] >= stamps[:, None] - 1e-9) & (stamps[None, :] <= stamps[:, None] + tol + 1e-9)
-        counts = inside.sum(axis=1)
-        best = np.flatnonzero(counts == counts.max())
-        start = best[np.argmin(stamps[best])]
-        members = inside[start]
-        group = stamps[members]
-        reference = {"earliest": group.min(), "latest": group.max(), "mean": group.mean()}[self.params.reference]
-        return float(reference), members
+        # each stamp as the window start; the sweeps in [start, start + tol] (a handful: plain Python)
+        inside = [[s - 1e-9 <= t <= s + tol + 1e-9 for t in stamps_s] for s in stamps_s]
+        counts = [sum(row) for row in inside]
+        best = [i for i, count in enumerate(counts) if count == max(counts)]
+        members = inside[min(best, key=lambda i: stamps_s[i])]  # ties: the earliest start
+        group = [stamp for stamp, member in zip(stamps_s, members) if member]
+        reference = self.params.reference
+        value = min(group) if reference == "earliest" else max(group) if reference == "latest" else np.mean(group)
+        return float(value), np.array(members)
 
     @staticmethod
     def interpolate(points: np.ndarray, lag_s: np.ndarray, motion: list[MotionHint]) -> None:

@@ -17,8 +17,8 @@ from numba.extending import intrinsic
 
 _JIT = {"cache": True, "nogil": True}
 
-# voxel grouping: a dense slot per key when the key range is at most this times the points (plus
-# a constant), else an open-addressing hash table
+# voxel grouping: an occupancy bit per key when the key range is at most this times the points
+# (plus a constant), else an open-addressing hash table
 DENSE_KEYS_PER_POINT = 8
 DENSE_KEYS_MIN = 1 << 16
 EMPTY = np.int64(-1)
@@ -34,25 +34,24 @@ def sweep_to_yard(points, offsets, rot, trans, min_r2, max_r2, out_points, out_o
 
     The rotation is the fused multiply-add chain of the float32 matrix product it replaces
     (x r0 rounded, then y r1 and z r2 each added with one rounding), so the points are bit-equal.
-    """
+    Every point is written at the next free row, which is then kept or not (no branch around the
+    writes; the rows written stay within the sweep's own)."""
     k = start
     n_bad = 0
+    r00, r01, r02 = rot[0, 0], np.float64(rot[0, 1]), np.float64(rot[0, 2])
+    r10, r11, r12 = rot[1, 0], np.float64(rot[1, 1]), np.float64(rot[1, 2])
+    r20, r21, r22 = rot[2, 0], np.float64(rot[2, 1]), np.float64(rot[2, 2])
     for i in range(points.shape[0]):
-        x, y, z, off = points[i, 0], points[i, 1], points[i, 2], offsets[i]
-        if not (np.isfinite(x) and np.isfinite(y) and np.isfinite(z) and np.isfinite(off)):
-            n_bad += 1
-            continue
-        xd, yd, zd = np.float64(x), np.float64(y), np.float64(z)
-        r2 = xd * xd + yd * yd + zd * zd
-        if r2 < min_r2 or r2 > max_r2:
-            continue
-        for a in range(3):
-            acc = x * rot[a, 0]
-            acc = np.float32(yd * np.float64(rot[a, 1]) + np.float64(acc))
-            acc = np.float32(zd * np.float64(rot[a, 2]) + np.float64(acc))
-            out_points[k, a] = acc + trans[a]
+        x, off = points[i, 0], offsets[i]
+        xd, yd, zd = np.float64(x), np.float64(points[i, 1]), np.float64(points[i, 2])
+        r2 = xd * xd + yd * yd + zd * zd  # not finite exactly when a coordinate is not (squares add up)
+        out_points[k, 0] = np.float32(zd * r02 + np.float64(np.float32(yd * r01 + np.float64(x * r00)))) + trans[0]
+        out_points[k, 1] = np.float32(zd * r12 + np.float64(np.float32(yd * r11 + np.float64(x * r10)))) + trans[1]
+        out_points[k, 2] = np.float32(zd * r22 + np.float64(np.float32(yd * r21 + np.float64(x * r20)))) + trans[2]
         out_offsets[k] = off
-        k += 1
+        finite = np.isfinite(r2) and np.isfinite(off)
+        k += finite and min_r2 <= r2 <= max_r2
+        n_bad += not finite
     return k - start, n_bad
 
 
@@ -88,8 +87,7 @@ def background_pass(
     shift,
     scale,
     upper,
-    strides,
-    region_bits,
+    grid,
     free_bits,
     ready,
     keep_columns,
@@ -105,46 +103,63 @@ def background_pass(
     is_background,
     flips,
 ):
-    """Per point: its voxel of the padded grid, in the region, foreground (the map before this
-    frame: ``region_bits`` and ``free_bits``, a bit per voxel, small enough to stay in cache); on a
-    learning frame each region voxel outside the protected columns counts once.
+    """Per point: its voxel of the padded grid (``grid``: voxels along x, y, z and the padding), in
+    the region (inside the padding), foreground (the map before this frame: ``free_bits``, a bit per
+    voxel, small enough to stay in cache); on a learning frame each region voxel outside the
+    protected columns counts once.
     ``keep_columns`` / ``protect_columns`` are empty when no box is protected; ``seen`` is a bit per
     voxel, all clear between calls (an eighth of a byte array: it stays in cache). With ``evaluate``
     (the window is full and the old sample already taken off the counts) a counted voxel that
     reaches ``threshold`` and is not background is listed in ``flips``: with fixed thresholds and
     every voxel decided, that is the only way a count going up changes a decision. Returns the
-    number of voxels counted (their indices in ``learned``) and of voxels listed."""
-    nz = strides[1]
+    number of voxels counted (their indices in ``learned``) and of voxels listed.
+
+    The point loop only finds the voxels (no integer division, no scattered count); the counts
+    and the decisions follow in short loops over the counted voxels, whose cache misses overlap."""
+    ny, nz, pad = grid[1], grid[2], grid[3]
+    # in the region: pad <= index < size - pad, one unsigned comparison per axis
+    wx, wy, wz = np.uint64(grid[0] - 2 * pad), np.uint64(ny - 2 * pad), np.uint64(nz - 2 * pad)
     use_keep = keep_columns.shape[0] > 0 and ready
     use_protect = protect_columns.shape[0] > 0
+    s0, s1, s2 = shift[0], shift[1], shift[2]
+    u0, u1, u2 = upper[0], upper[1], upper[2]
     n = 0
-    n_flips = 0
     for i in range(points.shape[0]):
-        flat = np.int64(0)
-        for a in range(3):
-            q = (points[i, a] - shift[a]) * scale
-            q = min(max(q, np.float32(0.0)), upper[a])
-            flat += np.int64(q) * strides[a]
+        ix = np.int64(_clip_grid((points[i, 0] - s0) * scale, u0))
+        iy = np.int64(_clip_grid((points[i, 1] - s1) * scale, u1))
+        iz = np.int64(_clip_grid((points[i, 2] - s2) * scale, u2))
+        column = ix * ny + iy
+        flat = column * nz + iz
+        inside = (np.uint64(ix - pad) < wx) & (np.uint64(iy - pad) < wy) & (np.uint64(iz - pad) < wz)
         byte, bit = flat >> 3, np.uint8(1) << np.uint8(flat & 7)
-        inside = (region_bits[byte] & bit) != 0
         fg = (free_bits[byte] & bit) != 0 if ready else inside
-        column = flat // nz
-        if use_keep and inside and keep_columns[column]:
-            fg = True
+        if use_keep and inside and not fg:
+            fg = keep_columns[column]
         in_region[i] = inside
         foreground[i] = fg
-        if learn and inside and not (use_protect and protect_columns[column]):
-            if not seen[byte] & bit:
-                seen[byte] |= bit
-                counts[flat] += 1
-                learned[n] = flat
-                n += 1
-                if evaluate and counts[flat] == threshold and not is_background[flat]:
-                    flips[n_flips] = flat
-                    n_flips += 1
+        if learn and inside and not (use_protect and protect_columns[column]) and not seen[byte] & bit:
+            seen[byte] |= bit
+            learned[n] = flat
+            n += 1
+    for j in range(n):
+        counts[learned[j]] += 1
+    n_flips = 0
+    if evaluate:
+        for j in range(n):
+            flat = learned[j]
+            if counts[flat] == threshold and not is_background[flat]:
+                flips[n_flips] = flat
+                n_flips += 1
     for j in range(n):
         seen[learned[j] >> 3] = 0
     return n, n_flips
+
+
+@njit(**_JIT)
+def _clip_grid(q, upper):
+    """``q`` clipped to [0, upper] (the padded grid: outside points land in the padding)."""
+    q = q if q > np.float32(0.0) else np.float32(0.0)
+    return q if q < upper else upper
 
 
 @njit(**_JIT)
@@ -271,37 +286,28 @@ def plane_scores(sample, normals, offsets, threshold):
     return scores
 
 
+@njit(**_JIT)
+def row_mean(rows):
+    """Mean of the rows of a non-empty (N, k) float64 array, summed row after row as numpy's
+    ``mean(axis=0)`` of a C-ordered array does (so the same bits), without its per-row overhead."""
+    total = rows[0].copy()
+    for i in range(1, rows.shape[0]):
+        for a in range(rows.shape[1]):
+            total[a] += rows[i, a]
+    return total / np.float64(rows.shape[0])
+
+
 # ----------------------------------------------------------------------------- voxel grouping
 
 
-@njit(**_JIT)
-def voxel_grid_keys(points, take, voxel, one):
-    """Key of each taken point's voxel (origin at the taken points' minimum, computed in the type of
-    ``one``/``voxel``: the points' own for float32 grids, float64 for ``one`` = 1.0) and the grid
-    dimensions; untaken points get -1. The offsets from the minimum are never negative, so the
-    integer conversion is the floor."""
-    n = points.shape[0]
-    lo = np.full(3, one)
-    lo[:] = np.inf
-    for i in range(n):
-        if take[i]:
-            for a in range(3):
-                v = points[i, a] * one
-                if v < lo[a]:
-                    lo[a] = v
-    dims = np.ones(3, dtype=np.int64)
-    ijk = np.empty((n, 3), dtype=np.int64)
-    for i in range(n):
-        if take[i]:
-            for a in range(3):
-                q = np.int64((points[i, a] * one - lo[a]) / voxel)
-                ijk[i, a] = q
-                dims[a] = max(dims[a], q + 1)
-    keys = np.full(n, EMPTY, dtype=np.int64)
-    for i in range(n):
-        if take[i]:
-            keys[i] = (ijk[i, 0] * dims[1] + ijk[i, 1]) * dims[2] + ijk[i, 2]
-    return keys, dims
+@intrinsic
+def _popcount(typingctx, x):
+    """Set bits of a uint64 (LLVM's ctpop: the hardware instruction where there is one)."""
+
+    def codegen(context, builder, signature, args):
+        return builder.ctpop(args[0])
+
+    return types.uint64(types.uint64), codegen
 
 
 @njit(**_JIT)
@@ -320,34 +326,69 @@ def _hash_slot(table_keys, key):
 
 
 @njit(**_JIT)
-def group_keys(keys, n_taken):
-    """Voxel id of each point (-1 for untaken) and the voxel keys. Returns (ids, voxel_keys,
-    lookup_dense, table_keys, table_ids, in_key_order): with a small key range a slot per key
-    (``lookup_dense``) and ids in key order; else a hash table, ids in order of first appearance
-    (``rank_in_key_order`` renumbers them once the keys are sorted)."""
-    n = keys.shape[0]
+def voxel_ids(points, take, voxel, one):
+    """Voxel id of each taken point (-1 for the others) and the voxel keys (raster order, origin at
+    the taken points' minimum). Returns (ids, voxel_keys, dims, bits, word_rank, table_keys,
+    table_ids): with a small key range an occupancy bit per key (``bits``, uint64 words) and the
+    voxels before each word (``word_rank``), so the grouping touches a few kB, and the ids in key
+    order; else an open-addressing hash table of key -> id (``bits`` empty) and the ids in order of
+    first appearance (``rank_in_key_order`` renumbers them once the keys are sorted). See ``_lookup``.
+
+    The grid is computed in the type of ``one``/``voxel`` (the points' own for float32 grids,
+    float64 for ``one`` = 1.0); the offsets from the minimum are never negative, so the integer
+    conversion is the floor."""
+    n = points.shape[0]
+    lo = np.full(3, one)
+    lo[:] = np.inf
+    n_taken = 0
+    for i in range(n):
+        if take[i]:
+            n_taken += 1
+            for a in range(3):
+                v = points[i, a] * one
+                if v < lo[a]:
+                    lo[a] = v
+    dims = np.ones(3, dtype=np.int64)
+    ijk = np.empty((n, 3), dtype=np.int64)
+    for i in range(n):
+        if take[i]:
+            for a in range(3):
+                q = np.int64((points[i, a] * one - lo[a]) / voxel)
+                ijk[i, a] = q
+                dims[a] = max(dims[a], q + 1)
+    keys = np.full(n, EMPTY, dtype=np.int64)
     n_keys = np.int64(0)
     for i in range(n):
-        if keys[i] + 1 > n_keys:
-            n_keys = keys[i] + 1
+        if take[i]:
+            keys[i] = (ijk[i, 0] * dims[1] + ijk[i, 1]) * dims[2] + ijk[i, 2]
+            n_keys = max(n_keys, keys[i] + 1)
     ids = np.full(n, EMPTY, dtype=np.int64)
+    no_table = np.empty(0, dtype=np.int64)
     if n_keys <= DENSE_KEYS_PER_POINT * n_taken + DENSE_KEYS_MIN:
-        dense = np.full(n_keys, EMPTY, dtype=np.int64)
+        bits = np.zeros((n_keys + 63) >> 6, dtype=np.uint64)
         for i in range(n):
             if keys[i] >= 0:
-                dense[keys[i]] = 0
-        voxel_keys = np.empty(n_taken, dtype=np.int64)
+                bits[keys[i] >> 6] |= np.uint64(1) << np.uint64(keys[i] & 63)
+        word_rank = np.empty(bits.shape[0], dtype=np.int64)
         n_vox = 0
-        for key in range(n_keys):
-            if dense[key] == 0:
-                dense[key] = n_vox
-                voxel_keys[n_vox] = key
-                n_vox += 1
-        voxel_keys = voxel_keys[:n_vox]
+        for w in range(bits.shape[0]):
+            word_rank[w] = n_vox
+            n_vox += np.int64(_popcount(bits[w]))
+        voxel_keys = np.empty(n_vox, dtype=np.int64)
+        v = 0
+        for w in range(bits.shape[0]):
+            word = bits[w]
+            while word:
+                low = word & (~word + np.uint64(1))  # the lowest set bit
+                voxel_keys[v] = w * 64 + np.int64(_popcount(low - np.uint64(1)))
+                v += 1
+                word ^= low
         for i in range(n):
-            if keys[i] >= 0:
-                ids[i] = dense[keys[i]]
-        return ids, voxel_keys, dense, np.empty(0, dtype=np.int64), np.empty(0, dtype=np.int64), True
+            key = keys[i]
+            if key >= 0:  # the voxels before its word and before it in its word
+                word, bit = bits[key >> 6], np.uint64(1) << np.uint64(key & 63)
+                ids[i] = word_rank[key >> 6] + np.int64(_popcount(word & (bit - np.uint64(1))))
+        return ids, voxel_keys, dims, bits, word_rank, no_table, no_table
     size = 1
     while size < 2 * n_taken + 2:
         size *= 2
@@ -365,7 +406,8 @@ def group_keys(keys, n_taken):
             first[n_vox] = keys[i]
             n_vox += 1
         ids[i] = table_ids[slot]
-    return ids, first[:n_vox], np.empty(0, dtype=np.int64), table_keys, table_ids, False
+    no_bits = np.empty(0, dtype=np.uint64)
+    return ids, first[:n_vox], dims, no_bits, no_table, table_keys, table_ids
 
 
 @njit(**_JIT)
@@ -399,9 +441,16 @@ def voxel_sums(points, values, ids, n_vox):
 
 
 @njit(**_JIT)
-def _lookup(key, dense, table_keys, table_ids):
-    if dense.shape[0] > 0:
-        return dense[key] if key < dense.shape[0] else EMPTY
+def _lookup(key, bits, word_rank, table_keys, table_ids):
+    """Id of the voxel of ``key`` (a key of the grid) in a grouping of ``voxel_ids``, -1 if none."""
+    if bits.shape[0] > 0:
+        w = key >> 6
+        if w >= bits.shape[0]:
+            return EMPTY
+        word, bit = bits[w], np.uint64(1) << np.uint64(key & 63)
+        if not word & bit:
+            return EMPTY
+        return word_rank[w] + np.int64(_popcount(word & (bit - np.uint64(1))))
     slot = _hash_slot(table_keys, key)
     return table_ids[slot] if table_keys[slot] == key else EMPTY
 
@@ -437,7 +486,7 @@ def _component_labels(parent):
 
 
 @njit(**_JIT)
-def voxel_components(voxel_keys, dims, dense, table_keys, table_ids):
+def voxel_components(voxel_keys, dims, bits, word_rank, table_keys, table_ids):
     """26-connected components of the occupied voxels, numbered in the order of their first voxel
     in key (raster) order."""
     n_vox = voxel_keys.shape[0]
@@ -455,7 +504,7 @@ def voxel_components(voxel_keys, dims, dense, table_keys, table_ids):
                     ni, nj, nk = i + di, j + dj, k + dk
                     if ni >= dims[0] or nj < 0 or nj >= dims[1] or nk < 0 or nk >= dims[2]:
                         continue
-                    w = _lookup((ni * dims[1] + nj) * dims[2] + nk, dense, table_keys, table_ids)
+                    w = _lookup((ni * dims[1] + nj) * dims[2] + nk, bits, word_rank, table_keys, table_ids)
                     if w < 0:
                         continue
                     _union(parent, v, w)
@@ -800,8 +849,7 @@ def warm_up() -> None:
         np.zeros(3, dtype=np.float32),
         np.float32(1.0),
         np.full(3, 3.5, dtype=np.float32),
-        np.array([16, 4, 1], dtype=np.int64),
-        np.zeros(8, dtype=np.uint8),
+        np.array([4, 4, 4, 1], dtype=np.int64),
         np.zeros(8, dtype=np.uint8),
         True,
         np.zeros(16, dtype=np.bool_),
@@ -828,16 +876,16 @@ def warm_up() -> None:
     box_mask(p32, np.zeros(3, dtype=np.float32), np.ones(3, dtype=np.float32), np.empty(3, dtype=np.bool_))
     above_plane(p32, take, np.array([0.0, 0.0, 1.0]), 0.0, 0.1, np.empty(3, dtype=np.int64))
     plane_scores(p64, np.array([[0.0, 0.0, 1.0]]), np.zeros(1), 0.1)
+    row_mean(p64)
+    far = p32 * np.float32(1e6)  # a key range too wide for the bits: the hash table
     for points, voxel, one in ((p32, np.float32(0.5), np.float32(1.0)), (p64, 0.5, 1.0), (p32, 0.5, 1.0)):
-        keys, dims = voxel_grid_keys(points, take, voxel, one)
-        for dense_range in (True, False):
-            k = keys if dense_range else keys * np.int64(1 << 40)
-            ids, vkeys, dense, tk, ti, in_order = group_keys(k, 3)
-            if not in_order:
+        for cloud in (points, far.astype(points.dtype)):
+            ids, vkeys, dims, bits, word_rank, tk, ti = voxel_ids(cloud, take, voxel, one)
+            if len(bits) == 0:
                 vkeys = np.sort(vkeys)
                 rank_in_key_order(vkeys, ids, tk, ti)
-            voxel_sums(points, np.zeros((3, 0)), ids, len(vkeys))
-            voxel_components(vkeys, dims, dense, tk, ti)
+            voxel_sums(cloud, np.zeros((3, 0)), ids, len(vkeys))
+            voxel_components(vkeys, dims, bits, word_rank, tk, ti)
     counting_order(np.array([1, 0, 1], dtype=np.int64), 2)
     radius_components(p64, 0.5)
     min_area_rect(np.ascontiguousarray(p64[:, :2]))

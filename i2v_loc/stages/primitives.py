@@ -26,16 +26,15 @@ def _voxel_ids(points: np.ndarray, voxel_m: float, take: np.ndarray | None = Non
         points = np.asarray(points, dtype=np.float64)
     points = np.ascontiguousarray(points)
     if take is None:
-        take, n_taken = np.ones(len(points), dtype=bool), len(points)
-    else:
-        n_taken = int(np.count_nonzero(take))
+        take = np.ones(len(points), dtype=bool)
     dtype = np.float64 if float64 else points.dtype.type
-    keys, dims = kernels.voxel_grid_keys(points, take, dtype(voxel_m), dtype(1.0))
-    ids, voxel_keys, dense, table_keys, table_ids, in_key_order = kernels.group_keys(keys, n_taken)
-    if not in_key_order:  # numpy's sort (vectorised) of the distinct keys, then the ids follow
+    ids, voxel_keys, dims, bits, word_rank, table_keys, table_ids = kernels.voxel_ids(
+        points, take, dtype(voxel_m), dtype(1.0)
+    )
+    if not len(bits):  # hashed: numpy's sort (vectorised) of the distinct keys, then the ids follow
         voxel_keys = np.sort(voxel_keys)
         kernels.rank_in_key_order(voxel_keys, ids, table_keys, table_ids)
-    return points, ids, voxel_keys, dims, (dense, table_keys, table_ids)
+    return points, ids, voxel_keys, dims, (bits, word_rank, table_keys, table_ids)
 
 
 def voxel_centroids(
