@@ -4,6 +4,7 @@ jackknife warning, innovation gate."""
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from i2v_loc.params import Params
 from i2v_loc.sim.kinematics import Articulation, step
@@ -124,3 +125,35 @@ def test_rigid_vehicle_has_no_hitch():
         assert f.update(np.array([x, y, 0.5]), R[:3, :3])
     assert f.state.hitch_rad == 0.0 and not f.state.jackknife
     assert abs(f.state.speed_m_s - 2.0) < 0.1
+
+
+@pytest.mark.parametrize("articulated", [True, False])
+def test_the_filter_computes_what_filterpys_ukf_computes(articulated):
+    """The same sigma points, weights, transforms and gain as filterpy's UnscentedKalmanFilter with
+    Merwe's points over the same model: the same states and covariances (to rounding: filterpy
+    transforms and correlates the sigma points one by one)."""
+    from filterpy.kalman import MerweScaledSigmaPoints, UnscentedKalmanFilter
+
+    from i2v_loc.stages import kinematic_filter as kf
+
+    n_z = 4 if articulated else 3
+    rng = np.random.default_rng(7)
+    z0, r = np.array([1.0, 2.0, 0.3, 0.1])[:n_z], np.diag([0.01, 0.01, 1e-4, 1e-4][:n_z])
+    ours = kf.KinematicFilter(z0, r, 0.0, -0.3, 7.0, articulated, PARAMS.articulated, 1.0)
+    points = MerweScaledSigmaPoints(6, alpha=0.3, beta=2.0, kappa=0.0, sqrt_method=kf._sqrt)
+    theirs = UnscentedKalmanFilter(
+        6, n_z, 0.1, lambda x: ours._hx(x), lambda x, dt: ours._fx(x, dt), points,
+        x_mean_fn=kf._mean_x, z_mean_fn=kf._mean_z, residual_x=kf._residual_x, residual_z=kf._residual_z,
+    )  # fmt: skip
+    theirs.x, theirs.P = ours.ukf.x.copy(), ours.ukf.P.copy()
+    for k in range(1, 120):
+        dt = 0.1 * k - ours.stamp_s  # the filter's own step (0.1 * k - 0.1 * (k - 1) is not always 0.1)
+        theirs.Q = ours._q(dt)
+        ours.predict(0.1 * k)
+        theirs.predict(dt=dt)
+        z = z0 + np.r_[0.1 * k, 0.02 * k, 0.01 * k, 0.0][:n_z] + rng.normal(0, 0.02, n_z)
+        ours.ukf.update(z, r)
+        theirs.update(z, R=r)
+        assert np.allclose(ours.ukf.x, theirs.x, rtol=1e-12, atol=1e-12)
+        assert np.allclose(ours.ukf.P, theirs.P, rtol=1e-9, atol=1e-15)
+        assert ours.ukf.mahalanobis == pytest.approx(theirs.mahalanobis, rel=1e-12)

@@ -9,9 +9,13 @@
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 from i2v_loc.params import DEFAULT_METHOD, Params
-from i2v_loc.pipelines.articulated import ArticulatedPipeline
-from i2v_loc.pipelines.paper import PaperPipeline
+
+if TYPE_CHECKING:
+    from i2v_loc.pipelines.articulated import ArticulatedPipeline
+    from i2v_loc.pipelines.paper import PaperPipeline
 
 METHODS = ("paper", "default")
 ALIASES = {"articulated": "default"}
@@ -26,5 +30,12 @@ def method_name(method: str) -> str:
 
 
 def build_pipeline(params: Params, method: str = DEFAULT_METHOD) -> PaperPipeline | ArticulatedPipeline:
-    """The pipeline of ``method`` over ``params``."""
-    return PaperPipeline(params) if method_name(method) == "paper" else ArticulatedPipeline(params)
+    """The pipeline of ``method`` over ``params`` (only its own module is imported: the paper's
+    tracker needs filterpy and scipy.stats, half a second of start-up)."""
+    if method_name(method) == "paper":
+        from i2v_loc.pipelines.paper import PaperPipeline
+
+        return PaperPipeline(params)
+    from i2v_loc.pipelines.articulated import ArticulatedPipeline
+
+    return ArticulatedPipeline(params)

@@ -1,4 +1,4 @@
-"""The articulated estimator's filter: one unscented Kalman filter (filterpy) per vehicle over the
+"""The articulated estimator's filter: one unscented Kalman filter per vehicle over the
 one-trailer, off-axle-hitch kinematics (docs/pipeline.md, Articulated estimator).
 
 State [x, y, ψ1, v, κ, γ]: tractor rear-axle position, tractor yaw, signed speed (reversing is
@@ -11,10 +11,10 @@ Measurement: the hinged fit's (x, y, ψ1, γ) with its covariance.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
-from filterpy.kalman import MerweScaledSigmaPoints, UnscentedKalmanFilter
 
 from i2v_loc.geometry import wrap_rad
 from i2v_loc.params import ArticulatedParams
@@ -71,23 +71,50 @@ def _unscented_transform(sigmas, wm, wc, noise_cov=None, mean_fn=None, residual_
     return x, p + noise_cov if noise_cov is not None else p
 
 
-class _BatchUKF(UnscentedKalmanFilter):
-    """filterpy's UKF with whole-array sigma-point propagation, transform and cross variance
-    (filterpy calls them once per sigma point)."""
+class _Ukf:
+    """An unscented Kalman filter with Merwe's scaled sigma points, computed as filterpy's
+    ``UnscentedKalmanFilter`` computes them (same operations, same order: the same numbers) with
+    the sigma points propagated, transformed and cross-correlated as whole arrays. (filterpy itself
+    imports scipy.stats: half a second of every start-up.)"""
 
-    def compute_process_sigmas(self, dt, fx=None, **fx_args):
-        self.sigmas_f = (fx or self.fx)(self.points_fn.sigma_points(self.x, self.P), dt)
+    def __init__(self, n: int, fx, hx, alpha: float, beta: float, kappa: float, mean_x, mean_z, residual_x, residual_z):
+        lambda_ = alpha**2 * (n + kappa) - n
+        self.wm = np.full(2 * n + 1, 0.5 / (n + lambda_))
+        self.wc = self.wm.copy()
+        self.wc[0] = lambda_ / (n + lambda_) + (1 - alpha**2 + beta)
+        self.wm[0] = lambda_ / (n + lambda_)
+        self.spread = lambda_ + n
+        self.fx, self.hx = fx, hx
+        self.mean_x, self.mean_z, self.residual_x, self.residual_z = mean_x, mean_z, residual_x, residual_z
+        self.x, self.P = np.zeros(n), np.eye(n)
+        self.sigmas_f = np.zeros((2 * n + 1, n))
+        self.mahalanobis = 0.0
 
-    def cross_variance(self, x, z, sigmas_f, sigmas_h):
-        dx = self.residual_x(sigmas_f, x[None, :])
-        dz = self.residual_z(np.asarray(sigmas_h), z[None, :])
-        return (dx.T * self.Wc) @ dz
+    def sigma_points(self, x: np.ndarray, p: np.ndarray) -> np.ndarray:
+        """x, x + each row of U, x - each row (U^T U = spread P), in C order: the weighted sums over
+        them take another path through BLAS, and another rounding, over a Fortran-ordered copy."""
+        u = _sqrt(self.spread * p)
+        n = len(x)
+        sigmas = np.empty((2 * n + 1, n))
+        sigmas[0], sigmas[1 : n + 1], sigmas[n + 1 :] = x, x + u, x - u
+        return sigmas
 
-    def predict(self, dt=None, UT=None, fx=None, **fx_args):
-        super().predict(dt, UT or _unscented_transform, fx, **fx_args)
+    def predict(self, dt: float, q: np.ndarray) -> None:
+        sigmas = self.fx(self.sigma_points(self.x, self.P), dt)
+        self.x, self.P = _unscented_transform(sigmas, self.wm, self.wc, q, self.mean_x, self.residual_x)
+        self.sigmas_f = self.sigma_points(self.x, self.P)
 
-    def update(self, z, R=None, UT=None, hx=None, **hx_args):
-        super().update(z, R, UT or _unscented_transform, hx, **hx_args)
+    def update(self, z: np.ndarray, r: np.ndarray) -> None:
+        sigmas_h = self.hx(self.sigmas_f)
+        zp, s = _unscented_transform(sigmas_h, self.wm, self.wc, r, self.mean_z, self.residual_z)
+        si = np.linalg.inv(s)
+        dx = self.residual_x(self.sigmas_f, self.x[None, :])
+        pxz = (dx.T * self.wc) @ self.residual_z(sigmas_h, zp[None, :])
+        k = pxz @ si
+        y = self.residual_z(z, zp)
+        self.x = self.x + k @ y
+        self.P = self.P - k @ (s @ k.T)
+        self.mahalanobis = math.sqrt(float((y.T @ si) @ y))
 
 
 def _wrap(angle):
@@ -155,20 +182,7 @@ class KinematicFilter:
         self.articulated = articulated
         self.kingpin_m, self.trailer_axle_m = kingpin_m, trailer_axle_m
         self.stamp_s = stamp_s
-        n_z = 4 if articulated else 3
-        points = MerweScaledSigmaPoints(6, alpha=0.3, beta=2.0, kappa=0.0, sqrt_method=_sqrt)
-        self.ukf = _BatchUKF(
-            6,
-            n_z,
-            0.1,
-            self._hx,
-            self._fx,
-            points,
-            x_mean_fn=_mean_x,
-            z_mean_fn=_mean_z,
-            residual_x=_residual_x,
-            residual_z=_residual_z,
-        )
+        self.ukf = _Ukf(6, self._fx, self._hx, 0.3, 2.0, 0.0, _mean_x, _mean_z, _residual_x, _residual_z)
         x = np.zeros(6)
         x[[X, Y, YAW]] = z[:3]
         x[SPEED] = speed_m_s
@@ -199,7 +213,8 @@ class KinematicFilter:
         return propagate(x, dt, self.kingpin_m, self.trailer_axle_m, self.articulated)
 
     def _hx(self, x: np.ndarray) -> np.ndarray:
-        return x[[X, Y, YAW, HITCH]] if self.articulated else x[:3]
+        """The measured part of the state(s), in C order (see ``_Ukf.sigma_points``)."""
+        return np.ascontiguousarray(x[..., [X, Y, YAW, HITCH]] if self.articulated else x[..., :3])
 
     def _q(self, dt_s: float) -> np.ndarray:
         p = self.params
@@ -219,8 +234,7 @@ class KinematicFilter:
     def predict(self, stamp_s: float) -> FilterState:
         dt = stamp_s - self.stamp_s if np.isfinite(stamp_s) else 0.1
         if dt > 0:
-            self.ukf.Q = self._q(dt)
-            self.ukf.predict(dt=dt)
+            self.ukf.predict(dt, self._q(dt))
             self.stamp_s = stamp_s
         return self.state
 
@@ -229,7 +243,7 @@ class KinematicFilter:
         ``reset_after_rejections`` rejections in a row the fits are right and the prediction is not:
         the pose and hitch restart from the fit (speed and curvature kept, their variance reset)."""
         x, p = self.ukf.x.copy(), self.ukf.P.copy()
-        self.ukf.update(np.asarray(z, dtype=float), R=r)
+        self.ukf.update(np.asarray(z, dtype=float), r)
         if self.ukf.mahalanobis**2 > self.params.innovation_gate:
             self.ukf.x, self.ukf.P = x, p
             self.rejected += 1
