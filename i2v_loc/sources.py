@@ -73,6 +73,10 @@ class ReplaySource:
     def duration_s(self) -> float:
         return len(self.recording) / self.rate_hz
 
+    def starts_lap(self, k: int) -> bool:
+        """Frame ``k`` starts the recording over (a looping replay's 2nd, 3rd, ... pass)."""
+        return self.loop and k > 0 and k % len(self.recording) == 0
+
     def frame(self, k: int) -> Frame:
         """Frame number ``k`` of the stream; IndexError past the end of a non-looping replay."""
         n = len(self.recording)

@@ -338,6 +338,8 @@ class PipelineRunner:
         try:
             with self._apply_lock:
                 self._apply_updates()
+                if self.source.starts_lap(k):  # its vehicles jump back to their start: the scene starts over
+                    self.pipeline.forget_vehicles()
                 result = self.pipeline.process(frame)
             self._publish(frame, result, taken_s)
         except Exception as err:  # any part of one frame: process, serialise, record, publish

@@ -154,6 +154,55 @@ def test_replay_loop_keeps_time_monotonic(tmp_path):
         once.frame(3)
 
 
+def test_a_looping_replay_starts_the_scene_over_each_lap(tmp_path):
+    """Each lap the vehicles jump back to their start: the service's pipeline forgets them then
+    (a track left at the dock had folded onto the vehicle's next lap), and keeps its map."""
+    source = ReplaySource(_tiny_recording(tmp_path / "rec"), loop=True)
+    assert [k for k in range(10) if source.starts_lap(k)] == [3, 6, 9]
+    assert not any(ReplaySource(tmp_path / "rec").starts_lap(k) for k in range(3))
+
+    class Forgetful(FakePipeline):
+        seen, forgotten = -1, []
+
+        def forget_vehicles(self) -> None:
+            self.forgotten.append(self.seen)
+
+        def process(self, frame: Frame) -> FakeResult:
+            self.seen = frame.index
+            return super().process(frame)
+
+    pipeline = Forgetful(Params())
+    runner = PipelineRunner(source, pipeline, Hub(), ServiceMetrics(), [], realtime=False)
+    for k in range(7):
+        runner._step(k)
+    assert pipeline.forgotten == [2, 5]  # before frames 3 and 6, after the lap's last frame
+
+
+def test_forgetting_vehicles_keeps_the_map_and_the_ids_counting():
+    from hinged_points import vehicle_points
+    from test_articulated_pipeline import SENSORS, volvo
+
+    from i2v_loc.pipelines import build_pipeline
+
+    pipeline = build_pipeline(Params(), "default")
+    tracker = pipeline.tracker
+    for k in range(4):
+        points = vehicle_points(volvo(), 2.0, 3.0, 0.3, np.radians(20.0), sensors=SENSORS, seed=k)
+        reports = tracker.process(points, lambda x, y: 0.0, 0.1 * k, background_ready=False)
+    assert [r.id for r in reports] == [1] and tracker.tracks
+    background = pipeline.background
+    pipeline.forget_vehicles()
+    assert tracker.tracks == [] and tracker.seeds == [] and pipeline.background is background
+    for k in range(4):
+        points = vehicle_points(volvo(), -6.0, -3.0, 1.0, 0.0, sensors=SENSORS, seed=k)
+        reports = tracker.process(points, lambda x, y: 0.0, 1.0 + 0.1 * k, background_ready=False)
+    assert [r.id for r in reports] == [2]
+    paper = build_pipeline(Params(), "paper")
+    old = paper.tracker
+    paper.forget_vehicles()
+    assert paper.tracker is not old and paper.tracker.tracks == []
+
+
 def test_open_source_errors(tmp_path):
     with pytest.raises(SourceError, match="unknown source"):
         open_source("camera:1")
@@ -199,6 +248,9 @@ class FakeSource:
 
     def frame(self, k: int) -> Frame:
         return Frame(index=k, scans={})
+
+    def starts_lap(self, k: int) -> bool:
+        return False
 
 
 class FakeResult:

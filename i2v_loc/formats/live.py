@@ -95,6 +95,10 @@ class OusterUdpSource:
     def n_frames(self) -> None:
         return None  # a live stream has no end
 
+    def starts_lap(self, k: int) -> bool:
+        """A live stream never starts over."""
+        return False
+
     @property
     def counters(self) -> dict[str, int]:
         counts = {f"{name}.{k}": v for name, d in self.decoders.items() for k, v in d.counters.items()}

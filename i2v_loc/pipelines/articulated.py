@@ -79,6 +79,11 @@ class ArticulatedPipeline(ParameterHandoff):
         ):
             self.background = BackgroundMap(params.background, params.region)  # else the learned map survives
 
+    def forget_vehicles(self) -> None:
+        """Drop every vehicle and seed (a looping replay starts over); the map and parameters stay."""
+        self.tracker.forget()
+        self._reports = []
+
     def save_background(self, path) -> None:
         self._map().save(path)
 

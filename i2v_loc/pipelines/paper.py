@@ -67,6 +67,12 @@ class PaperPipeline(ParameterHandoff):
         self._build(params)
         self._motion: list[MotionHint] = []
 
+    def forget_vehicles(self) -> None:
+        """Drop every track and yaw history (a looping replay starts over)."""
+        self.tracker = Tracker(self._active.tracking)
+        self.orientation = OrientationEstimator(self._active.orientation)
+        self._motion = []
+
     def _build(self, params: Params) -> None:
         """Stages for ``params`` (already in ``_active``)."""
         self.concatenation = Concatenation(params.concatenation, params.sensors)

@@ -209,6 +209,10 @@ class VehicleTracker:
         self._ids = count(1)
         self.rejected = 0  # fits outside a filter's innovation gate
 
+    def forget(self) -> None:
+        """Drop every track and seed; ids go on counting."""
+        self.tracks, self.seeds = [], []
+
     # ----------------------------------------------------------------- per frame
 
     def process(
