@@ -19,11 +19,13 @@ from i2v_loc.stages.region import GroundPlane
 LEVEL_MAX_TILT_DEG = 0.5  # ground within this of level: the yard frame is the level frame
 TURN_MIN_DEG = 0.25
 UP = np.array([0.0, 0.0, 1.0])
+LEVEL = np.eye(3)  # the rotation on level ground: the points are used as they are
+LEVEL.flags.writeable = False
 
 
 class LevelFrame:
     def __init__(self) -> None:
-        self.rotation = np.eye(3)  # yard -> level
+        self.rotation = LEVEL  # yard -> level
 
     @property
     def normal(self) -> np.ndarray:
@@ -39,8 +41,8 @@ class LevelFrame:
             self.rotation = _rotation_onto_up(target)
 
     def points(self, points: np.ndarray) -> np.ndarray:
-        """Yard-frame points (N, 3) in the level frame."""
-        return points @ self.rotation.T
+        """Yard-frame points (N, 3) in the level frame (the same array on level ground)."""
+        return points if self.rotation is LEVEL else points @ self.rotation.T
 
     def ground(self, plane: GroundPlane | None):
         """The ground's height z(x, y) in the level frame (0 without a plane)."""
@@ -73,7 +75,7 @@ def _rotation_onto_up(normal: np.ndarray) -> np.ndarray:
     axis = np.cross(n, UP)
     s, c = np.linalg.norm(axis), float(n @ UP)
     if s < 1e-12:
-        return np.eye(3)
+        return LEVEL
     k = axis / s
     kx = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
     return np.eye(3) + s * kx + (1.0 - c) * kx @ kx

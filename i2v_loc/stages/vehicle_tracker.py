@@ -788,13 +788,18 @@ def _placed(model: VehicleModel, rect, sign: float, hitch_rad: float, ground_z_m
     return Prior(float(x), float(y), float(yaw), float(hitch_rad), model, ground_z_m, 0.0, model.articulated)
 
 
-def unit_frames(points: np.ndarray, v: np.ndarray, model: VehicleModel) -> list[np.ndarray]:
-    """(N, 2) coordinates of the points in each unit's frame (tractor: rear axle; trailer: kingpin)."""
+def _unit_origins(v: np.ndarray, model: VehicleModel) -> list[tuple[np.ndarray, float]]:
+    """Origin xy and yaw of each unit's frame (tractor: rear axle; trailer: kingpin) for pose ``v``."""
     frames = [(v[:2], v[2])]
     if model.trailer is not None:
         frames.append((model.kingpin_xy(v[0], v[1], v[2]), v[2] + v[3]))
+    return frames
+
+
+def unit_frames(points: np.ndarray, v: np.ndarray, model: VehicleModel) -> list[np.ndarray]:
+    """(N, 2) coordinates of the points in each unit's frame (tractor: rear axle; trailer: kingpin)."""
     out = []
-    for origin, yaw in frames:
+    for origin, yaw in _unit_origins(v, model):
         c, s = np.cos(yaw), np.sin(yaw)
         d = points[:, :2] - origin
         out.append(np.column_stack([c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1]]))
@@ -804,12 +809,11 @@ def unit_frames(points: np.ndarray, v: np.ndarray, model: VehicleModel) -> list[
 def box_distance(points: np.ndarray, prior: Prior) -> np.ndarray:
     """Planar distance of each point to the nearer of the prior's boxes (0 inside); the trailer's box
     reaches ``trailer_slack_m`` further back."""
-    model, v = prior.model, prior.vector
-    frames = [(v[0], v[1], v[2])]
-    if model.trailer is not None:
-        frames.append((*model.kingpin_xy(v[0], v[1], v[2]), v[2] + v[3]))
+    model = prior.model
     boxes = [
-        (*origin, box.rear_m - slack, box.front_m, box.width_m / 2)
-        for origin, box, slack in zip(frames, model.boxes, (0.0, prior.trailer_slack_m))
+        (*origin, yaw, box.rear_m - slack, box.front_m, box.width_m / 2)
+        for (origin, yaw), box, slack in zip(
+            _unit_origins(prior.vector, model), model.boxes, (0.0, prior.trailer_slack_m)
+        )
     ]
     return kernels.box_distances(np.ascontiguousarray(points[:, :2], dtype=float), np.array(boxes, dtype=float))
