@@ -6,8 +6,9 @@ x, y, ψ1 of the box centre). Each point is explained by the nearest face of eit
 vertical face (signed distance to its plane; a face segment is chosen by the distance to the
 segment) or the roof (a point at roof height inside the footprint) — and the sum of a Cauchy
 loss of those distances is minimised by iteratively reweighted Gauss-Newton steps with the
-analytic Jacobian, warm-started from the prior on an evenly thinned subset of the points.
-(``scipy.optimize.least_squares`` with the same residuals, Jacobian and loss reaches the same
+analytic Jacobian, warm-started from the prior on an evenly thinned subset of the points, in one
+compiled loop (``kernels.irls``, the arithmetic of the numpy loop it replaced: the same poses to the
+bit). (``scipy.optimize.least_squares`` with the same residuals, Jacobian and loss reaches the same
 poses, but its own overhead is about 1 ms per call, the whole budget of a vehicle's frame.) A weak prior term (one
 pseudo-point per parameter) keeps unobserved directions (the hitch when the trailer is hidden)
 at the prediction; the covariance then says they were not measured.
@@ -31,6 +32,7 @@ WEAK_LENGTH_SIGMA_M, WEAK_KINGPIN_SIGMA_M = 4.0, 0.5
 FRONT, REAR, LEFT, RIGHT = 0, 1, 2, 3  # face numbers of a unit (the face table's rows modulo 4)
 TRAILER_LENGTH_RANGE_M = (2.0, 16.5)
 KINGPIN_RANGE_M = (-1.5, 1.5)
+_RANGES = np.array([*TRAILER_LENGTH_RANGE_M, *KINGPIN_RANGE_M])
 
 
 @dataclass(frozen=True)
@@ -139,13 +141,10 @@ def faces(
     top_band_m: float,
     trailer_slack_m: float = 0.0,
 ) -> _Faces:
-    return _nearest(_geometry(v, model, trailer_slack_m), xy, z_rel, top_band_m, len(v))
-
-
-def _nearest(geometry: np.ndarray, xy: np.ndarray, z_rel: np.ndarray, top_band_m: float, n_params: int) -> _Faces:
+    """The nearest faces of the pose ``v`` (x, y, yaw[, hitch])."""
     xy = np.ascontiguousarray(xy, dtype=float)
     z_rel = np.ascontiguousarray(z_rel, dtype=float)
-    return _Faces(*kernels.nearest_faces(xy, z_rel, geometry, float(top_band_m), n_params))
+    return _Faces(*kernels.nearest_faces(xy, z_rel, _geometry(v, model, trailer_slack_m), float(top_band_m), len(v)))
 
 
 def fit(
@@ -166,22 +165,15 @@ def fit(
     scale = params.fit_loss_scale_m
     sigmas = _weak_prior_sigmas(prior)
     prior_weights = (scale / sigmas) ** 2  # the diagonal of the weak prior's information
-    prior_info = np.diag(prior_weights)
-    v = v0.copy()
-    for k in range(iterations or params.fit_iterations):
-        # graduated: a wide loss first so that faces a prediction misses by decimetres still pull
-        c = max(scale, (start_scale_m or params.fit_start_scale_m) * 0.5**k)
-        at = _faces_of(v, xy, z_rel, prior, params)
-        w = 1.0 / (1.0 + (at.residual / c) ** 2)  # Cauchy weights: iteratively reweighted Gauss-Newton
-        jw = at.jacobian * w[:, None]
-        step = np.linalg.solve(jw.T @ at.jacobian + prior_info, -(jw.T @ at.residual + prior_weights * (v - v0)))
-        v = v + step
-        if prior.fits_length:
-            v[4] = np.clip(v[4], *TRAILER_LENGTH_RANGE_M)
-        if prior.fits_kingpin:
-            v[-2] = np.clip(v[-2], *KINGPIN_RANGE_M)
-        if c == scale and max(abs(step[0]), abs(step[1])) < 1e-3 and max(abs(step[2:4])) < 1e-4:
-            break  # residuals and faces of the last step stand for the solution (it moved < 1 mm)
+    n_pose = 4 if prior.model.articulated else 3
+    # graduated: a wide loss first so that faces a prediction misses by decimetres still pull
+    v, *found = kernels.irls(
+        xy, np.ascontiguousarray(z_rel), _geometry(v0, prior.model, 0.0 if prior.extra else prior.trailer_slack_m),
+        float(params.fit_top_band_m), n_pose, prior.fits_length, prior.fits_kingpin, v0, prior_weights,
+        float(scale), float(start_scale_m or params.fit_start_scale_m), int(iterations or params.fit_iterations),
+        _RANGES,
+    )  # fmt: skip
+    at = _Faces(*found)
     cost = float(np.mean(np.log1p((at.residual / scale) ** 2))) * scale**2 / 2
     covariance = _covariance(at, sigmas, params)
     # explained: on a face, not only on its plane (a wall running on past a box's corner is no side of it)
@@ -216,49 +208,19 @@ def _weak_prior_sigmas(prior: Prior) -> np.ndarray:
     return np.concatenate([pose, extra])
 
 
-def _faces_of(v: np.ndarray, xy: np.ndarray, z_rel: np.ndarray, prior: Prior, params: ArticulatedParams) -> _Faces:
-    """``faces`` of the pose v[:4] and the fitted dimensions after it (``Prior.extra``): the trailer's
-    rear face moves with its length, the whole trailer with the kingpin."""
-    if not prior.extra:
-        return faces(v, xy, z_rel, prior.model, params.fit_top_band_m, prior.trailer_slack_m)
-    geometry = _geometry(v, prior.model, 0.0)
-    trailer = 6 + 5  # the trailer box's first entry (front) in the geometry
-    if prior.fits_length:
-        geometry[trailer + 1] = v[4]
-    if prior.fits_kingpin:
-        geometry[4], geometry[trailer] = v[-2], v[-1]
-    at = _nearest(geometry, xy, z_rel, params.fit_top_band_m, 4)
-    columns = [at.jacobian]
-    if prior.fits_length:  # the rear face lies length behind the front (its normal points back)
-        columns.append(-at.on_rear.astype(float))
-    if prior.fits_kingpin:  # the trailer moves back along the tractor's axis (d perp = N . e1), forward along its own
-        trailer = (at.unit == 1) & (at.face >= 0)
-        for yaw, sign in ((v[2], -1.0), (v[2] + v[3], 1.0)):
-            along = at.jacobian[:, 0] * np.cos(yaw) + at.jacobian[:, 1] * np.sin(yaw)  # -N . e
-            columns.append(np.where(trailer, sign * along, 0.0))
-    at.jacobian = np.column_stack(columns)
-    return at
-
-
 def _covariance(at: _Faces, sigmas: np.ndarray, params: ArticulatedParams) -> np.ndarray:
     """Gauss-Newton covariance with the Cauchy weights of the residuals, the noise from the
     explained residuals, plus a floor (neighbouring points are not independent)."""
     scale = params.fit_loss_scale_m
-    r = at.residual
-    w = 1.0 / (1.0 + (r / scale) ** 2)
-    inliers = np.abs(r) <= params.fit_inlier_m
-    sigma2 = max(_median(r[inliers] ** 2) / 0.455 if inliers.any() else scale**2, params.fit_noise_floor_m**2)
-    info = (at.jacobian * w[:, None]).T @ at.jacobian / sigma2 + np.diag(1.0 / sigmas**2)
     position, angle = params.fit_position_floor_m, math.radians(params.fit_angle_floor_deg)
     floor = np.array([position, position, angle, angle][: min(len(sigmas), 4)])
-    return np.linalg.inv(info)[:4, :4] + np.diag(floor**2)
-
-
-def _median(values: np.ndarray) -> float:
-    """``np.median`` of a non-empty 1-D array without NaNs (the same value: the middle order
-    statistic, or the mean of the two) at a fifth of its call overhead."""
-    half = len(values) // 2
-    if len(values) % 2:
-        return float(np.partition(values, half)[half])
-    low, high = np.partition(values, [half - 1, half])[half - 1 : half + 1]
-    return (float(low) + float(high)) / 2
+    return kernels.fit_covariance(
+        at.residual,
+        at.jacobian,
+        1.0 / sigmas**2,
+        scale,
+        params.fit_inlier_m,
+        scale**2,
+        params.fit_noise_floor_m**2,
+        floor,
+    )

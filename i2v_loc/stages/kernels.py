@@ -824,6 +824,136 @@ def nearest_faces(xy, z_rel, geometry, top_band, n_params):
     return residual, jacobian, unit, distance, face
 
 
+@njit(**_JIT)
+def fit_faces(xy, z_rel, geometry, top_band, n_pose, fits_length, fits_kingpin, v):
+    """``nearest_faces`` of the pose and fitted dimensions ``v`` (pose, then the trailer's length,
+    then the kingpin's offset and the trailer's front), with the dimensions' Jacobian columns: the
+    rear face moves with the length; the trailer moves back along the tractor's axis with the
+    kingpin's offset and forward along its own with its front. ``geometry`` is updated in place."""
+    geometry[0], geometry[1], geometry[2] = v[0], v[1], v[2]
+    geometry[3] = v[3] if n_pose == 4 else 0.0
+    n_params = v.shape[0]
+    if fits_length:
+        geometry[12] = v[4]
+    if fits_kingpin:
+        geometry[4], geometry[11] = v[n_params - 2], v[n_params - 1]
+    residual, pose_jacobian, unit, distance, face = nearest_faces(xy, z_rel, geometry, top_band, n_pose)
+    if n_params == n_pose:
+        return residual, pose_jacobian, unit, distance, face
+    n = xy.shape[0]
+    jacobian = np.empty((n, n_params))
+    jacobian[:, :n_pose] = pose_jacobian
+    column = n_pose
+    if fits_length:
+        for i in range(n):
+            jacobian[i, column] = -(1.0 if unit[i] == 1 and face[i] == 1 else 0.0)
+        column += 1
+    if fits_kingpin:
+        for yaw, sign in ((v[2], -1.0), (v[2] + v[3], 1.0)):
+            c, s = math.cos(yaw), math.sin(yaw)
+            for i in range(n):
+                along = pose_jacobian[i, 0] * c + pose_jacobian[i, 1] * s
+                jacobian[i, column] = sign * along if unit[i] == 1 and face[i] >= 0 else 0.0
+            column += 1
+    return residual, jacobian, unit, distance, face
+
+
+@njit(**_JIT)
+def irls(
+    xy,
+    z_rel,
+    geometry,
+    top_band,
+    n_pose,
+    fits_length,
+    fits_kingpin,
+    v0,
+    prior_weights,
+    scale,
+    start_scale,
+    iterations,
+    ranges,
+):
+    """Iteratively reweighted Gauss-Newton steps of the hinged fit from ``v0`` (Cauchy weights, the
+    loss scale halved per step from ``start_scale`` down to ``scale``, a weak prior pulling towards
+    ``v0``); stops once a step at the final scale moved the pose by less than 1 mm and 1e-4 rad.
+    Returns the solution and the faces (residual, Jacobian, unit, distance, face) of its last step.
+    ``ranges``: (trailer length low, high, kingpin low, high) the fitted dimensions are clipped to.
+
+    The same arithmetic as the numpy loop it replaced: elementwise operations in its order, the
+    normal equations by ``np.dot`` and ``np.linalg.solve`` (the BLAS / LAPACK calls numpy makes)."""
+    prior_info = np.diag(prior_weights)
+    v = v0.copy()
+    n_params = v.shape[0]
+    residual, jacobian, unit, distance, face = fit_faces(
+        xy, z_rel, geometry, top_band, n_pose, fits_length, fits_kingpin, v
+    )
+    n = residual.shape[0]
+    weights = np.empty(n)
+    for k in range(iterations):
+        c = max(scale, start_scale * 0.5**k)
+        if k > 0:
+            residual, jacobian, unit, distance, face = fit_faces(
+                xy, z_rel, geometry, top_band, n_pose, fits_length, fits_kingpin, v
+            )
+        for i in range(n):
+            q = residual[i] / c
+            weights[i] = 1.0 / (1.0 + q * q)
+        weighted = np.empty((n, n_params))
+        for i in range(n):
+            for j in range(n_params):
+                weighted[i, j] = jacobian[i, j] * weights[i]
+        normal = np.dot(weighted.T, jacobian) + prior_info
+        gradient = np.dot(weighted.T, residual) + prior_weights * (v - v0)
+        step = np.linalg.solve(normal, -gradient)
+        v = v + step
+        if fits_length:
+            v[4] = min(max(v[4], ranges[0]), ranges[1])
+        if fits_kingpin:
+            v[n_params - 2] = min(max(v[n_params - 2], ranges[2]), ranges[3])
+        angular = abs(step[2]) if n_params == 3 else max(abs(step[2]), abs(step[3]))
+        if c == scale and max(abs(step[0]), abs(step[1])) < 1e-3 and angular < 1e-4:
+            break
+    return v, residual, jacobian, unit, distance, face
+
+
+@njit(**_JIT)
+def fit_covariance(residual, jacobian, prior_information, scale, inlier_m, no_inlier_noise2, noise_floor2, floor):
+    """The hinged fit's covariance of its first ``floor.shape[0]`` parameters: Gauss-Newton with
+    the Cauchy weights of the residuals and the noise of the inliers' residuals (their median
+    square / 0.455, else ``no_inlier_noise2``; at least ``noise_floor2``), plus the weak prior (``sigmas``), plus ``floor``
+    squared on the diagonal (``prior_information``: the weak prior's diagonal, 1 / sigma^2). numpy's order of operations; the inverse as numpy takes it (LAPACK
+    gesv against the identity)."""
+    n, n_params = jacobian.shape
+    squares = np.empty(n)
+    n_in = 0
+    weighted = np.empty((n, n_params))
+    for i in range(n):
+        q = residual[i] / scale
+        w = 1.0 / (1.0 + q * q)
+        for j in range(n_params):
+            weighted[i, j] = jacobian[i, j] * w
+        if abs(residual[i]) <= inlier_m:
+            squares[n_in] = residual[i] * residual[i]
+            n_in += 1
+    sigma2 = no_inlier_noise2
+    if n_in:
+        ordered = np.sort(squares[:n_in])
+        half = n_in // 2
+        median = ordered[half] if n_in % 2 else (ordered[half - 1] + ordered[half]) / 2
+        sigma2 = median / 0.455
+    sigma2 = max(sigma2, noise_floor2)
+    info = np.dot(weighted.T, jacobian) / sigma2
+    for j in range(n_params):
+        info[j, j] += prior_information[j]
+    covariance = np.linalg.solve(info, np.eye(n_params))
+    k = floor.shape[0]
+    out = covariance[:k, :k].copy()
+    for j in range(k):
+        out[j, j] += floor[j] * floor[j]
+    return out
+
+
 # ----------------------------------------------------------------------------- warm-up
 
 _WARM = False
@@ -893,4 +1023,10 @@ def warm_up() -> None:
     for n_boxes in (1, 2):
         geometry = np.r_[np.zeros(5), 1.0, np.tile([2.0, 4.0, 2.0, 0.5, 3.0], n_boxes)]
         nearest_faces(np.ascontiguousarray(p64[:, :2]), np.ascontiguousarray(p64[:, 2]), geometry, 0.25, 2 + n_boxes)
+    xy, z = np.ascontiguousarray(p64[:, :2]), np.ascontiguousarray(p64[:, 2])
+    v0 = np.array([0.0, 0.0, 0.1, 0.2, 9.0, 0.3, 1.0])
+    geometry = np.r_[np.zeros(5), 0.0, np.tile([2.0, 4.0, 2.0, 0.5, 3.0], 2)]
+    ranges = np.array([2.0, 16.5, -1.5, 1.5])
+    _, residual, jacobian, _, _, _ = irls(xy, z, geometry, 0.25, 4, True, True, v0, np.ones(7), 0.1, 0.2, 2, ranges)
+    fit_covariance(residual, jacobian, np.ones(7), 0.1, 0.3, 0.01, 0.0004, np.ones(4))
     _WARM = True
