@@ -14,7 +14,7 @@ from conftest import SAMPLES
 from i2v_loc.frame import SensorScan
 from i2v_loc.params import BackgroundParams, ConcatenationParams, Extrinsics, RegionParams, SensorConfig, load_params
 from i2v_loc.recording import Recording
-from i2v_loc.stages import kernels
+from i2v_loc.stages import kernels, primitives
 from i2v_loc.stages.background import BackgroundMap, ProtectedBox
 from i2v_loc.stages.concatenation import Concatenation, MotionHint
 from i2v_loc.stages.primitives import euclidean_labels, grid_labels, min_area_rect, split_by_label, voxel_centroids
@@ -309,3 +309,13 @@ def test_euclidean_labels_are_the_k_d_tree_components_numbered_alike(seed, dims,
 def test_euclidean_labels_join_points_exactly_at_the_tolerance_and_no_further():
     points = np.array([[0.0, 0.0], [0.5, 0.0], [1.0, 0.0], [1.5000001, 0.0], [0.0, 0.5]])
     assert euclidean_labels(points, 0.5).tolist() == ref.euclidean_labels(points, 0.5).tolist() == [0, 0, 0, 1, 0]
+
+
+@pytest.mark.parametrize("n", [1, 2, 3, 4, 57, 200, 201])
+def test_median_is_numpys_median(n):
+    rng = np.random.default_rng(n)
+    for rounded in (False, True):  # with repeated values too
+        values = rng.normal(size=n) * 3.0
+        values = np.round(values, 1) if rounded else values
+        assert primitives.median(values) == float(np.median(values))
+        assert primitives.median(values[::-1]) == float(np.median(values))  # a view, any order

@@ -157,3 +157,69 @@ def test_the_filter_computes_what_filterpys_ukf_computes(articulated):
         assert np.allclose(ours.ukf.x, theirs.x, rtol=1e-12, atol=1e-12)
         assert np.allclose(ours.ukf.P, theirs.P, rtol=1e-9, atol=1e-15)
         assert ours.ukf.mahalanobis == pytest.approx(theirs.mahalanobis, rel=1e-12)
+
+
+# ----------------------------------------------------------------------------- the compiled parts
+
+
+def ref_wrap(angle):
+    return (angle + np.pi) % (2 * np.pi) - np.pi
+
+
+def ref_derivative(s, kingpin_m, trailer_axle_m, articulated):
+    v, kappa, yaw, hitch = s[..., SPEED], s[..., CURVATURE], s[..., 2], s[..., HITCH]
+    d = np.zeros_like(s)
+    d[..., 0], d[..., 1], d[..., 2] = v * np.cos(yaw), v * np.sin(yaw), v * kappa
+    if articulated:
+        omega = v * kappa
+        d[..., HITCH] = -(v * np.sin(hitch) + kingpin_m * omega * np.cos(hitch)) / trailer_axle_m - omega
+    return d
+
+
+def ref_propagate(state, dt_s, kingpin_m, trailer_axle_m, articulated):
+    """The numpy kinematics ``kernels.propagate_states`` replaced."""
+    s = np.array(state, dtype=float)
+    steps = max(1, int(np.ceil(abs(dt_s) / 0.1)))
+    h = dt_s / steps
+    for _ in range(steps):
+        mid = s + 0.5 * h * ref_derivative(s, kingpin_m, trailer_axle_m, articulated)
+        s = s + h * ref_derivative(mid, kingpin_m, trailer_axle_m, articulated)
+    s[..., 2], s[..., HITCH] = ref_wrap(s[..., 2]), ref_wrap(s[..., HITCH])
+    return s
+
+
+@pytest.mark.parametrize("articulated", [True, False])
+def test_the_compiled_kinematics_and_sigma_means_are_numpys_to_the_bit(articulated):
+    from i2v_loc.stages import kernels
+    from i2v_loc.stages import kinematic_filter as kf
+
+    rng = np.random.default_rng(11)
+    for _ in range(200):
+        states = np.column_stack(
+            [rng.normal(0, 30, (13, 2)), rng.uniform(-7, 7, 13), rng.normal(0, 3, 13), rng.normal(0, 0.1, 13)]
+            + [rng.uniform(-4, 4, 13)]
+        )
+        dt = float(rng.choice([0.05, 0.1, 0.1000000001, 0.37, 2.0, -0.1]))
+        derivative = kernels._kinematics(states, -0.35, 7.9, articulated)
+        assert np.array_equal(derivative, ref_derivative(states, -0.35, 7.9, articulated))
+        want = ref_propagate(states, dt, -0.35, 7.9, articulated)
+        assert np.array_equal(propagate(states, dt, -0.35, 7.9, articulated), want)
+        assert np.array_equal(propagate(states[3], dt, -0.35, 7.9, articulated), want[3])
+        weights = rng.normal(size=13)
+        mean = weights @ want
+        for i in (2, HITCH):
+            mean[i] = np.arctan2(weights @ np.sin(want[:, i]), weights @ np.cos(want[:, i]))
+        assert np.array_equal(kf._mean_x(want, weights), mean)
+        d = np.subtract(want, states[:1])
+        d[:, [2, HITCH]] = ref_wrap(d[:, [2, HITCH]])
+        assert np.array_equal(kf._residual_x(want, states[:1]), d)
+        z = np.ascontiguousarray(want[:, [0, 1, 2, HITCH]] if articulated else want[:, :3])
+        dz = np.subtract(z, z[4])
+        dz[:, 2:] = ref_wrap(dz[:, 2:])
+        assert np.array_equal(kf._residual_z(z, z[4][None, :]), dz)
+        assert np.array_equal(kf._residual_z(z[1], z[4]), dz[1])
+    # the wrap's edges: exactly +-pi and beyond several turns
+    edges = np.array([[0.0, 0.0, np.pi, 0.0, 0.0, -np.pi], [1.0, 0.0, 7 * np.pi, 0.0, 0.0, -1e-300]])
+    assert np.array_equal(
+        propagate(edges, 0.0, -0.35, 7.9, articulated), ref_propagate(edges, 0.0, -0.35, 7.9, articulated)
+    )

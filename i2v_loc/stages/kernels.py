@@ -954,6 +954,63 @@ def fit_covariance(residual, jacobian, prior_information, scale, inlier_m, no_in
     return out
 
 
+# ----------------------------------------------------------------------------- kinematic filter
+
+
+@njit(**_JIT)
+def wrap_angles(values):
+    """(a + pi) mod 2 pi - pi of each value (numpy's floored remainder, the same bits)."""
+    out = np.empty_like(values)
+    for i in range(values.shape[0]):
+        out[i] = (values[i] + np.pi) % (2 * np.pi) - np.pi
+    return out
+
+
+@njit(**_JIT)
+def _kinematics(s, kingpin_m, trailer_axle_m, articulated):
+    """d/dt of states (k, 6) [x, y, yaw, v, curvature, hitch] (kinematic_filter's model)."""
+    d = np.zeros_like(s)
+    for i in range(s.shape[0]):
+        v, kappa, yaw, hitch = s[i, 3], s[i, 4], s[i, 2], s[i, 5]
+        d[i, 0], d[i, 1], d[i, 2] = v * math.cos(yaw), v * math.sin(yaw), v * kappa
+        if articulated:
+            omega = v * kappa
+            d[i, 5] = -(v * math.sin(hitch) + kingpin_m * omega * math.cos(hitch)) / trailer_axle_m - omega
+    return d
+
+
+@njit(**_JIT)
+def propagate_states(states, step_s, steps, kingpin_m, trailer_axle_m, articulated):
+    """States (k, 6) after ``steps`` midpoint steps of ``step_s``, yaw and hitch wrapped: the
+    arithmetic of the numpy code it replaced (s + h d(s + 0.5 h d(s)), products in its order)."""
+    s = states.copy()
+    half = 0.5 * step_s
+    for _ in range(steps):
+        mid = s + half * _kinematics(s, kingpin_m, trailer_axle_m, articulated)
+        s = s + step_s * _kinematics(mid, kingpin_m, trailer_axle_m, articulated)
+    s[:, 2] = wrap_angles(s[:, 2])
+    s[:, 5] = wrap_angles(s[:, 5])
+    return s
+
+
+@njit(**_JIT)
+def angle_residuals(a, b, angle_columns):
+    """a - b (rows of a minus the row b, (1, n)), the angle columns wrapped."""
+    d = a - b
+    for c in angle_columns:
+        d[:, c] = wrap_angles(d[:, c])
+    return d
+
+
+@njit(**_JIT)
+def angle_mean(sigmas, weights, angle_columns):
+    """The weighted mean of the rows of ``sigmas``; angle columns averaged on the circle."""
+    mean = np.dot(weights, sigmas)
+    for c in angle_columns:
+        mean[c] = math.atan2(np.dot(weights, np.sin(sigmas[:, c])), np.dot(weights, np.cos(sigmas[:, c])))
+    return mean
+
+
 # ----------------------------------------------------------------------------- warm-up
 
 _WARM = False
@@ -1029,4 +1086,12 @@ def warm_up() -> None:
     ranges = np.array([2.0, 16.5, -1.5, 1.5])
     _, residual, jacobian, _, _, _ = irls(xy, z, geometry, 0.25, 4, True, True, v0, np.ones(7), 0.1, 0.2, 2, ranges)
     fit_covariance(residual, jacobian, np.ones(7), 0.1, 0.3, 0.01, 0.0004, np.ones(4))
+    fit_faces(xy, z, geometry, 0.25, 4, True, True, v0)  # the tests call it on its own
+    wrap_angles(np.zeros(2))
+    states = np.zeros((13, 6))
+    for articulated in (True, False):
+        propagate_states(states, 0.1, 1, -0.3, 7.0, articulated)
+    for columns in (np.array([2, 5]), np.array([2, 3]), np.array([2])):
+        angle_residuals(states, states[:1], columns)
+        angle_mean(states, np.ones(13), columns)
     _WARM = True

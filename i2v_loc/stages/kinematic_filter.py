@@ -18,9 +18,11 @@ import numpy as np
 
 from i2v_loc.geometry import wrap_rad
 from i2v_loc.params import ArticulatedParams
+from i2v_loc.stages import kernels
 
 X, Y, YAW, SPEED, CURVATURE, HITCH = range(6)
-ANGLES_X = [YAW, HITCH]
+_ANGLES_X = np.array([YAW, HITCH])
+_ANGLES_Z = {4: np.array([2, 3]), 3: np.array([2])}  # of (x, y, yaw, hitch) and (x, y, yaw)
 INITIAL_SPEED_SIGMA_M_S = 3.0
 INITIAL_CURVATURE_SIGMA_1_M = 0.05
 MAX_STEP_S = 0.1  # the kinematics are integrated in midpoint steps no longer than this
@@ -33,25 +35,13 @@ def hitch_rate(v: float, curvature: float, hitch: float, kingpin_m: float, trail
 
 
 def propagate(state: np.ndarray, dt_s: float, kingpin_m: float, trailer_axle_m: float, articulated: bool) -> np.ndarray:
-    """The state (6,) or states (k, 6) ``dt_s`` later (midpoint steps)."""
+    """The state (6,) or states (k, 6) ``dt_s`` later (midpoint steps, compiled: ``kernels.propagate_states``)."""
     s = np.array(state, dtype=float)
     steps = max(1, int(np.ceil(abs(dt_s) / MAX_STEP_S)))
-    h = dt_s / steps
-    for _ in range(steps):
-        s = s + h * _derivative(
-            s + 0.5 * h * _derivative(s, kingpin_m, trailer_axle_m, articulated), kingpin_m, trailer_axle_m, articulated
-        )
-    s[..., YAW], s[..., HITCH] = _wrap(s[..., YAW]), _wrap(s[..., HITCH])
-    return s
-
-
-def _derivative(s: np.ndarray, kingpin_m: float, trailer_axle_m: float, articulated: bool) -> np.ndarray:
-    v, kappa, yaw, hitch = s[..., SPEED], s[..., CURVATURE], s[..., YAW], s[..., HITCH]
-    d = np.zeros_like(s)
-    d[..., X], d[..., Y], d[..., YAW] = v * np.cos(yaw), v * np.sin(yaw), v * kappa
-    if articulated:
-        d[..., HITCH] = hitch_rate(v, kappa, hitch, kingpin_m, trailer_axle_m)
-    return d
+    out = kernels.propagate_states(
+        np.atleast_2d(s), float(dt_s / steps), steps, float(kingpin_m), float(trailer_axle_m), bool(articulated)
+    )
+    return out.reshape(s.shape)
 
 
 def _sqrt(p: np.ndarray) -> np.ndarray:
@@ -117,34 +107,27 @@ class _Ukf:
         self.mahalanobis = math.sqrt(float((y.T @ si) @ y))
 
 
-def _wrap(angle):
-    return (angle + np.pi) % (2 * np.pi) - np.pi
-
-
 def _residual_x(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    d = np.subtract(a, b)
-    d[..., ANGLES_X] = _wrap(d[..., ANGLES_X])
-    return d
+    return _angle_residuals(a, b, _ANGLES_X)
 
 
 def _mean_x(sigmas: np.ndarray, weights: np.ndarray) -> np.ndarray:
-    mean = weights @ sigmas
-    for i in ANGLES_X:
-        mean[i] = np.arctan2(weights @ np.sin(sigmas[:, i]), weights @ np.cos(sigmas[:, i]))
-    return mean
+    return kernels.angle_mean(sigmas, weights, _ANGLES_X)
 
 
 def _residual_z(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    d = np.subtract(a, b)
-    d[..., 2:] = _wrap(d[..., 2:])
-    return d
+    return _angle_residuals(a, b, _ANGLES_Z[a.shape[-1]])
 
 
 def _mean_z(sigmas: np.ndarray, weights: np.ndarray) -> np.ndarray:
-    mean = weights @ sigmas
-    for i in range(2, sigmas.shape[1]):
-        mean[i] = np.arctan2(weights @ np.sin(sigmas[:, i]), weights @ np.cos(sigmas[:, i]))
-    return mean
+    return kernels.angle_mean(sigmas, weights, _ANGLES_Z[sigmas.shape[1]])
+
+
+def _angle_residuals(a: np.ndarray, b: np.ndarray, columns: np.ndarray) -> np.ndarray:
+    """a - b with the angle columns wrapped, for rows (k, n) or single vectors (n,) (filterpy's)."""
+    a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
+    d = kernels.angle_residuals(np.atleast_2d(a), np.atleast_2d(b), columns)
+    return d.reshape(np.broadcast_shapes(a.shape, b.shape))
 
 
 @dataclass(frozen=True)

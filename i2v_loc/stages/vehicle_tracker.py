@@ -24,7 +24,7 @@ from i2v_loc.params import ArticulatedParams, VehicleConfig
 from i2v_loc.stages import kernels
 from i2v_loc.stages.hinged_fit import LEFT, RIGHT, TRAILER_LENGTH_RANGE_M, Measurement, Prior, fit
 from i2v_loc.stages.kinematic_filter import FilterState, KinematicFilter
-from i2v_loc.stages.primitives import Rect, grid_labels, min_area_rect, split_by_label, voxel_keys
+from i2v_loc.stages.primitives import Rect, grid_labels, median, min_area_rect, split_by_label, voxel_keys
 from i2v_loc.stages.vehicle_model import VehicleModel
 
 START_HITCHES_DEG = (-90.0, -60.0, -30.0, 0.0, 30.0, 60.0, 90.0)
@@ -282,7 +282,7 @@ class VehicleTracker:
             mine = m.unit == u
             left, right = local[u][mine & (m.face == LEFT), 1], local[u][mine & (m.face == RIGHT), 1]
             if min(len(left), len(right)) >= SIDE_MIN_POINTS:  # both sides seen: the width between them
-                track.widths[u].add(float(np.median(left) - np.median(right)))
+                track.widths[u].add(median(left) - median(right))
             new_boxes.append(replace(box, width_m=track.widths[u].estimate))
         if model.trailer is not None and track.trailer_length is not None:
             self._learn_trailer_length(track, m, local[1], new_boxes[1].width_m)
@@ -356,7 +356,7 @@ class VehicleTracker:
         # the face's middle below the roof (roof points near the edge lie up to END_BAND_M ahead of it)
         middle = end[(np.abs(end[:, 1]) <= width_m / 4) & (zb[at_end] < trailer.top_m - self.params.fit_top_band_m)]
         if len(middle) >= 2 and np.ptp(end[:, 1]) >= FACE_SEEN_SPAN * width_m:
-            length = trailer.front_m - float(np.median(middle[:, 0]))
+            length = trailer.front_m - median(middle[:, 0])
             if length >= TRAILER_LENGTH_RANGE_M[0]:
                 track.trailer_length.add(length)
         bound = min(trailer.front_m - rear - END_BAND_M, MAX_TRAILER_LENGTH_M)
