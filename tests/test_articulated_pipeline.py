@@ -363,6 +363,47 @@ def test_seed_parts_are_joined_by_their_nearest_points():
     assert sorted(sorted(g) for g in _join_near([a, far], 2.0)) == [[0], [1]]
 
 
+def test_the_seeds_closeness_test_is_a_kd_tree_query():
+    """``kernels.any_closer`` (the join of seed parts) answers what scipy's k-d tree query with
+    that upper bound answers (strictly closer), on random parts near and far apart, and on pairs
+    exactly at the distance."""
+    from scipy.spatial import cKDTree
+
+    from i2v_loc.stages import kernels
+
+    rng = np.random.default_rng(5)
+    answers = []
+    for _ in range(300):
+        a = rng.normal(0, rng.uniform(0.3, 4), (rng.integers(1, 80), 2)) + rng.uniform(-5, 5, 2)
+        b = rng.normal(0, rng.uniform(0.3, 4), (rng.integers(1, 80), 2)) + rng.uniform(-8, 8, 2)
+        d = float(rng.choice([0.5, 2.0, 3.3]))
+        want = bool(np.isfinite(cKDTree(a).query(b, distance_upper_bound=d)[0]).any())
+        assert kernels.any_closer(a, b, d) == want
+        answers.append(want)
+    assert 0.2 < np.mean(answers) < 0.8  # both answers were exercised
+    exact = np.array([[0.0, 0.0]])
+    for q in ([2.0, 0.0], [1.2, 1.6], [-2.0, 0.0], [0.0, -2.0]):  # exactly 2 m: not closer
+        assert not kernels.any_closer(exact, np.array([q]), 2.0)
+        assert kernels.any_closer(exact, np.array([q]) * 0.999, 2.0)
+
+
+def test_seed_heights_are_the_bincount_heights():
+    from i2v_loc.stages.vehicle_tracker import _heights, ground_heights
+
+    rng = np.random.default_rng(2)
+    points = rng.normal(0, 5, (500, 3)).astype(np.float32)
+    labels = np.r_[np.arange(40), rng.integers(0, 40, 460)]  # every label has points, as grid_labels' do
+
+    def ground(x, y):
+        return 0.1 + 0.02 * x - 0.01 * y
+
+    counts = np.bincount(labels)
+    centres = np.column_stack([np.bincount(labels, points[:, i]) for i in (0, 1)]) / counts[:, None]
+    top = np.full(len(counts), -np.inf)
+    np.maximum.at(top, labels, points[:, 2])
+    assert np.array_equal(_heights(points, labels, ground), top - ground_heights(ground, centres))
+
+
 def dock(x_m: float, y_m: float, yaw_rad: float) -> np.ndarray:
     """Points of a 12 m wide, 6 m tall dock wall whose face passes through (x, y) facing ``yaw_rad``,
     with two 0.4 m rubber bumpers standing 0.15 m out of it at 0.9-1.3 m, 1.1 m either side of the

@@ -954,6 +954,105 @@ def fit_covariance(residual, jacobian, prior_information, scale, inlier_m, no_in
     return out
 
 
+# ----------------------------------------------------------------------------- vehicle seeds
+
+
+@njit(**_JIT)
+def any_closer(a, b, distance):
+    """Whether a point of ``b`` (M, 2) lies closer than ``distance`` to a point of ``a`` (N, 2)
+    (squared distances summed x then y, strictly below distance squared: a k-d tree's query with
+    that upper bound). ``a`` is binned in cells a little wider than ``distance``: a closer pair
+    lies in the same or neighbouring cells."""
+    if a.shape[0] == 0 or b.shape[0] == 0:
+        return False
+    limit = distance * distance
+    cell_m = distance * (1.0 + 1e-9) if distance > 0 else 1.0
+    lo_x, lo_y = a[:, 0].min(), a[:, 1].min()
+    n = a.shape[0]
+    cx = np.empty(n, dtype=np.int64)
+    cy = np.empty(n, dtype=np.int64)
+    for i in range(n):
+        cx[i] = np.int64((a[i, 0] - lo_x) / cell_m)
+        cy[i] = np.int64((a[i, 1] - lo_y) / cell_m)
+    rows = cy.max() + 3  # a query's neighbour rows -1 .. rows - 2 never wrap into another column
+    keys = (cx + 1) * rows + (cy + 1)
+    order = np.argsort(keys)
+    sorted_keys = keys[order]
+    for j in range(b.shape[0]):
+        qx, qy = b[j, 0], b[j, 1]
+        fx, fy = math.floor((qx - lo_x) / cell_m), math.floor((qy - lo_y) / cell_m)
+        if fx < -1 or fy < -1 or fx > cx.max() + 1 or fy > rows - 2:
+            continue  # no cell of a beside it
+        for di in range(-1, 2):
+            for dj in range(-1, 2):
+                ci, cj = np.int64(fx) + di + 1, np.int64(fy) + dj + 1
+                if cj < 0 or cj >= rows:
+                    continue
+                key = ci * rows + cj
+                t = np.searchsorted(sorted_keys, key)
+                while t < n and sorted_keys[t] == key:
+                    i = order[t]
+                    t += 1
+                    dx, dy = qx - a[i, 0], qy - a[i, 1]
+                    if dx * dx + dy * dy < limit:
+                        return True
+    return False
+
+
+@njit(**_JIT)
+def join_parts(xy, starts, distance):
+    """Root part of each part (rows ``starts[k]:starts[k + 1]`` of ``xy``) after joining every two
+    parts with a pair of points closer than ``distance`` (``any_closer``; tried only where their
+    footprints come within it), chained: the smallest part index of its group."""
+    n_parts = starts.shape[0] - 1
+    low = np.empty((n_parts, 2))
+    high = np.empty((n_parts, 2))
+    for k in range(n_parts):
+        part = xy[starts[k] : starts[k + 1]]
+        for a in range(2):
+            low[k, a], high[k, a] = part[:, a].min(), part[:, a].max()
+    parent = np.arange(n_parts)
+    for i in range(n_parts):
+        for j in range(i + 1, n_parts):
+            if (
+                low[i, 0] - distance > high[j, 0]
+                or low[j, 0] - distance > high[i, 0]
+                or low[i, 1] - distance > high[j, 1]
+                or low[j, 1] - distance > high[i, 1]
+            ):
+                continue  # footprints farther apart than the distance
+            ri, rj = _root(parent, i), _root(parent, j)
+            if ri != rj and any_closer(xy[starts[i] : starts[i + 1]], xy[starts[j] : starts[j + 1]], distance):
+                parent[max(ri, rj)] = min(ri, rj)
+    for k in range(n_parts):
+        parent[k] = _root(parent, k)
+    return parent
+
+
+@njit(**_JIT)
+def _root(parent, i):
+    while parent[i] != i:
+        parent[i] = parent[parent[i]]
+        i = parent[i]
+    return i
+
+
+@njit(**_JIT)
+def label_extents(points, labels, n_labels):
+    """Per label: point count, sums of x and of y (in point order, as np.bincount sums) and the
+    highest z."""
+    counts = np.zeros(n_labels, dtype=np.int64)
+    sums = np.zeros((n_labels, 2))
+    top = np.full(n_labels, -np.inf)
+    for i in range(points.shape[0]):
+        k = labels[i]
+        counts[k] += 1
+        sums[k, 0] += points[i, 0]
+        sums[k, 1] += points[i, 1]
+        top[k] = max(top[k], points[i, 2])
+    return counts, sums, top
+
+
 # ----------------------------------------------------------------------------- kinematic filter
 
 
@@ -1087,6 +1186,9 @@ def warm_up() -> None:
     _, residual, jacobian, _, _, _ = irls(xy, z, geometry, 0.25, 4, True, True, v0, np.ones(7), 0.1, 0.2, 2, ranges)
     fit_covariance(residual, jacobian, np.ones(7), 0.1, 0.3, 0.01, 0.0004, np.ones(4))
     fit_faces(xy, z, geometry, 0.25, 4, True, True, v0)  # the tests call it on its own
+    any_closer(xy, xy, 0.5)
+    join_parts(xy, np.array([0, 1, 3]), 0.5)
+    label_extents(p32, np.zeros(3, dtype=np.int64), 1)
     wrap_angles(np.zeros(2))
     states = np.zeros((13, 6))
     for articulated in (True, False):

@@ -18,7 +18,6 @@ from dataclasses import dataclass, field, replace
 from itertools import count
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from i2v_loc.params import ArticulatedParams, VehicleConfig
 from i2v_loc.stages import kernels
@@ -733,36 +732,21 @@ def _near_any(x: np.ndarray, marks: np.ndarray, tolerance: float) -> np.ndarray:
 
 def _heights(points: np.ndarray, labels: np.ndarray, ground) -> np.ndarray:
     """Per label, its highest point above the ground under its points' centre."""
-    counts = np.bincount(labels)
-    centres = np.column_stack([np.bincount(labels, points[:, i]) for i in (0, 1)]) / counts[:, None]
-    top = np.full(len(counts), -np.inf)
-    np.maximum.at(top, labels, points[:, 2])
-    return top - ground_heights(ground, centres)
+    counts, sums, top = kernels.label_extents(points, labels, int(labels.max()) + 1)
+    return top - ground_heights(ground, sums / counts[:, None])
 
 
 def _join_near(parts: list[np.ndarray], distance_m: float) -> list[list[int]]:
-    """Groups of indices of ``parts`` linked by point pairs closer than ``distance_m`` (union-find)."""
-    parent = list(range(len(parts)))
-
-    def root(i: int) -> int:
-        while parent[i] != i:
-            parent[i] = parent[parent[i]]
-            i = parent[i]
-        return i
-
-    # only parts whose footprints, grown by the distance, overlap can hold such a pair
-    low = np.array([part[:, :2].min(axis=0) for part in parts]).reshape(-1, 2) - distance_m / 2
-    high = np.array([part[:, :2].max(axis=0) for part in parts]).reshape(-1, 2) + distance_m / 2
-    overlap = np.all((low[:, None] <= high[None]) & (low[None] <= high[:, None]), axis=2)
-    trees: dict[int, cKDTree] = {}
-    for i, j in zip(*np.nonzero(np.triu(overlap, 1))):
-        if root(i) != root(j):
-            tree = trees.setdefault(i, cKDTree(parts[i][:, :2]))
-            if np.isfinite(tree.query(parts[j][:, :2], distance_upper_bound=distance_m)[0]).any():
-                parent[root(j)] = root(i)
+    """Groups of indices of ``parts`` linked by point pairs closer than ``distance_m``, each group
+    in index order, the groups in the order of their first index."""
+    if not parts:
+        return []
+    starts = np.cumsum([0] + [len(part) for part in parts])
+    xy = np.ascontiguousarray(np.vstack(parts)[:, :2], dtype=float)
+    roots = kernels.join_parts(xy, starts, float(distance_m))
     groups: dict[int, list[int]] = {}
-    for i in range(len(parts)):
-        groups.setdefault(root(i), []).append(i)
+    for i, root in enumerate(roots.tolist()):
+        groups.setdefault(root, []).append(i)
     return list(groups.values())
 
 
