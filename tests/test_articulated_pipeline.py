@@ -157,6 +157,26 @@ def test_a_tractor_with_another_kingpin_is_learned_in_the_turn():
     assert np.sqrt(np.mean(late[:, 3] ** 2)) < 0.5 and late[:, 1].max() < 0.05
 
 
+def test_a_trailer_front_reaching_further_is_learned_driving_straight():
+    """This tractor has its kingpin 0.6 m ahead of the rear axle, the catalogue's Volvo FH 0.3 m:
+    its trailer's front reaches 1.5 m ahead of the axle, not 1.2. Straight, the trailer's faces put
+    the axle 0.3 m off the cab's; the fit with the kingpin free measures the reach where the cab's
+    rear face is seen, and the axle is where the cab says, before any turn."""
+    truth_model = replace(volvo(), kingpin_behind_axle_m=-0.6)
+    tracker = VehicleTracker(PARAMS.articulated, PARAMS.vehicles)
+    rows = []
+    for t, points, (truth,) in drive([(truth_model, (-14.0, 3.0, 0.0, 0.0))], 6.0, 2.0, 0.0):
+        reports = tracker.process(points, flat, t)
+        if reports:
+            rows.append((t, *errors(reports[0], truth)))
+    track = tracker.tracks[0]
+    assert len(track.reach.values) >= 5 and not track.kingpin.values  # straight: the reach only
+    assert abs(track.reach.estimate - 1.5) < 0.05
+    rows = np.array(rows)
+    late = rows[rows[:, 0] >= 3.0]
+    assert len(late) >= 25 and late[:, 1].max() < 0.03  # without the reach: up to 0.07 m
+
+
 def test_a_parked_trailer_alone_is_no_vehicle():
     """A trailer without its tractor, standing, seen all around or from one side only: no tractor is
     made of its front, and it never moves, so it is no rigid vehicle either."""

@@ -21,7 +21,7 @@ import numpy as np
 
 from i2v_loc.params import ArticulatedParams, VehicleConfig
 from i2v_loc.stages import kernels
-from i2v_loc.stages.hinged_fit import LEFT, RIGHT, TRAILER_LENGTH_RANGE_M, Measurement, Prior, fit
+from i2v_loc.stages.hinged_fit import LEFT, REAR, RIGHT, TRAILER_LENGTH_RANGE_M, Measurement, Prior, fit
 from i2v_loc.stages.kinematic_filter import FilterState, KinematicFilter
 from i2v_loc.stages.primitives import Rect, grid_labels, median, min_area_rect, split_by_label, voxel_keys
 from i2v_loc.stages.vehicle_model import VehicleModel
@@ -43,6 +43,7 @@ RIGID_MAX_LENGTH_M = 15.0  # the longest rigid vehicles: three-axle coaches (EU 
 RIGID_MIN_WIDTH_M = 1.6  # a rigid vehicle starts once its width is seen (an end face or both sides)
 KINGPIN_MIN_HITCH_RAD = np.radians(20.0)  # the kingpin's offset shows only at a hitch angle
 KINGPIN_SETTLED = 50  # observations of the kingpin's offset: learned
+REACH_MAX_HITCH_RAD = np.radians(5.0)  # nearly straight: the trailer's front reach ahead of the rear axle shows
 GAP_TEST_MAX_HITCH_RAD = np.radians(10.0)  # beyond, a trailer's front corner swings into the gap
 GAP_FILL_RATIO = 0.5
 GAP_MIN_POINTS = 5
@@ -189,6 +190,7 @@ class _Track:
     ground_z_m: float = 0.0  # under the vehicle, this frame
     kingpin: _Extent | None = None  # its offset behind the rear axle (fitted at a hitch angle only)
     trailer_front: _Extent | None = None  # the trailer's front face ahead of the kingpin (with it)
+    reach: _Extent | None = None  # the trailer's front face ahead of the rear axle (seen straight)
     frames: int = 0  # measured frames
 
     def report(self, measured: bool) -> VehicleReport:
@@ -286,7 +288,7 @@ class VehicleTracker:
         if model.trailer is not None and track.trailer_length is not None:
             self._learn_trailer_length(track, m, local[1], new_boxes[1].width_m)
             new_boxes[1] = replace(new_boxes[1], length_m=track.trailer_length.estimate)
-            new_boxes[1] = replace(new_boxes[1], front_m=track.trailer_front.estimate)
+            new_boxes[1] = replace(new_boxes[1], front_m=self._trailer_front(track))
             model = replace(model, kingpin_behind_axle_m=track.kingpin.estimate)
             track.filter.kingpin_m = model.kingpin_behind_axle_m
         track.model = model.with_boxes(new_boxes[0], new_boxes[1] if len(new_boxes) > 1 else None)
@@ -299,14 +301,31 @@ class VehicleTracker:
     def _learn_kingpin(self, track: _Track, prior: Prior, points: np.ndarray) -> None:
         """The kingpin's offset shows only at a hitch angle (straight, it trades with the trailer's
         front): while unsettled, a second fit with it free measures it. (Free in the pose's own fit,
-        it let the rear axle wander by up to 9 cm on a known vehicle.)"""
+        it let the rear axle wander by up to 9 cm on a known vehicle.) Straight, the same fit
+        measures their difference, how far ahead of the rear axle the trailer's front is, when the
+        cab's rear face pins the axle: until the first hitch angle that is the model's."""
         kingpin = track.kingpin
-        if kingpin is None or len(kingpin.values) >= KINGPIN_SETTLED or abs(prior.hitch_rad) < KINGPIN_MIN_HITCH_RAD:
+        if kingpin is None:
+            return
+        turning = abs(prior.hitch_rad) >= KINGPIN_MIN_HITCH_RAD and len(kingpin.values) < KINGPIN_SETTLED
+        straight = abs(prior.hitch_rad) <= REACH_MAX_HITCH_RAD and not kingpin.values
+        if not (turning or (straight and len(track.reach.values) < KINGPIN_SETTLED)):
             return
         m = fit(points, replace(prior, free_kingpin=True), self.params)
-        if m is not None:
+        if m is None:
+            return
+        if turning:
             kingpin.add(m.kingpin_m)
             track.trailer_front.add(m.trailer_front_m)
+        elif np.sum((m.unit == 0) & (m.face == REAR)) >= REAR_FACE_MIN_POINTS:
+            track.reach.add(m.trailer_front_m - m.kingpin_m)
+
+    def _trailer_front(self, track: _Track) -> float:
+        """The trailer's front ahead of the kingpin: measured at a hitch angle, else the reach seen
+        straight less the kingpin's offset."""
+        if track.kingpin.values:
+            return track.trailer_front.estimate
+        return track.reach.estimate + track.kingpin.estimate
 
     def _retype(self, track: _Track, name: str) -> None:
         """The learned sizes match another catalogue vehicle better than the start's: take its
@@ -320,6 +339,7 @@ class VehicleTracker:
         track.catalogue_name = name
         track.kingpin = _Extent(prior.kingpin_behind_axle_m, self.params.dimension_window)  # from the old axle
         track.trailer_front = _Extent(prior.trailer.front_m, self.params.dimension_window)
+        track.reach = _Extent(prior.trailer.front_m - prior.kingpin_behind_axle_m, self.params.dimension_window)
         track.filter.kingpin_m = prior.kingpin_behind_axle_m
         track.filter.shift_reference(model.tractor.front_m - prior.tractor.front_m)  # the cab stays where it is
 
@@ -543,14 +563,27 @@ class VehicleTracker:
         )
         window = self.params.dimension_window
         widths = [_Extent(box.width_m, window) for box in model.boxes]
-        length = kingpin = front = None
+        length = kingpin = front = reach = None
         if model.trailer is not None:
             length, kingpin = _Extent(model.trailer.length_m, window), _Extent(model.kingpin_behind_axle_m, window)
             front = _Extent(model.trailer.front_m, window)
+            reach = _Extent(model.trailer.front_m - model.kingpin_behind_axle_m, window)
             if m.rear_points >= REAR_FACE_MIN_POINTS:  # the start fit saw where the trailer ends
                 length.add(model.trailer.length_m)
         return _Track(
-            track_id, model, filt, model.name, length, widths, 0, m, np.array(m.vector[:2]), ground_z_m, kingpin, front
+            track_id,
+            model,
+            filt,
+            model.name,
+            length,
+            widths,
+            0,
+            m,
+            np.array(m.vector[:2]),
+            ground_z_m,
+            kingpin,
+            front,
+            reach,
         )
 
     def _recheck_rigid(self, track: _Track, points: np.ndarray, stamp_s: float) -> _Track:
