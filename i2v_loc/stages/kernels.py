@@ -1021,20 +1021,13 @@ def join_parts(xy, starts, distance):
                 or low[j, 1] - distance > high[i, 1]
             ):
                 continue  # footprints farther apart than the distance
-            ri, rj = _root(parent, i), _root(parent, j)
-            if ri != rj and any_closer(xy[starts[i] : starts[i + 1]], xy[starts[j] : starts[j + 1]], distance):
-                parent[max(ri, rj)] = min(ri, rj)
+            if _root(parent, i) != _root(parent, j) and any_closer(
+                xy[starts[i] : starts[i + 1]], xy[starts[j] : starts[j + 1]], distance
+            ):
+                _union(parent, i, j)
     for k in range(n_parts):
         parent[k] = _root(parent, k)
     return parent
-
-
-@njit(**_JIT)
-def _root(parent, i):
-    while parent[i] != i:
-        parent[i] = parent[parent[i]]
-        i = parent[i]
-    return i
 
 
 @njit(**_JIT)
