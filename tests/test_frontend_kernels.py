@@ -319,3 +319,35 @@ def test_median_is_numpys_median(n):
         values = np.round(values, 1) if rounded else values
         assert primitives.median(values) == float(np.median(values))
         assert primitives.median(values[::-1]) == float(np.median(values))  # a view, any order
+
+
+def test_ground_hypotheses_are_the_numpy_hypotheses():
+    """``kernels.plane_hypotheses`` (behind Region._hypotheses) gives numpy's normals and offsets to
+    the bit: degenerate triples (a repeated point) and steep planes dropped."""
+    from i2v_loc.stages.region import Region
+
+    def reference(a, b, c, tilt_deg):
+        normals = np.cross(b - a, c - a)
+        norms = np.linalg.norm(normals, axis=1)
+        ok = norms > 1e-9
+        normals = normals[ok] / norms[ok, None]
+        normals *= np.sign(normals[:, 2:3] + 1e-12)
+        admissible = normals[:, 2] >= np.cos(np.radians(tilt_deg))
+        normals = normals[admissible]
+        return normals, -np.einsum("ij,ij->i", normals, a[ok][admissible])
+
+    rng = np.random.default_rng(4)
+    region = Region(RegionParams())
+    kept = 0
+    for _ in range(200):
+        sample = rng.normal(0, 10, (500, 3))
+        sample[:, 2] *= rng.choice([0.01, 0.3, 1.0])
+        sample[7] = sample[8]  # a degenerate triple when both are drawn
+        state = region.rng.bit_generator.state
+        normals, offsets = region._hypotheses(sample)
+        region.rng.bit_generator.state = state
+        idx = region.rng.integers(0, len(sample), size=(region.params.ransac_iterations, 3))
+        want = reference(sample[idx[:, 0]], sample[idx[:, 1]], sample[idx[:, 2]], region.params.max_ground_tilt_deg)
+        assert np.array_equal(normals, want[0]) and np.array_equal(offsets, want[1])
+        kept += len(normals)
+    assert 0 < kept < 200 * region.params.ransac_iterations  # some planes kept, some dropped as too steep

@@ -103,14 +103,15 @@ class ArticulatedPipeline(ParameterHandoff):
         timer = StageTimer()
         merged = self.concatenation.merge(frame.scans)
         timer.lap("merge")
+        units = list(self._unit_boxes())  # the last frame's vehicles, for the map and the de-skew
         if self.background is not None:
-            split = self.background.process(merged.points, self._protected_boxes())
+            split = self.background.process(merged.points, self._protected_boxes(units))
             region = self.region.process(merged.points, split.in_region, split.foreground)
         else:
             region = self.region.process(merged.points)
         points = region.points  # the region's own gathered copy: interpolated in place
         if params.concatenation.motion_interpolation and self._reports:
-            self.concatenation.interpolate(points, merged.lag_s[region.index], self._motion_hints())
+            self.concatenation.interpolate(points, merged.lag_s[region.index], self._motion_hints(units))
         points, _ = voxel_centroids(points, params.concatenation.voxel_size_m)
         timer.lap("front_end")
         self.level.update(region.ground)
@@ -191,22 +192,22 @@ class ArticulatedPipeline(ParameterHandoff):
                 velocity = kingpin_velocity + _turn(trailer_rate, centers[1] - kingpin)
                 yield centers[1], s.yaw_rad + s.hitch_rad, model.trailer, velocity, trailer_rate, r.travel_m, True
 
-    def _protected_boxes(self) -> list[ProtectedBox]:
+    def _protected_boxes(self, units) -> list[ProtectedBox]:
         """Every articulated vehicle's boxes (one standing from the start is no background), a rigid
         one's once it travelled (a parked container that fooled the start becomes background)."""
         min_travel = self._active.background.protect_min_travel_m
         return [
             ProtectedBox(tuple(c), yaw, box.length_m / 2, box.width_m / 2)
-            for c, yaw, box, _, _, travel, articulated in self._unit_boxes()
+            for c, yaw, box, _, _, travel, articulated in units
             if articulated or travel >= min_travel
         ]
 
-    def _motion_hints(self) -> list[MotionHint]:
+    def _motion_hints(self, units) -> list[MotionHint]:
         return [
             MotionHint(
                 tuple(c), yaw, box.length_m / 2 + MOTION_MARGIN_M, box.width_m / 2 + MOTION_MARGIN_M, tuple(v), rate
             )
-            for c, yaw, box, v, rate, _, _ in self._unit_boxes()
+            for c, yaw, box, v, rate, _, _ in units
             if np.hypot(*v) >= MIN_MOTION_SPEED_M_S
         ]
 

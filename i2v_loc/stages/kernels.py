@@ -287,6 +287,32 @@ def plane_scores(sample, normals, offsets, threshold):
 
 
 @njit(**_JIT)
+def plane_hypotheses(a, b, c, min_cos):
+    """Unit normals (pointing up) of the planes through the rows of a, b, c (N, 3) that are not
+    degenerate (cross product norm above 1e-9) and tilted at most as far as ``min_cos`` allows
+    (normal z >= it), with the rows they came from. numpy's arithmetic: the cross product, its
+    norm summed x, y, z, the division, the sign of z + 1e-12."""
+    n = a.shape[0]
+    normals = np.empty((n, 3))
+    rows = np.empty(n, dtype=np.int64)
+    k = 0
+    for i in range(n):
+        u0, u1, u2 = b[i, 0] - a[i, 0], b[i, 1] - a[i, 1], b[i, 2] - a[i, 2]
+        v0, v1, v2 = c[i, 0] - a[i, 0], c[i, 1] - a[i, 1], c[i, 2] - a[i, 2]
+        n0, n1, n2 = u1 * v2 - u2 * v1, u2 * v0 - u0 * v2, u0 * v1 - u1 * v0
+        norm = math.sqrt(n0 * n0 + n1 * n1 + n2 * n2)
+        if not norm > 1e-9:
+            continue
+        up = np.sign(n2 / norm + 1e-12)
+        n0, n1, n2 = n0 / norm * up, n1 / norm * up, n2 / norm * up
+        if n2 >= min_cos:
+            normals[k, 0], normals[k, 1], normals[k, 2] = n0, n1, n2
+            rows[k] = i
+            k += 1
+    return normals[:k], rows[:k]
+
+
+@njit(**_JIT)
 def row_mean(rows):
     """Mean of the rows of a non-empty (N, k) float64 array, summed row after row as numpy's
     ``mean(axis=0)`` of a C-ordered array does (so the same bits), without its per-row overhead."""
@@ -1156,6 +1182,7 @@ def warm_up() -> None:
     above_plane(p32, take, np.array([0.0, 0.0, 1.0]), 0.0, 0.1, np.empty(3, dtype=np.int64))
     plane_scores(p64, np.array([[0.0, 0.0, 1.0]]), np.zeros(1), 0.1)
     row_mean(p64)
+    plane_hypotheses(p64, p64, p64, 0.9)
     far = p32 * np.float32(1e6)  # a key range too wide for the bits: the hash table
     for points, voxel, one in ((p32, np.float32(0.5), np.float32(1.0)), (p64, 0.5, 1.0), (p32, 0.5, 1.0)):
         for cloud in (points, far.astype(points.dtype)):

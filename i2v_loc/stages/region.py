@@ -113,15 +113,8 @@ class Region:
         """Planes through random point triples, oriented up, tilt-admissible ones only."""
         idx = self.rng.integers(0, len(sample), size=(self.params.ransac_iterations, 3))
         a, b, c = sample[idx[:, 0]], sample[idx[:, 1]], sample[idx[:, 2]]
-        normals = np.cross(b - a, c - a)
-        norms = np.linalg.norm(normals, axis=1)
-        ok = norms > 1e-9
-        normals = normals[ok] / norms[ok, None]
-        normals *= np.sign(normals[:, 2:3] + 1e-12)
-        admissible = normals[:, 2] >= np.cos(np.radians(self.params.max_ground_tilt_deg))
-        normals = normals[admissible]
-        offsets = -np.einsum("ij,ij->i", normals, a[ok][admissible])
-        return normals, offsets
+        normals, rows = kernels.plane_hypotheses(a, b, c, float(np.cos(np.radians(self.params.max_ground_tilt_deg))))
+        return normals, -np.einsum("ij,ij->i", normals, a[rows])  # einsum's own summation order, kept
 
     def _refine(self, inliers: np.ndarray, normal: np.ndarray, offset: float, fraction: float) -> GroundPlane | None:
         if len(inliers) >= 3:
