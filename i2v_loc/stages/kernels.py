@@ -914,21 +914,13 @@ def irls(
     residual, jacobian, unit, distance, face = fit_faces(
         xy, z_rel, geometry, top_band, n_pose, fits_length, fits_kingpin, v
     )
-    n = residual.shape[0]
-    weights = np.empty(n)
     for k in range(iterations):
         c = max(scale, start_scale * 0.5**k)
         if k > 0:
             residual, jacobian, unit, distance, face = fit_faces(
                 xy, z_rel, geometry, top_band, n_pose, fits_length, fits_kingpin, v
             )
-        for i in range(n):
-            q = residual[i] / c
-            weights[i] = 1.0 / (1.0 + q * q)
-        weighted = np.empty((n, n_params))
-        for i in range(n):
-            for j in range(n_params):
-                weighted[i, j] = jacobian[i, j] * weights[i]
+        weighted = _cauchy_weighted(jacobian, residual, c)
         normal = np.dot(weighted.T, jacobian) + prior_info
         gradient = np.dot(weighted.T, residual) + prior_weights * (v - v0)
         step = np.linalg.solve(normal, -gradient)
@@ -944,21 +936,30 @@ def irls(
 
 
 @njit(**_JIT)
-def fit_covariance(residual, jacobian, prior_information, scale, inlier_m, no_inlier_noise2, noise_floor2, floor):
-    """The hinged fit's covariance of its first ``floor.shape[0]`` parameters: Gauss-Newton with
-    the Cauchy weights of the residuals and the noise of the inliers' residuals (their median
-    square / 0.455, else ``no_inlier_noise2``; at least ``noise_floor2``), plus the weak prior (``sigmas``), plus ``floor``
-    squared on the diagonal (``prior_information``: the weak prior's diagonal, 1 / sigma^2). numpy's order of operations; the inverse as numpy takes it (LAPACK
-    gesv against the identity)."""
+def _cauchy_weighted(jacobian, residual, scale):
+    """The Jacobian's rows times the Cauchy weights 1 / (1 + (r / scale)^2) of their residuals."""
     n, n_params = jacobian.shape
-    squares = np.empty(n)
-    n_in = 0
     weighted = np.empty((n, n_params))
     for i in range(n):
         q = residual[i] / scale
         w = 1.0 / (1.0 + q * q)
         for j in range(n_params):
             weighted[i, j] = jacobian[i, j] * w
+    return weighted
+
+
+@njit(**_JIT)
+def fit_covariance(residual, jacobian, prior_information, scale, inlier_m, no_inlier_noise2, noise_floor2, floor):
+    """The hinged fit's covariance of its first ``floor.shape[0]`` parameters: Gauss-Newton with
+    the Cauchy weights of the residuals and the noise of the inliers' residuals (their median
+    square / 0.455, else ``no_inlier_noise2``; at least ``noise_floor2``), plus the weak prior
+    (``prior_information``: its diagonal, 1 / sigma^2), plus ``floor`` squared on the diagonal.
+    numpy's order of operations; the inverse as numpy takes it (LAPACK gesv against the identity)."""
+    n, n_params = jacobian.shape
+    squares = np.empty(n)
+    n_in = 0
+    weighted = _cauchy_weighted(jacobian, residual, scale)
+    for i in range(n):
         if abs(residual[i]) <= inlier_m:
             squares[n_in] = residual[i] * residual[i]
             n_in += 1
@@ -1092,9 +1093,15 @@ def _kinematics(s, kingpin_m, trailer_axle_m, articulated):
         v, kappa, yaw, hitch = s[i, 3], s[i, 4], s[i, 2], s[i, 5]
         d[i, 0], d[i, 1], d[i, 2] = v * math.cos(yaw), v * math.sin(yaw), v * kappa
         if articulated:
-            omega = v * kappa
-            d[i, 5] = -(v * math.sin(hitch) + kingpin_m * omega * math.cos(hitch)) / trailer_axle_m - omega
+            d[i, 5] = hitch_rate(v, kappa, hitch, kingpin_m, trailer_axle_m)
     return d
+
+
+@njit(**_JIT)
+def hitch_rate(v, curvature, hitch, kingpin_m, trailer_axle_m):
+    """γ' of the one-trailer kinematics (kinematic_filter's model): −(v sin γ + M ω cos γ) / L2 − ω, ω = v κ."""
+    omega = v * curvature
+    return -(v * math.sin(hitch) + kingpin_m * omega * math.cos(hitch)) / trailer_axle_m - omega
 
 
 @njit(**_JIT)
@@ -1210,6 +1217,7 @@ def warm_up() -> None:
     join_parts(xy, np.array([0, 1, 3]), 0.5)
     label_extents(p32, np.zeros(3, dtype=np.int64), 1)
     wrap_angles(np.zeros(2))
+    hitch_rate(1.0, 0.1, 0.2, -0.3, 7.0)
     states = np.zeros((13, 6))
     for articulated in (True, False):
         propagate_states(states, 0.1, 1, -0.3, 7.0, articulated)

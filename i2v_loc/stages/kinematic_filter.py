@@ -28,12 +28,6 @@ INITIAL_CURVATURE_SIGMA_1_M = 0.05
 MAX_STEP_S = 0.1  # the kinematics are integrated in midpoint steps no longer than this
 
 
-def hitch_rate(v: float, curvature: float, hitch: float, kingpin_m: float, trailer_axle_m: float):
-    """γ' of the one-trailer kinematics (works on arrays)."""
-    omega = v * curvature
-    return -(v * np.sin(hitch) + kingpin_m * omega * np.cos(hitch)) / trailer_axle_m - omega
-
-
 def propagate(state: np.ndarray, dt_s: float, kingpin_m: float, trailer_axle_m: float, articulated: bool) -> np.ndarray:
     """The state (6,) or states (k, 6) ``dt_s`` later (midpoint steps, compiled: ``kernels.propagate_states``)."""
     s = np.array(state, dtype=float)
@@ -248,7 +242,9 @@ class KinematicFilter:
     def state(self) -> FilterState:
         x = self.ukf.x
         rate = (
-            float(hitch_rate(x[SPEED], x[CURVATURE], x[HITCH], self.kingpin_m, self.trailer_axle_m))
+            kernels.hitch_rate(
+                float(x[SPEED]), float(x[CURVATURE]), float(x[HITCH]), float(self.kingpin_m), float(self.trailer_axle_m)
+            )
             if self.articulated
             else 0.0
         )

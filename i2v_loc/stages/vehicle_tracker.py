@@ -163,6 +163,13 @@ class _Extent:
         return self.measured if self.settled else max(self.measured, self.lower_bound)
 
 
+def _hinge_extents(model: VehicleModel, window: int) -> tuple[_Extent, _Extent, _Extent]:
+    """The kingpin's offset behind the rear axle, the trailer's front ahead of the kingpin and that
+    front's reach ahead of the rear axle, to be learned from ``model``'s."""
+    kingpin, front = model.kingpin_behind_axle_m, model.trailer.front_m
+    return _Extent(kingpin, window), _Extent(front, window), _Extent(front - kingpin, window)
+
+
 def _windowed_median(window: _Window, value: float, size: int) -> float:
     """``value`` appended to ``window`` (the oldest dropped beyond ``size``), the median of what is in
     it: ``np.median``'s value, from a sorted copy kept beside it (np.median sorted all of it every
@@ -337,9 +344,8 @@ class VehicleTracker:
         trailer = replace(prior.trailer, width_m=model.trailer.width_m, length_m=model.trailer.length_m)
         track.model = replace(prior.with_boxes(tractor, trailer), trailer_axle_m=model.trailer_axle_m)
         track.catalogue_name = name
-        track.kingpin = _Extent(prior.kingpin_behind_axle_m, self.params.dimension_window)  # from the old axle
-        track.trailer_front = _Extent(prior.trailer.front_m, self.params.dimension_window)
-        track.reach = _Extent(prior.trailer.front_m - prior.kingpin_behind_axle_m, self.params.dimension_window)
+        # learned again from the old axle
+        track.kingpin, track.trailer_front, track.reach = _hinge_extents(prior, self.params.dimension_window)
         track.filter.kingpin_m = prior.kingpin_behind_axle_m
         track.filter.shift_reference(model.tractor.front_m - prior.tractor.front_m)  # the cab stays where it is
 
@@ -565,9 +571,8 @@ class VehicleTracker:
         widths = [_Extent(box.width_m, window) for box in model.boxes]
         length = kingpin = front = reach = None
         if model.trailer is not None:
-            length, kingpin = _Extent(model.trailer.length_m, window), _Extent(model.kingpin_behind_axle_m, window)
-            front = _Extent(model.trailer.front_m, window)
-            reach = _Extent(model.trailer.front_m - model.kingpin_behind_axle_m, window)
+            length = _Extent(model.trailer.length_m, window)
+            kingpin, front, reach = _hinge_extents(model, window)
             if m.rear_points >= REAR_FACE_MIN_POINTS:  # the start fit saw where the trailer ends
                 length.add(model.trailer.length_m)
         return _Track(
