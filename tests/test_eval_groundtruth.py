@@ -146,6 +146,25 @@ def test_matching_counts_flips_and_unreported_units():
     assert math.isnan(s["hitch_rmse_deg"])
 
 
+def test_a_state_after_the_last_truth_line_is_not_scored():
+    lines = [_line(k, _unit(0, 0, 90.0), _unit(0, -8, 90.0)) for k in range(3)]
+    vehicle = {
+        "id": 1,
+        "vehicle": "volvo_fh",
+        "hitch_deg": 0.0,
+        "truck": {"track_id": 1, "center": [0, 0, 1], "yaw_deg": 90.0},
+        "trailer": {"track_id": 2, "center": [0, -8, 1], "yaw_deg": 90.0},
+    }
+    # the last sweep ends 0.08 s after the last GT line (0.2 s): no truth there, not a false vehicle
+    states = [{"frame": k, "stamp_s": k / 10 + 0.08 * (k == 2), "vehicles": [vehicle]} for k in range(3)]
+    records, frames = match_states(states, lines, Params())
+    s = summarize(records, frames)
+    assert s["false_vehicles"] == 0
+    assert s["frames_outside_truth"] == 1 and s["frames"] == 3
+    assert s["gt_vehicle_frames"] == 2
+    assert [row["scored"] for row in frames] == [True, True, False]
+
+
 def test_openlabel_tumtraf_frame(realdata):
     lines = gtm.load_openlabel(realdata / "tumtraf_s110_south" / "1646667315_454719936_s110_lidar_ouster_south.json")
     assert len(lines) == 1 and lines[0]["frame"] == 54

@@ -66,7 +66,7 @@ def interpolate_ground_truth(
     """The truth at ``stamp_s``: poses linearly interpolated between the two GT lines around it
     (yaw along the shorter arc); labels and point counts from the nearer line. A vehicle must be
     in both lines. Stamps outside the GT span by more than ``max_gap_s`` (default half a frame
-    period) give no vehicles. ``times`` are the lines' stamps, precomputed by callers that
+    period) have no truth: no vehicles and ``outside_truth``. ``times`` are the lines' stamps, precomputed by callers that
     interpolate many times."""
     if not lines:
         return {"frame": None, "stamp_s": stamp_s, "vehicles": []}
@@ -80,7 +80,7 @@ def interpolate_ground_truth(
     elif i1 == 0 or i1 == len(times):
         edge = 0 if i1 == 0 else len(times) - 1
         if abs(times[edge] - stamp_s) > gap:
-            return {"frame": None, "stamp_s": stamp_s, "vehicles": []}
+            return {"frame": None, "stamp_s": stamp_s, "vehicles": [], "outside_truth": True}
         i0 = i1 = edge
     else:
         i0 = i1 - 1

@@ -171,10 +171,11 @@ def match_frame(state: dict, gt_line: dict, params: Params, gate_m: float, perio
     return records
 
 
-def frame_row(state: dict, n_gt: int) -> dict:
+def frame_row(state: dict, n_gt: int, scored: bool = True) -> dict:
     row = {
         "frame": state.get("frame"),
         "stamp_s": state.get("stamp_s"),
+        "scored": scored,
         "n_gt_vehicles": n_gt,
         "n_est_vehicles": len(state.get("vehicles") or []),
     }
@@ -203,7 +204,9 @@ def match_states(
     states: list[dict], gt_lines: list[dict], params: Params, gate_m: float = 4.0
 ) -> tuple[list[dict], list[dict]]:
     """Records and frame rows of a whole run. Each state is compared with the truth interpolated
-    to its ``stamp_s`` (falling back to the GT line of the same frame when it has no stamp)."""
+    to its ``stamp_s`` (falling back to the GT line of the same frame when it has no stamp). A state
+    stamped outside the truth's span (a last sweep that ends after the last GT line) is not scored:
+    no truth there is not a truth of no vehicles; its frame row says ``scored`` False."""
     records, frames = [], []
     by_frame = {line.get("frame"): line for line in gt_lines}
     times = np.array([line["stamp_s"] for line in gt_lines], float)
@@ -216,6 +219,9 @@ def match_states(
             gt = interpolate_ground_truth(gt_lines, float(stamp), times=times)
         else:
             gt = by_frame.get(state.get("frame"), {"vehicles": []})
+        if gt.get("outside_truth"):
+            frames.append(frame_row(state, 0, scored=False))
+            continue
         frame_records = match_frame(state, gt, params, gate_m, period)
         since = float(stamp) - start if stamp is not None else NAN
         for rec in frame_records:

@@ -85,6 +85,7 @@ def summarize(records: list[dict], frame_rows: list[dict]) -> dict:
     """All metrics of a group of records; ``frame_rows`` are the frames the group covers."""
     gt = [r for r in records if r["kind"] == "gt"]
     out: dict = {"gt_vehicle_frames": len(gt), "frames": len(frame_rows)}
+    out["frames_outside_truth"] = sum(1 for row in frame_rows if row.get("scored") is False)
     flip_errors = []
     for unit in ("truck", "trailer"):
         yaw_err = column(gt, f"{unit}_yaw_err_deg")
