@@ -17,7 +17,7 @@ from i2v_loc.pipelines.paper import PaperPipeline
 from i2v_loc.sim.kinematics import Articulation, step
 from i2v_loc.stages.hinged_fit import Prior, fit
 from i2v_loc.stages.vehicle_model import VehicleModel
-from i2v_loc.stages.vehicle_tracker import VehicleTracker, _gap_filled, _gap_open
+from i2v_loc.stages.vehicle_tracker import SEED_RETRY_FRAMES, Seed, VehicleTracker, _gap_filled, _gap_open, _supported
 
 PARAMS = Params()
 SENSORS = ((0.0, -15.0, 4.0), (-22.0, 22.0, 4.0), (22.0, 22.0, 4.0))
@@ -543,6 +543,37 @@ def test_an_open_gap_is_two_units_and_a_side_running_through_it_is_not():
     centre = (model.tractor.rear_m + trailer_front) / 2 * np.array([np.cos(0.05), np.sin(0.05)]) + [0.0, 5.0]
     filled = np.vstack([points, vehicle_points(panel, *centre, 0.05, sensors=SENSORS[:1], spacing=0.15)])
     assert not _gap_open(filled, m, model, 0.0)
+
+
+def test_two_units_are_judged_on_the_cheapest_supported_fit():
+    """A moving seed seen from one side: a fit the wrong way round (its cab on the trailer's end,
+    unsupported) shows no gap; the right one, though it may cost more, shows the open gap between
+    cab and trailer: two units."""
+    model = volvo()
+    points = vehicle_points(model, 0.0, 5.0, 0.05, sensors=SENSORS[:1], spacing=0.15)
+    right = fit(points, Prior(0.0, 5.0, 0.05, 0.0, model), PARAMS.articulated, iterations=20)
+    back = -10.0 * np.array([np.cos(0.05), np.sin(0.05)]) + [0.0, 5.0]
+    wrong = fit(points, Prior(*back, 0.05 + np.pi, 0.0, model), PARAMS.articulated, iterations=20)
+    assert not _supported(wrong, model, 0.0) and not _gap_open(points, wrong, model, 0.0)
+    tracker = VehicleTracker(PARAMS.articulated, PARAMS.vehicles)
+    moving = Seed(np.array([2.0, 5.0]), np.array([0.0, 5.0]))
+    assert tracker._two_units([(model, wrong), (model, right)], points, moving, 0.0)
+    assert not tracker._two_units([(model, wrong)], points, moving, 0.0)
+    standing = Seed(np.array([0.0, 5.0]), np.array([0.0, 5.0]))
+    assert not tracker._two_units([(model, right)], points, standing, 0.0)
+
+
+def test_a_moving_seed_that_fitted_one_box_is_fitted_again_before_the_map_is_ready():
+    """Only a moved seed is fitted again; before the map is ready (it cannot start rigid) after
+    ``SEED_RETRY_FRAMES``, once the map is ready (it may start rigid) at once."""
+    tracker = VehicleTracker(PARAMS.articulated, PARAMS.vehicles)
+    travel = PARAMS.articulated.start_travel_m
+    moved = Seed(np.array([travel + 0.1, 5.0]), np.array([0.0, 5.0]), frames=10, rigid=True, failed_frame=5)
+    standing = Seed(np.array([0.0, 5.0]), np.array([0.0, 5.0]), frames=10, rigid=True, failed_frame=5)
+    assert tracker._may_fit(moved) and not tracker._may_fit(standing)
+    assert moved.retry_due(rigid_allowed=True) and not moved.retry_due(rigid_allowed=False)
+    moved.frames = 5 + SEED_RETRY_FRAMES
+    assert moved.retry_due(rigid_allowed=False)
 
 
 def test_a_moving_car_is_no_vehicle_and_is_not_fitted(monkeypatch):

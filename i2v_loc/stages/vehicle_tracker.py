@@ -110,10 +110,10 @@ class Seed:
     failed: _Shape | None = None  # its shape when it was last fitted and was no vehicle
     failed_frame: int = 0  # its frame count then
 
-    @property
-    def retry_due(self) -> bool:
-        """A rigid seed (it may start: it moved) at once; any other after a while."""
-        return self.rigid or self.frames - self.failed_frame >= SEED_RETRY_FRAMES
+    def retry_due(self, rigid_allowed: bool) -> bool:
+        """A rigid seed that may start as one (it moved, the map is ready) at once; any other after
+        a while."""
+        return (self.rigid and rigid_allowed) or self.frames - self.failed_frame >= SEED_RETRY_FRAMES
 
     @property
     def travel_m(self) -> float:
@@ -439,8 +439,8 @@ class VehicleTracker:
             shape = _Shape(len(cluster), rect.length_m, rect.width_m, center, rigid_allowed)
             if (
                 seed.frames >= self.params.start_frames
-                and self._may_start(seed, rigid_allowed)
-                and (seed.failed is None or (seed.retry_due and seed.failed.changed(shape)))
+                and self._may_fit(seed)
+                and (seed.failed is None or (seed.retry_due(rigid_allowed) and seed.failed.changed(shape)))
             ):
                 ready.append((seed, cluster, rect, shape))
         self.seeds = [s for s in self.seeds if s.seen]
@@ -464,6 +464,13 @@ class VehicleTracker:
         if seed.first_fit is None:
             seed.first_fit = m.vector[:2].copy()
         return float(np.hypot(*(m.vector[:2] - seed.first_fit))) >= self.params.start_travel_m
+
+    def _may_fit(self, seed: Seed) -> bool:
+        """A seed that fitted one rigid box best is fitted again once it moved, before the map is
+        ready too: driving straight, a tractor and trailer seen from one side fit one box, and their
+        hinge shows as an open gap only in motion (``_two_units``); ``_candidate`` starts it then
+        only as articulated."""
+        return not seed.rigid or seed.travel_m >= self.params.start_travel_m
 
     def _may_start(self, seed: Seed, rigid_allowed: bool) -> bool:
         """A rigid seed once the background is learned and it moved."""
@@ -535,13 +542,15 @@ class VehicleTracker:
         return not tops or float(cluster[:, 2].max()) - ground_z_m >= min(tops) - LOW_SEED_SLACK_M
 
     def _two_units(self, choices, cluster: np.ndarray, seed: Seed, ground_z_m: float) -> bool:
-        """A moving seed whose cheapest articulated fit shows an open gap between cab and trailer:
-        driving straight and seen from one side, a tractor and an unknown trailer fit one box of
-        their measured size better than any catalogue model, and started rigid."""
-        if not choices or seed.travel_m < self.params.start_travel_m:
+        """A moving seed whose cheapest supported articulated fit shows an open gap between cab and
+        trailer: driving straight and seen from one side, a tractor and an unknown trailer fit one
+        box of their measured size better than any catalogue model, and started rigid (a model fitted
+        the wrong way round, its cab on a few of the trailer's points, may cost less)."""
+        if seed.travel_m < self.params.start_travel_m:
             return False
-        model, m = choices[0]
-        return _gap_open(cluster, m, model, ground_z_m)
+        supported = (c for c in choices if _supported(c[1], c[0], ground_z_m))
+        model, m = next(supported, (None, None))
+        return model is not None and _gap_open(cluster, m, model, ground_z_m)
 
     def _articulated_choices(self, hypotheses) -> list[tuple[VehicleModel, Measurement]]:
         """Each catalogue model's cheapest fit, cheapest first, none folded beyond the start limit."""
