@@ -129,8 +129,14 @@ def merge(stage, scans):
 def interpolate(points, lag_s, motion):
     moved = np.zeros(len(points), dtype=bool)
     for hint in motion:
-        d = points[:, :2] - np.asarray(hint.center_xy, dtype=np.float32)
-        c, s = np.cos(hint.yaw_rad), np.sin(hint.yaw_rad)
+        center = np.broadcast_to(np.asarray(hint.center_xy, dtype=np.float64), (len(points), 2))
+        yaw = np.full(len(points), hint.yaw_rad)
+        if np.isfinite(hint.age_s):  # the box where it stood when each point was captured
+            since = hint.age_s - lag_s.astype(np.float64)
+            center = center + since[:, None] * np.asarray(hint.velocity_xy, dtype=np.float64)
+            yaw = yaw + hint.yaw_rate_rad_s * since
+        d = points[:, :2] - center.astype(np.float32)
+        c, s = np.cos(yaw), np.sin(yaw)
         along, across = d[:, 0] * c + d[:, 1] * s, -d[:, 0] * s + d[:, 1] * c
         inside = (np.abs(along) <= hint.half_length_m) & (np.abs(across) <= hint.half_width_m) & ~moved
         velocity = np.asarray(hint.velocity_xy, dtype=np.float32)

@@ -198,6 +198,7 @@ def test_interpolation_moves_the_reference_points():
     motion = [
         MotionHint((1.0, 2.0), 0.3, 4.0, 1.5, (2.0, -1.0), 0.4),
         MotionHint((-3.0, 2.5), -1.2, 3.0, 1.2, (0.5, 1.5)),  # overlaps the first: points move once
+        MotionHint((5.0, -4.0), 0.7, 3.0, 1.2, (-3.0, 2.0), 0.3, 0.1),  # 0.1 s old: moved to each capture time
     ]
     got, want = points.copy(), points.copy()
     Concatenation.interpolate(got, lag, motion)

@@ -71,3 +71,27 @@ def test_motion_interpolation_moves_points_of_a_moving_object_to_the_reference_t
     assert result.points[:, 0].tolist() == pytest.approx([9.9, 30.0], abs=1e-5)
     off = Concatenation(ConcatenationParams(voxel_size_m=0, motion_interpolation=False), SENSORS[1:])
     assert off.process({"b": scan("b", 1.0, pts, [0.05, 0.05])}, [hint]).points[:, 0].tolist() == [10.0, 30.0]
+
+
+def test_a_hint_with_an_age_catches_the_points_captured_after_its_pose():
+    """The last frame's box (0.1 s before the reference) of a vehicle moving +x at 4 m/s spans x 7..13;
+    a point at x 13.8 captured 0.15 s after the reference lies beyond it, but inside the box where it
+    stood at the point's capture time (8..14). With the age the point goes back by 0.6 m; without
+    it, it is left where it was (and distorts the vehicle's front)."""
+    stage = Concatenation(ConcatenationParams(voxel_size_m=0, reference="earliest"), SENSORS[1:])
+    late = {"b": scan("b", 1.0, [[13.8, 0.0, -3.0]], [0.15])}
+    result = stage.process(late, [MotionHint((10.0, 0.0), 0.0, 3.0, 1.5, (4.0, 0.0), 0.0, 0.1)])
+    assert result.points[0, 0] == pytest.approx(13.8 - 0.6, abs=1e-5)
+    result = stage.process(late, [MotionHint((10.0, 0.0), 0.0, 3.0, 1.5, (4.0, 0.0), 0.0)])
+    assert result.points[0, 0] == pytest.approx(13.8, abs=1e-5)
+
+
+def test_a_turning_hint_with_an_age_is_turned_to_the_capture_time():
+    """A box turning at 1 rad/s on the spot: a point 2.5 m ahead and 1.7 m aside is outside it at its
+    pose (half width 1.5) and inside 0.25 s later, turned by 0.25 rad; it goes back along the turn."""
+    stage = Concatenation(ConcatenationParams(voxel_size_m=0, reference="earliest"), SENSORS[1:])
+    late = {"b": scan("b", 1.0, [[12.5, 1.7, -3.0]], [0.15])}
+    result = stage.process(late, [MotionHint((10.0, 0.0), 0.0, 3.0, 1.5, (0.0, 0.0), 1.0, 0.1)])
+    assert result.points[0, :2].tolist() == pytest.approx([12.5 + 0.15 * 1.7, 1.7 - 0.15 * 2.5], abs=1e-5)
+    result = stage.process(late, [MotionHint((10.0, 0.0), 0.0, 3.0, 1.5, (0.0, 0.0), 1.0)])
+    assert result.points[0, :2].tolist() == pytest.approx([12.5, 1.7], abs=1e-5)

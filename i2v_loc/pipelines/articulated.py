@@ -64,6 +64,7 @@ class ArticulatedPipeline(ParameterHandoff):
         self._ground = self.level.ground(None)  # the last frame's ground height in the level frame
         self.background: BackgroundMap | None = None
         self._reports: list[VehicleReport] = []
+        self._reports_stamp_s = float("nan")  # the reference time of the frame the reports are of
         self._build(params)
 
     def _build(self, params: Params) -> None:
@@ -111,7 +112,8 @@ class ArticulatedPipeline(ParameterHandoff):
             region = self.region.process(merged.points)
         points = region.points  # the region's own gathered copy: interpolated in place
         if params.concatenation.motion_interpolation and self._reports:
-            self.concatenation.interpolate(points, merged.lag_s[region.index], self._motion_hints(units))
+            age_s = merged.stamp_s - self._reports_stamp_s
+            self.concatenation.interpolate(points, merged.lag_s[region.index], self._motion_hints(units, age_s))
         points, _ = voxel_centroids(points, params.concatenation.voxel_size_m)
         timer.lap("front_end")
         self.level.update(region.ground)
@@ -120,6 +122,7 @@ class ArticulatedPipeline(ParameterHandoff):
             ready = self.background is None or self.background.ready
             level_points = self.level.points(points)
             self._reports = self.tracker.process(level_points, ground, merged.stamp_s, background_ready=ready)
+            self._reports_stamp_s = merged.stamp_s
         timer.lap("vehicles")
         vehicles = [self._result(r, ground) for r in self._reports]
         self._count(merged, region)
@@ -202,10 +205,18 @@ class ArticulatedPipeline(ParameterHandoff):
             if articulated or travel >= min_travel
         ]
 
-    def _motion_hints(self, units) -> list[MotionHint]:
+    def _motion_hints(self, units, age_s: float) -> list[MotionHint]:
+        """The last frame's units, ``age_s`` before this frame's reference time: each point is tested
+        against its unit's box moved on to the point's capture time."""
         return [
             MotionHint(
-                tuple(c), yaw, box.length_m / 2 + MOTION_MARGIN_M, box.width_m / 2 + MOTION_MARGIN_M, tuple(v), rate
+                tuple(c),
+                yaw,
+                box.length_m / 2 + MOTION_MARGIN_M,
+                box.width_m / 2 + MOTION_MARGIN_M,
+                tuple(v),
+                rate,
+                age_s if np.isfinite(age_s) else float("nan"),
             )
             for c, yaw, box, v, rate, _, _ in units
             if np.hypot(*v) >= MIN_MOTION_SPEED_M_S

@@ -30,7 +30,9 @@ DROP_REASONS = ("out_of_sync", "empty", "missing", "nan_points")
 
 @dataclass
 class MotionHint:
-    """A moving object: points inside its xy box (centre, yaw, half sizes) move with ``velocity_xy`` (m/s)."""
+    """A moving object: points inside its xy box (centre, yaw, half sizes) move with ``velocity_xy`` (m/s).
+    ``age_s``: seconds from this pose to the merged frame's reference time; the box is then moved to
+    each point's capture time before the point is tested (NaN: the box as it is)."""
 
     center_xy: tuple[float, float]
     yaw_rad: float
@@ -38,6 +40,7 @@ class MotionHint:
     half_width_m: float
     velocity_xy: tuple[float, float]  # of the box centre
     yaw_rate_rad_s: float = 0.0  # the box also turns about its centre
+    age_s: float = float("nan")
 
 
 @dataclass
@@ -150,7 +153,7 @@ class Concatenation:
         boxes = np.array(
             [
                 (*h.center_xy, np.cos(h.yaw_rad), np.sin(h.yaw_rad), h.half_length_m, h.half_width_m,
-                 *h.velocity_xy, h.yaw_rate_rad_s)
+                 *h.velocity_xy, h.yaw_rate_rad_s, h.age_s)
                 for h in motion
             ],
             dtype=np.float64,

@@ -59,12 +59,21 @@ def sweep_to_yard(points, offsets, rot, trans, min_r2, max_r2, out_points, out_o
 def interpolate(points, lag_s, boxes):
     """Move each point inside a box to the reference time (in place); the first box holding a
     point moves it. ``boxes`` rows: centre x, y, cos yaw, sin yaw, half length, half width,
-    velocity x, y, yaw rate."""
+    velocity x, y, yaw rate, age: the seconds from the box's pose to the reference time. With an
+    age, a point is tested against the box where it stood when the point was captured (age - lag
+    after the pose: a sweep's last points are up to 0.25 s younger than the last frame's pose);
+    NaN: the box as it is."""
     for i in range(points.shape[0]):
         for b in range(boxes.shape[0]):
-            dx = points[i, 0] - np.float32(boxes[b, 0])
-            dy = points[i, 1] - np.float32(boxes[b, 1])
-            c, s = boxes[b, 2], boxes[b, 3]
+            cx, cy, c, s = boxes[b, 0], boxes[b, 1], boxes[b, 2], boxes[b, 3]
+            age = boxes[b, 9]
+            if age == age:
+                since = age - np.float64(lag_s[i])
+                cx, cy = cx + boxes[b, 6] * since, cy + boxes[b, 7] * since
+                turn = boxes[b, 8] * since
+                c, s = c * math.cos(turn) - s * math.sin(turn), s * math.cos(turn) + c * math.sin(turn)
+            dx = points[i, 0] - np.float32(cx)
+            dy = points[i, 1] - np.float32(cy)
             along = np.float64(dx) * c + np.float64(dy) * s
             across = -np.float64(dx) * s + np.float64(dy) * c
             if abs(along) <= boxes[b, 4] and abs(across) <= boxes[b, 5]:
@@ -1152,7 +1161,7 @@ def warm_up() -> None:
     offsets = np.zeros(3, dtype=np.float32)
     out_p, out_o = np.empty((3, 3), dtype=np.float32), np.empty(3, dtype=np.float32)
     sweep_to_yard(p32, offsets, np.eye(3, dtype=np.float32), np.zeros(3, dtype=np.float32), 0.0, 1e4, out_p, out_o, 0)
-    interpolate(p32.copy(), offsets, np.zeros((1, 9)))
+    interpolate(p32.copy(), offsets, np.zeros((1, 10)))
     take = np.ones(3, dtype=np.bool_)
     cells = np.zeros(64, dtype=np.uint16)
     flags = np.zeros(64, dtype=np.bool_)
