@@ -547,20 +547,20 @@ def test_an_open_gap_is_two_units_and_a_side_running_through_it_is_not():
 
 def test_two_units_are_judged_on_the_cheapest_supported_fit():
     """A moving seed seen from one side: a fit the wrong way round (its cab on the trailer's end,
-    unsupported) shows no gap; the right one, though it may cost more, shows the open gap between
-    cab and trailer: two units."""
+    unsupported) shows no gap, though it costs less; the right one shows the open gap between cab
+    and trailer: two units, that fit."""
     model = volvo()
     points = vehicle_points(model, 0.0, 5.0, 0.05, sensors=SENSORS[:1], spacing=0.15)
     right = fit(points, Prior(0.0, 5.0, 0.05, 0.0, model), PARAMS.articulated, iterations=20)
     back = -10.0 * np.array([np.cos(0.05), np.sin(0.05)]) + [0.0, 5.0]
-    wrong = fit(points, Prior(*back, 0.05 + np.pi, 0.0, model), PARAMS.articulated, iterations=20)
+    wrong = replace(fit(points, Prior(*back, 0.05 + np.pi, 0.0, model), PARAMS.articulated, iterations=20), cost=0.0)
     assert not _supported(wrong, model, 0.0) and not _gap_open(points, wrong, model, 0.0)
     tracker = VehicleTracker(PARAMS.articulated, PARAMS.vehicles)
     moving = Seed(np.array([2.0, 5.0]), np.array([0.0, 5.0]))
-    assert tracker._two_units([(model, wrong), (model, right)], points, moving, 0.0)
-    assert not tracker._two_units([(model, wrong)], points, moving, 0.0)
+    assert tracker._two_units([(model, -1.0, wrong), (model, 1.0, right)], points, moving, 0.0) == (model, right)
+    assert tracker._two_units([(model, -1.0, wrong)], points, moving, 0.0) is None
     standing = Seed(np.array([0.0, 5.0]), np.array([0.0, 5.0]))
-    assert not tracker._two_units([(model, right)], points, standing, 0.0)
+    assert tracker._two_units([(model, 1.0, right)], points, standing, 0.0) is None
 
 
 def test_a_moving_seed_that_fitted_one_box_is_fitted_again_before_the_map_is_ready():
@@ -642,3 +642,27 @@ def test_a_unit_whose_points_lie_mostly_under_its_floor_is_not_supported():
     low = np.random.default_rng(0).random(len(kerbs)) < 0.6
     kerbs[low, 2] = 0.2  # the same footprint, at kerb height
     assert not _supported(replace(m, points=kerbs), model, 0.0)
+
+
+def test_a_reach_that_stays_put_while_moving_is_the_trailers_end():
+    """Seen from one side the rear face never shows: the trailer's points reaching 10.5 m behind
+    its front frame after moving frame is its length (the prior, 13.68 m, was the catalogue's); a
+    reach that moves along the trailer (a shadow's edge) is not, nor are too few frames."""
+    from i2v_loc.stages.vehicle_tracker import STILL_END_FRAMES, _Extent
+
+    rng = np.random.default_rng(3)
+    still = _Extent(13.68, 50)
+    for k in range(STILL_END_FRAMES):
+        still.add_bound(10.1)
+        still.add_reach(10.5 + rng.uniform(-0.2, 0.2))
+        assert (still.still_end is None) == (k < STILL_END_FRAMES - 1)
+    assert still.measured == pytest.approx(10.5, abs=0.1) and still.estimate == still.measured
+    shadow = _Extent(13.68, 50)
+    for k in range(STILL_END_FRAMES):
+        shadow.add_reach(8.0 + 0.1 * k)  # 2 m over the frames
+    assert shadow.still_end is None and shadow.measured == 13.68
+    seen = _Extent(13.68, 50)
+    for _ in range(STILL_END_FRAMES):
+        seen.add(10.3)  # the rear face itself
+        seen.add_reach(10.5)
+    assert seen.measured == 10.3

@@ -133,3 +133,9 @@ def test_a_huge_or_infinite_region_is_refused_with_a_value_error(x_max_m):
     with pytest.raises(ValueError, match="max_voxels"):
         check_grid(BackgroundParams(), region)
     check_grid(BackgroundParams(), RegionParams())  # the default region fits
+
+
+def test_a_frame_says_whether_the_map_learned_from_it():
+    bg = BackgroundMap(BackgroundParams(enabled=True, **{**FAST, "learn_every_frames": 3}), REGION)
+    results = run(bg, [ground()] * 7)
+    assert [r.learned for r in results] == [True, False, False, True, False, False, True]

@@ -116,3 +116,25 @@ def test_analytic_jacobian_matches_finite_differences():
         ) / (2 * eps)
         same_face = np.abs(numeric) < 1e3  # a point switching faces inside the step has no derivative
         np.testing.assert_allclose(at.jacobian[same_face, k], numeric[same_face], atol=1e-5)
+
+
+def test_a_hidden_cab_is_not_measured_only_its_trailer_is():
+    """A cab hidden from every sensor: the fit's observed directions are the trailer's pose; turning
+    the cab about the kingpin (the trailer standing still) is none of them, whereas with the cab
+    seen all four directions are measured."""
+    model, hitch = volvo(), np.radians(30.0)
+    cab = tuple((0, f) for f in ("front", "rear", "left", "right", "roof"))
+    hidden = vehicle_points(model, *TRUTH, hitch, sensors=SENSORS, drop=cab)
+    prior = Prior(*TRUTH, hitch, model)
+    rows, noise = fit(hidden, prior, PARAMS.articulated).observed
+    assert rows.shape[0] == 3 and noise.shape == (3, 3)
+    m_kp, yaw = model.kingpin_behind_axle_m, TRUTH[2]
+    cab_turn = np.array([-m_kp * np.sin(yaw), m_kp * np.cos(yaw), 1.0, -1.0])  # kingpin, trailer fixed
+    trailer_yaw = np.array([0.0, 0.0, 0.0, 1.0])
+    assert np.all(np.abs(rows @ cab_turn) < 0.05 * np.linalg.norm(rows, axis=1) * np.linalg.norm(cab_turn))
+    assert np.abs(rows @ trailer_yaw).max() > 0.5 * np.linalg.norm(rows, axis=1).max()
+    seen = fit(vehicle_points(model, *TRUTH, hitch, sensors=SENSORS), prior, PARAMS.articulated)
+    assert seen.observed[0].shape[0] == 4
+    # all measured: the observed directions carry the covariance's information (the weak prior's aside)
+    information = seen.observed[0].T @ np.linalg.inv(seen.observed[1]) @ seen.observed[0]
+    assert np.allclose(np.linalg.inv(information), seen.covariance, rtol=0.05, atol=1e-6)

@@ -224,3 +224,24 @@ def test_the_compiled_kinematics_and_sigma_means_are_numpys(articulated):
     assert np.array_equal(
         propagate(edges, 0.0, -0.35, 7.9, articulated), ref_propagate(edges, 0.0, -0.35, 7.9, articulated)
     )
+
+
+def test_a_fit_fused_in_its_observed_directions_only():
+    """All four directions as rows are the full update; the trailer's yaw (yaw + hitch) alone is the
+    full update with a fit that says nothing in the other directions (a huge variance there)."""
+    truth = np.array([1.0, 2.0, 0.3, 0.5])  # x, y, tractor yaw, trailer yaw: hitch 0.2
+    z = np.array([1.01, 1.99, 0.302, 0.204])
+    filters = [new_filter(truth) for _ in range(4)]
+    for f in filters:
+        f.predict(0.1)
+    full, rows, trailer, vague = filters
+    assert full.update(z, R) and rows.update(z, R, (np.eye(4), R))
+    assert np.allclose(full.ukf.x, rows.ukf.x, atol=1e-12) and np.allclose(full.ukf.P, rows.ukf.P, atol=1e-15)
+    u = np.array([0.0, 0.0, 1.0, 1.0]) / np.sqrt(2.0)
+    basis = np.linalg.qr(np.column_stack([u, np.eye(4)[:, [0, 1, 2]]]))[0]  # u, then three orthogonal to it
+    before = trailer.ukf.x.copy()
+    assert trailer.update(z, R, (u[None, :], np.array([[1e-8]])))
+    assert vague.update(z, basis @ np.diag([1e-8, 1e8, 1e8, 1e8]) @ basis.T)
+    assert np.allclose(trailer.ukf.x, vague.ukf.x, rtol=1e-3, atol=1e-5)
+    assert np.allclose(trailer.ukf.P, vague.ukf.P, rtol=1e-3, atol=1e-6)
+    assert abs((trailer.ukf.x - before)[[0, 1, 2, HITCH]] @ u) > 0.003  # it moved towards the fit

@@ -61,3 +61,14 @@ def test_horizontal_ground_at_height_is_removed_with_the_threshold():
 def test_bounds_must_be_ordered():
     with pytest.raises(ParamsError, match="x_min_m"):
         apply_patch(Params(), {"region": {"x_min_m": 10, "x_max_m": 5}})
+
+
+def test_the_ground_is_refitted_every_n_frames_and_a_refit_due_on_a_busy_frame_waits_one():
+    region = Region(RegionParams(ground_refit_frames=3))
+    fitted = []
+    region.fit_ground = lambda points, in_region=None: fitted.append(frame) or "plane"
+    busy = {3, 7, 8}  # the background learned on these frames
+    for frame in range(12):
+        assert region.ground(np.zeros((0, 3)), None, busy=frame in busy) == "plane"
+    # frame 0: none yet; 3 is busy: 4; then 7 due but busy, 8 (one frame late) fits anyway; 11
+    assert fitted == [0, 4, 8, 11]

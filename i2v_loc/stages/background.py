@@ -81,6 +81,7 @@ def _padding(params: BackgroundParams) -> int:
 class BackgroundResult:
     in_region: np.ndarray  # (N,) bool: inside the region of interest (the grid)
     foreground: np.ndarray  # (N,) bool: in the region and not background (= in_region until the map is ready)
+    learned: bool = False  # the frame was a learning sample (the map's costlier frames)
 
 
 class BackgroundMap:
@@ -172,6 +173,7 @@ class BackgroundMap:
         elif learning:
             self._filling(index)
         self.frames_seen += 1
+        result.learned = learning
         return result
 
     def _filling(self, index: np.ndarray) -> None:

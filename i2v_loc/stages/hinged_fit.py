@@ -11,7 +11,10 @@ compiled loop (``kernels.irls``, the arithmetic of the numpy loop it replaced: t
 bit). (``scipy.optimize.least_squares`` with the same residuals, Jacobian and loss reaches the same
 poses, but its own overhead is about 1 ms per call, the whole budget of a vehicle's frame.) A weak prior term (one
 pseudo-point per parameter) keeps unobserved directions (the hitch when the trailer is hidden)
-at the prediction; the covariance then says they were not measured.
+at the prediction. What the filter fuses is what the points measured: the pose directions whose
+information, less the weak prior's, exceeds the prior's (``Measurement.observed``); the prior's own
+pseudo-measurement, fused every frame, would pin an unseen direction to the prediction (a cab hidden
+behind its trailer while reversing: its yaw followed the prediction's curvature, 60 deg off).
 """
 
 from __future__ import annotations
@@ -88,6 +91,8 @@ class Measurement:
     trailer_front_m: float | None = None  # fitted (Prior.free_kingpin), else None
     rear_points: int = 0  # explained points on the trailer's rear face
     face: np.ndarray | None = None  # (n,) int8: the face (FRONT, REAR, LEFT, RIGHT) whose plane it is on, else -1
+    # the directions of (x, y, yaw[, hitch]) the points measured, as rows (k, 4 or 3), and their noise (k, k)
+    observed: tuple[np.ndarray, np.ndarray] | None = None
 
     @property
     def vector(self) -> np.ndarray:
@@ -175,7 +180,9 @@ def fit(
     )  # fmt: skip
     at = _Faces(*found)
     cost = float(np.mean(np.log1p((at.residual / scale) ** 2))) * scale**2 / 2
-    covariance = _covariance(at, sigmas, params)
+    marginal = _covariance(at, sigmas, params)
+    floor = _floor(params, n_pose)
+    covariance = marginal + np.diag(floor**2)
     # explained: on a face, not only on its plane (a wall running on past a box's corner is no side of it)
     explained = at.distance <= params.fit_inlier_m
     unit = np.where(explained, at.unit, -1).astype(np.int8)
@@ -197,6 +204,7 @@ def fit(
         *kingpin,
         rear,
         face,
+        _observed(marginal, sigmas[:n_pose], floor),
     )
 
 
@@ -209,11 +217,10 @@ def _weak_prior_sigmas(prior: Prior) -> np.ndarray:
 
 
 def _covariance(at: _Faces, sigmas: np.ndarray, params: ArticulatedParams) -> np.ndarray:
-    """Gauss-Newton covariance with the Cauchy weights of the residuals, the noise from the
-    explained residuals, plus a floor (neighbouring points are not independent)."""
+    """Gauss-Newton covariance of the pose (the model's dimensions fitted too marginalised) with the
+    Cauchy weights of the residuals, the noise from the explained residuals and the weak prior."""
     scale = params.fit_loss_scale_m
-    position, angle = params.fit_position_floor_m, math.radians(params.fit_angle_floor_deg)
-    floor = np.array([position, position, angle, angle][: min(len(sigmas), 4)])
+    n_pose = min(len(sigmas), 4)
     return kernels.fit_covariance(
         at.residual,
         at.jacobian,
@@ -222,5 +229,24 @@ def _covariance(at: _Faces, sigmas: np.ndarray, params: ArticulatedParams) -> np
         params.fit_inlier_m,
         scale**2,
         params.fit_noise_floor_m**2,
-        floor,
+        np.zeros(n_pose),
     )
+
+
+def _floor(params: ArticulatedParams, n_pose: int) -> np.ndarray:
+    """The standard deviations added to the pose's (neighbouring points are not independent)."""
+    position, angle = params.fit_position_floor_m, math.radians(params.fit_angle_floor_deg)
+    return np.array([position, position, angle, angle][:n_pose])
+
+
+def _observed(marginal: np.ndarray, prior_sigmas: np.ndarray, floor: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The pose directions the points measured and their noise: the marginal information less the
+    weak prior's, in the prior's units (so that metres and radians compare), kept where it exceeds
+    the prior's own; the floor added to the noise."""
+    data = np.linalg.inv(marginal) - np.diag(1.0 / prior_sigmas**2)
+    whitened = prior_sigmas[:, None] * data * prior_sigmas[None, :]
+    values, vectors = np.linalg.eigh((whitened + whitened.T) / 2)
+    keep = values > 1.0
+    rows = vectors[:, keep].T / prior_sigmas[None, :]
+    noise = np.diag(1.0 / values[keep]) + (rows * floor**2) @ rows.T
+    return rows, noise

@@ -88,14 +88,18 @@ class _Ukf:
         self.x, self.P = _unscented_transform(sigmas, self.wm, self.wc, q, self.mean_x, self.residual_x)
         self.sigmas_f = self.sigma_points(self.x, self.P)
 
-    def update(self, z: np.ndarray, r: np.ndarray) -> None:
+    def update(self, z: np.ndarray, r: np.ndarray, rows: np.ndarray | None = None) -> None:
+        """Fuse ``z`` with noise ``r``; with ``rows`` (k, m) only those directions of z (r is k x k)."""
         sigmas_h = self.hx(self.sigmas_f)
-        zp, s = _unscented_transform(sigmas_h, self.wm, self.wc, r, self.mean_z, self.residual_z)
-        si = np.linalg.inv(s)
+        zp, s = _unscented_transform(sigmas_h, self.wm, self.wc, None, self.mean_z, self.residual_z)
         dx = self.residual_x(self.sigmas_f, self.x[None, :])
         pxz = (dx.T * self.wc) @ self.residual_z(sigmas_h, zp[None, :])
-        k = pxz @ si
         y = self.residual_z(z, zp)
+        if rows is not None:
+            s, pxz, y = rows @ s @ rows.T, pxz @ rows.T, rows @ y
+        s = s + r
+        si = np.linalg.inv(s)
+        k = pxz @ si
         self.x = self.x + k @ y
         self.P = self.P - k @ (s @ k.T)
         self.mahalanobis = math.sqrt(float((y.T @ si) @ y))
@@ -215,12 +219,18 @@ class KinematicFilter:
             self.stamp_s = stamp_s
         return self.state
 
-    def update(self, z: np.ndarray, r: np.ndarray) -> bool:
-        """Fuse one fit; False (state unchanged) when it lies outside the innovation gate. After
-        ``reset_after_rejections`` rejections in a row the fits are right and the prediction is not:
-        the pose and hitch restart from the fit (speed and curvature kept, their variance reset)."""
+    def update(self, z: np.ndarray, r: np.ndarray, observed: tuple[np.ndarray, np.ndarray] | None = None) -> bool:
+        """Fuse one fit, ``z`` with covariance ``r``, or only its ``observed`` directions (rows and
+        their noise: what its points measured); False (state unchanged) when it lies outside the
+        innovation gate. After ``reset_after_rejections`` rejections in a row the fits are right and
+        the prediction is not: the pose and hitch restart from the fit (speed and curvature kept,
+        their variance reset)."""
         x, p = self.ukf.x.copy(), self.ukf.P.copy()
-        self.ukf.update(np.asarray(z, dtype=float), r)
+        z = np.asarray(z, dtype=float)
+        if observed is None:
+            self.ukf.update(z, r)
+        else:
+            self.ukf.update(z, observed[1], observed[0])
         if self.ukf.mahalanobis**2 > self.params.innovation_gate:
             self.ukf.x, self.ukf.P = x, p
             self.rejected += 1

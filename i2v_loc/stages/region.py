@@ -57,14 +57,20 @@ class Region:
         kernels.warm_up()
 
     def process(
-        self, points: np.ndarray, in_region: np.ndarray | None = None, candidates: np.ndarray | None = None
+        self,
+        points: np.ndarray,
+        in_region: np.ndarray | None = None,
+        candidates: np.ndarray | None = None,
+        busy: bool = False,
     ) -> RegionResult:
         """Points inside the region and off the ground. ``in_region`` (bool mask) replaces the
         passthrough box; ``candidates`` (bool mask inside the region, e.g. the foreground) limits
-        which points are kept, while the ground is still fitted on the whole region."""
+        which points are kept, while the ground is still fitted on the whole region. ``busy``: an
+        earlier stage did costlier work this frame (the background map learned): a refit due now
+        waits one frame, so that the two never add up in one frame."""
         points = np.ascontiguousarray(points)
         in_region = self.roi_mask(points) if in_region is None else in_region
-        plane = self.ground(points, in_region)
+        plane = self.ground(points, in_region, busy)
         take = in_region if candidates is None else candidates
         if plane is None:
             index = np.flatnonzero(take)
@@ -78,11 +84,12 @@ class Region:
         # np.take: a quarter of the time of the fancy index on rows
         return RegionResult(np.take(points, index, axis=0), plane, roi_points, n_taken - n_kept, index)
 
-    def ground(self, points: np.ndarray, in_region: np.ndarray | None = None) -> GroundPlane | None:
+    def ground(self, points: np.ndarray, in_region: np.ndarray | None = None, busy: bool = False) -> GroundPlane | None:
         """The ground plane of the points in the region, refitted every ``ground_refit_frames`` frames
-        (and while none is found)."""
+        (and while none is found); a refit due on a ``busy`` frame waits one frame."""
         self._frames_since_fit += 1
-        if self._plane is None or self._frames_since_fit >= self.params.ground_refit_frames:
+        due = self._frames_since_fit >= self.params.ground_refit_frames + (1 if busy else 0)
+        if self._plane is None or due:
             self._plane = self.fit_ground(points, in_region)
             self._frames_since_fit = 0
         return self._plane

@@ -21,7 +21,7 @@ import numpy as np
 
 from i2v_loc.params import ArticulatedParams, VehicleConfig
 from i2v_loc.stages import kernels
-from i2v_loc.stages.hinged_fit import LEFT, REAR, RIGHT, TRAILER_LENGTH_RANGE_M, Measurement, Prior, fit
+from i2v_loc.stages.hinged_fit import LEFT, REAR, RIGHT, TRAILER_LENGTH_RANGE_M, Measurement, Prior, fit, thin
 from i2v_loc.stages.kinematic_filter import FilterState, KinematicFilter
 from i2v_loc.stages.primitives import Rect, grid_labels, median, min_area_rect, split_by_label, voxel_keys
 from i2v_loc.stages.vehicle_model import VehicleModel
@@ -49,8 +49,12 @@ GAP_FILL_RATIO = 0.5
 GAP_MIN_POINTS = 5
 GAP_OPEN_RATIO = 0.1  # a moving seed with so few points in its gap is two units, however well one box fits
 GAP_OPEN_MIN_POINTS = 10
+CAB_SLICE_MIN_M = 1.0
 LENGTH_CONVERGED_OBSERVATIONS = 5
 SETTLED_SLACK_M = 0.5
+STILL_END_FRAMES = 20  # moving frames whose reach must agree before it is taken as the unit's end
+STILL_END_SPREAD_M = 0.5  # a shadow's edge moves by metres over these frames; the thinned points' hindmost by 0.3 m
+STILL_END_MIN_SPEED_M_S = 0.5
 FACE_SEEN_SPAN = 0.6  # an end face is seen when its points span this share of the unit's width
 END_BAND_M = 0.4
 MAX_BODY_GAP_M = 1.0
@@ -132,7 +136,9 @@ class _Window(deque):
 class _Extent:
     """Per-frame observations of one dimension; the estimate is their median (the prior before any).
     Per-frame lower bounds (the unit reaches at least that far) count through their median too: a
-    dock's bumpers right behind a trailer reach on from it for some frames, then fall behind."""
+    dock's bumpers right behind a trailer reach on from it for some frames, then fall behind. A reach
+    that stays put while the unit moves (``add_reach``) is where it ends: the edge of a shadow moves
+    along a moving unit, its end does not (seen from one side, a trailer's rear face never shows)."""
 
     prior: float
     window: int
@@ -140,6 +146,7 @@ class _Extent:
     bounds: _Window = field(default_factory=_Window)
     median: float | None = None
     lower_bound: float = -np.inf
+    reaches: deque = field(default_factory=lambda: deque(maxlen=STILL_END_FRAMES))
 
     def add(self, value: float) -> None:
         self.median = _windowed_median(self.values, value, self.window)
@@ -147,14 +154,29 @@ class _Extent:
     def add_bound(self, value: float) -> None:
         self.lower_bound = _windowed_median(self.bounds, value, self.window)
 
+    def add_reach(self, value: float) -> None:
+        """How far the unit's points reach in a frame in which it moved."""
+        self.reaches.append(value)
+
+    @property
+    def still_end(self) -> float | None:
+        """The median reach of the last ``STILL_END_FRAMES`` moving frames if they spread at most
+        ``STILL_END_SPREAD_M``."""
+        if len(self.reaches) < STILL_END_FRAMES or np.ptp(self.reaches) > STILL_END_SPREAD_M:
+            return None
+        return float(np.median(self.reaches))
+
     @property
     def settled(self) -> bool:
         return len(self.values) >= LENGTH_CONVERGED_OBSERVATIONS
 
     @property
     def measured(self) -> float:
-        """The median, or the prior before any."""
-        return self.prior if self.median is None else self.median
+        """The median, else the end the moving unit's points kept reaching, else the prior."""
+        if self.median is not None:
+            return self.median
+        end = self.still_end
+        return self.prior if end is None else end
 
     @property
     def estimate(self) -> float:
@@ -267,7 +289,7 @@ class VehicleTracker:
         m = fit(points, prior, self.params) if len(points) else None
         measured = False
         if m is not None:
-            measured = track.filter.update(m.vector, m.covariance)
+            measured = track.filter.update(m.vector, m.covariance, m.observed)
             self.rejected += not measured
         if measured:
             track.missed, track.last = 0, m
@@ -386,6 +408,8 @@ class VehicleTracker:
                 track.trailer_length.add(length)
         bound = min(trailer.front_m - rear - END_BAND_M, MAX_TRAILER_LENGTH_M)
         track.trailer_length.add_bound(bound)
+        if abs(track.filter.state.speed_m_s) >= STILL_END_MIN_SPEED_M_S:
+            track.trailer_length.add_reach(min(trailer.front_m - rear, MAX_TRAILER_LENGTH_M))
 
     def _trailer_axle(self, track: _Track) -> float:
         """L2 scaled with the trailer's length behind the kingpin (the catalogue's proportion)."""
@@ -520,8 +544,9 @@ class VehicleTracker:
         if not hypotheses:
             return None
         choices = self._articulated_choices(hypotheses)
-        if may_be_rigid and not self._two_units(choices, cluster, seed, ground_z_m):
-            choices = [c for c in [self._choose(hypotheses, seed)] if c is not None]
+        if may_be_rigid:
+            two = self._two_units(hypotheses, cluster, seed, ground_z_m)
+            choices = [two] if two is not None else [c for c in [self._choose(hypotheses, seed)] if c is not None]
         for model, m in choices:
             seed.rigid = not model.articulated
             fit_moved = self._fit_moved(seed, m)  # its first rigid fit is remembered
@@ -541,16 +566,18 @@ class VehicleTracker:
         tops = [max(box.top_m for box in model.boxes) for model in self.catalogue.values() if model.articulated]
         return not tops or float(cluster[:, 2].max()) - ground_z_m >= min(tops) - LOW_SEED_SLACK_M
 
-    def _two_units(self, choices, cluster: np.ndarray, seed: Seed, ground_z_m: float) -> bool:
-        """A moving seed whose cheapest supported articulated fit shows an open gap between cab and
-        trailer: driving straight and seen from one side, a tractor and an unknown trailer fit one
-        box of their measured size better than any catalogue model, and started rigid (a model fitted
-        the wrong way round, its cab on a few of the trailer's points, may cost less)."""
+    def _two_units(
+        self, hypotheses, cluster: np.ndarray, seed: Seed, ground_z_m: float
+    ) -> tuple[VehicleModel, Measurement] | None:
+        """Of a moving seed, the cheapest supported articulated fit (either direction) if it shows an
+        open gap between cab and trailer: driving straight and seen from one side, a tractor and an
+        unknown trailer fit one box of their measured size better than any catalogue model, and
+        started rigid; the model the wrong way round, its cab on a few trailer points, may cost less."""
         if seed.travel_m < self.params.start_travel_m:
-            return False
-        supported = (c for c in choices if _supported(c[1], c[0], ground_z_m))
-        model, m = next(supported, (None, None))
-        return model is not None and _gap_open(cluster, m, model, ground_z_m)
+            return None
+        fits = sorted((h for h in hypotheses if h[0].articulated and self._unfolded(h[2])), key=lambda h: h[2].cost)
+        model, _, m = next((h for h in fits if _supported(h[2], h[0], ground_z_m)), (None, None, None))
+        return (model, m) if model is not None and _gap_open(cluster, m, model, ground_z_m) else None
 
     def _articulated_choices(self, hypotheses) -> list[tuple[VehicleModel, Measurement]]:
         """Each catalogue model's cheapest fit, cheapest first, none folded beyond the start limit."""
@@ -558,8 +585,10 @@ class VehicleTracker:
         for model, _, m in hypotheses:
             if model.articulated and (model.name not in best or m.cost < best[model.name][1].cost):
                 best[model.name] = (model, m)
-        limit = np.radians(self.params.start_max_hitch_deg)
-        return sorted((c for c in best.values() if abs(c[1].hitch_rad) <= limit), key=lambda c: c[1].cost)
+        return sorted((c for c in best.values() if self._unfolded(c[1])), key=lambda c: c[1].cost)
+
+    def _unfolded(self, m: Measurement) -> bool:
+        return abs(m.hitch_rad) <= np.radians(self.params.start_max_hitch_deg)
 
     def _track(
         self, track_id: int, model: VehicleModel, m: Measurement, ground_z_m: float, stamp_s: float, speed_m_s: float
@@ -624,13 +653,15 @@ class VehicleTracker:
         self, cluster: np.ndarray, rect: Rect, ground_z_m: float, may_be_rigid: bool
     ) -> list[tuple[VehicleModel, float, Measurement]]:
         """(model, direction sign, fit) of every catalogue vehicle in both directions (best start hitch
-        each) and, if ``may_be_rigid``, of one rigid box of the cluster's measured size."""
+        each) and, if ``may_be_rigid``, of one rigid box of the cluster's measured size. All are
+        fitted to the same thinned points (their costs are compared)."""
+        sample = thin(cluster, self.params.fit_max_points)
         out = []
         for model in self.catalogue.values():
             for sign in (1.0, -1.0):
                 coarse = [
                     fit(
-                        cluster,
+                        sample,
                         _placed(model, rect, sign, np.radians(h), ground_z_m),
                         self.params,
                         COARSE_ITERATIONS,
@@ -643,7 +674,7 @@ class VehicleTracker:
                     m = min(coarse, key=lambda m: m.cost)
                     sized = _with_trailer_length(model, m.trailer_length_m)
                     prior = Prior(m.x_m, m.y_m, m.yaw_rad, m.hitch_rad, sized, ground_z_m, 0.0, True)
-                    m = fit(cluster, prior, self.params, START_ITERATIONS, START_SCALE_M)
+                    m = fit(sample, prior, self.params, START_ITERATIONS, START_SCALE_M)
                     out.append((_with_trailer_length(model, m.trailer_length_m), sign, m))
         height = float(cluster[:, 2].max() - ground_z_m)
         if not (may_be_rigid and RIGID_MIN_WIDTH_M <= rect.width_m and height <= MAX_VEHICLE_HEIGHT_M):
@@ -652,7 +683,7 @@ class VehicleTracker:
         for sign in (1.0, -1.0):
             yaw = rect.yaw_rad + (0.0 if sign > 0 else np.pi)
             m = fit(
-                cluster,
+                sample,
                 Prior(*rect.center_xy, yaw, 0.0, rigid, ground_z_m),
                 self.params,
                 START_ITERATIONS,
@@ -714,23 +745,28 @@ def _gap_filled(cluster: np.ndarray, m: Measurement, model: VehicleModel, ground
     """A straight articulated vehicle seen from the side shows a gap between the cab's rear and the
     trailer's front above the chassis; a wall or a parked trailer's side runs on through it. The
     middle half of the gap, between the trailer's floor and the lower roof, holds more than
-    ``GAP_FILL_RATIO`` times the points of as long a slice of the cab just ahead of it (of at least
+    ``GAP_FILL_RATIO`` times the points per metre of a slice of the cab just ahead of it (of at least
     ``GAP_MIN_POINTS``)."""
     counts = _gap_counts(cluster, m, model, ground_z_m)
-    return counts is not None and counts[1] >= GAP_MIN_POINTS and counts[0] > GAP_FILL_RATIO * counts[1]
+    return counts is not None and counts[1] >= GAP_MIN_POINTS and counts[0] > GAP_FILL_RATIO * counts[1] * counts[2]
 
 
 def _gap_open(cluster: np.ndarray, m: Measurement, model: VehicleModel, ground_z_m: float) -> bool:
-    """The gap's middle (``_gap_filled``) holds at most ``GAP_OPEN_RATIO`` times the points of the
-    cab's slice, of at least ``GAP_OPEN_MIN_POINTS``: two units, not one long box."""
+    """The gap's middle (``_gap_filled``) holds at most ``GAP_OPEN_RATIO`` times the points per metre
+    of the cab's slice, of at least ``GAP_OPEN_MIN_POINTS``: two units, not one long box."""
     counts = _gap_counts(cluster, m, model, ground_z_m)
-    return counts is not None and counts[1] >= GAP_OPEN_MIN_POINTS and counts[0] <= GAP_OPEN_RATIO * counts[1]
+    return (
+        counts is not None and counts[1] >= GAP_OPEN_MIN_POINTS and counts[0] <= GAP_OPEN_RATIO * counts[1] * counts[2]
+    )
 
 
-def _gap_counts(cluster: np.ndarray, m: Measurement, model: VehicleModel, ground_z_m: float) -> tuple[int, int] | None:
-    """Points in the middle half of the model's gap between cab and trailer and in as long a slice
-    of the cab just ahead of it (between the trailer's floor and the lower roof, within the cab's
-    width); None unless articulated and nearly straight."""
+def _gap_counts(
+    cluster: np.ndarray, m: Measurement, model: VehicleModel, ground_z_m: float
+) -> tuple[int, int, float] | None:
+    """Points in the middle half of the model's gap between cab and trailer, in a slice of the cab
+    just ahead of it (as long, at least ``CAB_SLICE_MIN_M``: a gap of a metre leaves a slice of half
+    a metre, a handful of points) between the trailer's floor and the lower roof, within the cab's
+    width, and the gap's length over the slice's; None unless articulated and nearly straight."""
     if model.trailer is None or abs(m.hitch_rad) > GAP_TEST_MAX_HITCH_RAD:
         return None
     trailer_front = model.trailer.front_m - model.kingpin_behind_axle_m  # in the tractor's frame at hitch 0
@@ -738,14 +774,15 @@ def _gap_counts(cluster: np.ndarray, m: Measurement, model: VehicleModel, ground
     length = (cab_rear - trailer_front) / 2
     if length <= 0.0:
         return None
+    slice_m = max(length, CAB_SLICE_MIN_M)
     (q,) = unit_frames(cluster, m.vector, model.with_boxes(model.tractor, None))
     z_rel = cluster[:, 2] - ground_z_m
     band = (np.abs(q[:, 1]) <= model.tractor.width_m / 2) & (z_rel >= model.trailer.floor_m + END_BAND_M)
     band &= z_rel <= min(model.tractor.top_m, model.trailer.top_m) - END_BAND_M
     start = trailer_front + length / 2
     in_gap = int(np.sum(band & (q[:, 0] >= start) & (q[:, 0] <= start + length)))
-    in_cab = int(np.sum(band & (q[:, 0] >= cab_rear) & (q[:, 0] <= cab_rear + length)))
-    return in_gap, in_cab
+    in_cab = int(np.sum(band & (q[:, 0] >= cab_rear) & (q[:, 0] <= cab_rear + slice_m)))
+    return in_gap, in_cab, length / slice_m
 
 
 def _below_tall_structures(points: np.ndarray, ground, cell_m: float) -> np.ndarray:
