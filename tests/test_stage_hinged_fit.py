@@ -138,3 +138,23 @@ def test_a_hidden_cab_is_not_measured_only_its_trailer_is():
     # all measured: the observed directions carry the covariance's information (the weak prior's aside)
     information = seen.observed[0].T @ np.linalg.inv(seen.observed[1]) @ seen.observed[0]
     assert np.allclose(np.linalg.inv(information), seen.covariance, rtol=0.05, atol=1e-6)
+
+
+def test_the_observed_directions_are_the_data_information_less_the_prior():
+    """The compiled directions against the plain arithmetic: inverse covariance less the prior's
+    information, eigen-directions in the prior's units kept above the prior's own."""
+    from i2v_loc.stages.hinged_fit import _observed
+
+    rng = np.random.default_rng(5)
+    sigmas, floor = np.array([2.0, 2.0, 0.35, 0.52]), np.array([0.02, 0.02, 0.003, 0.003])
+    for _ in range(50):
+        a = rng.normal(size=(4, 4)) * rng.uniform(0.01, 3.0, 4)
+        data = a @ a.T  # some directions well seen, others hardly
+        marginal = np.linalg.inv(data + np.diag(1 / sigmas**2))
+        rows, noise = _observed(marginal, sigmas, floor)
+        values, vectors = np.linalg.eigh(sigmas[:, None] * data * sigmas[None, :])
+        keep = values > 1.0
+        assert rows.shape[0] == keep.sum()
+        want = (vectors[:, keep] / sigmas[:, None]) @ np.diag(values[keep]) @ (vectors[:, keep] / sigmas[:, None]).T
+        seen = rows.T @ np.linalg.inv(noise - (rows * floor**2) @ rows.T) @ rows
+        assert np.allclose(seen, want, rtol=1e-6, atol=1e-9 * np.abs(want).max())

@@ -242,11 +242,7 @@ def _floor(params: ArticulatedParams, n_pose: int) -> np.ndarray:
 def _observed(marginal: np.ndarray, prior_sigmas: np.ndarray, floor: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The pose directions the points measured and their noise: the marginal information less the
     weak prior's, in the prior's units (so that metres and radians compare), kept where it exceeds
-    the prior's own; the floor added to the noise."""
-    data = np.linalg.inv(marginal) - np.diag(1.0 / prior_sigmas**2)
-    whitened = prior_sigmas[:, None] * data * prior_sigmas[None, :]
-    values, vectors = np.linalg.eigh((whitened + whitened.T) / 2)
-    keep = values > 1.0
-    rows = vectors[:, keep].T / prior_sigmas[None, :]
-    noise = np.diag(1.0 / values[keep]) + (rows * floor**2) @ rows.T
-    return rows, noise
+    the prior's own; the floor added to the noise (``kernels.observed_directions``)."""
+    return kernels.observed_directions(
+        np.array(marginal, dtype=float), np.array(prior_sigmas, dtype=float), np.array(floor, dtype=float)
+    )

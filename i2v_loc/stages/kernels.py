@@ -990,6 +990,40 @@ def fit_covariance(residual, jacobian, prior_information, scale, inlier_m, no_in
     return out
 
 
+@njit(**_JIT)
+def observed_directions(marginal, prior_sigmas, floor):
+    """The pose directions a fit's points measured, as rows (k, n), and their noise (k, k): the
+    marginal covariance in the weak prior's units, W = C / (sigma sigma^T), has the data's
+    information inv(W) - I along its eigenvectors, 1 / w - 1; kept where that exceeds the prior's
+    own (1, so w < 0.5); the floor added to the noise."""
+    n = marginal.shape[0]
+    whitened = np.empty((n, n))
+    for i in range(n):
+        for j in range(n):
+            whitened[i, j] = (marginal[i, j] + marginal[j, i]) / 2 / (prior_sigmas[i] * prior_sigmas[j])
+    w, vectors = np.linalg.eigh(whitened)
+    k = 0
+    for i in range(n):
+        k += w[i] < 0.5
+    rows = np.empty((k, n))
+    information = np.empty(k)
+    r = 0
+    for i in range(n):
+        if w[i] < 0.5:
+            information[r] = 1.0 / w[i] - 1.0
+            for j in range(n):
+                rows[r, j] = vectors[j, i] / prior_sigmas[j]
+            r += 1
+    noise = np.empty((k, k))
+    for a in range(k):
+        for b in range(k):
+            total = 0.0
+            for j in range(n):
+                total += rows[a, j] * floor[j] * floor[j] * rows[b, j]
+            noise[a, b] = total + (1.0 / information[a] if a == b else 0.0)
+    return rows, noise
+
+
 # ----------------------------------------------------------------------------- vehicle seeds
 
 
@@ -1221,6 +1255,7 @@ def warm_up() -> None:
     ranges = np.array([2.0, 16.5, -1.5, 1.5])
     _, residual, jacobian, _, _, _ = irls(xy, z, geometry, 0.25, 4, True, True, v0, np.ones(7), 0.1, 0.2, 2, ranges)
     fit_covariance(residual, jacobian, np.ones(7), 0.1, 0.3, 0.01, 0.0004, np.ones(4))
+    observed_directions(np.eye(4), np.ones(4), np.ones(4))
     fit_faces(xy, z, geometry, 0.25, 4, True, True, v0)  # the tests call it on its own
     any_closer(xy, xy, 0.5)
     join_parts(xy, np.array([0, 1, 3]), 0.5)

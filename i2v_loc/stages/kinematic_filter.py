@@ -249,6 +249,10 @@ class KinematicFilter:
         self.ukf.x[Y] += forward_m * np.sin(yaw)
 
     @property
+    def speed_m_s(self) -> float:
+        return float(self.ukf.x[SPEED])
+
+    @property
     def state(self) -> FilterState:
         x = self.ukf.x
         rate = (

@@ -408,7 +408,7 @@ class VehicleTracker:
                 track.trailer_length.add(length)
         bound = min(trailer.front_m - rear - END_BAND_M, MAX_TRAILER_LENGTH_M)
         track.trailer_length.add_bound(bound)
-        if abs(track.filter.state.speed_m_s) >= STILL_END_MIN_SPEED_M_S:
+        if abs(track.filter.speed_m_s) >= STILL_END_MIN_SPEED_M_S:
             track.trailer_length.add_reach(min(trailer.front_m - rear, MAX_TRAILER_LENGTH_M))
 
     def _trailer_axle(self, track: _Track) -> float:
