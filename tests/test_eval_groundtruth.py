@@ -287,3 +287,18 @@ def test_openlabel_relations_pair_units_instead_of_distance(tmp_path):
         for v in line["vehicles"]
         if v["truck"] is not None
     ) == [(0.0, -7.0), (30.0, None)]
+
+
+def test_a_sensor_subset_sees_a_unit_by_its_own_sensors_points():
+    truck = {**_unit(0, 0, 90.0), "points": 300, "points_by_sensor": {"l1": 0, "l2": 250, "l3": 50}}
+    trailer = {**_unit(0, -8, 90.0), "points": 900, "points_by_sensor": {"l1": 400, "l2": 500, "l3": 0}}
+    lines = [
+        {"frame": 0, "stamp_s": 0.0, "vehicles": [{"id": 1, "vehicle": "volvo_fh", "truck": truck, "trailer": trailer}]}
+    ]
+    (line,) = gtm.seen_by(lines, ["l1"])
+    assert line["vehicles"][0]["truck"]["points"] == 0 and line["vehicles"][0]["trailer"]["points"] == 400
+    (line,) = gtm.seen_by(lines, ["l2", "l3"])
+    assert line["vehicles"][0]["truck"]["points"] == 300 and line["vehicles"][0]["trailer"]["points"] == 500
+    assert lines[0]["vehicles"][0]["truck"]["points"] == 300  # the lines themselves unchanged
+    plain = [{"frame": 0, "stamp_s": 0.0, "vehicles": [{"id": 1, "truck": _unit(0, 0, 90.0, points=42)}]}]
+    assert gtm.seen_by(plain, ["l1"])[0]["vehicles"][0]["truck"]["points"] == 42  # no per-sensor counts: kept

@@ -185,3 +185,14 @@ def test_length_errors_are_medians_over_settled_tracks_only():
         state["vehicles"][0]["id"] = 8  # a new track at 10 s: never 10 s old
     s = _summary(states, truth)
     assert math.isnan(s["truck_length_error_m"]) and math.isnan(s["trailer_length_error_m"])
+
+
+def test_the_hitch_where_seen_leaves_out_the_frames_a_unit_was_hidden():
+    """Both units reported in every frame, the trailer hidden (10 points) in frames 0 and 1 where
+    its reported yaw is 5 deg off (a prediction): the hitch RMSE counts them, the one where seen
+    does not."""
+    truth = _truth(trailer_points=lambda k: 10 if k < 2 else 500)
+    off = (TRAILER[0], TRAILER[1], TRAILER[2] + 5.0)
+    s = _summary([_estimate(k, trailer=off if k < 2 else TRAILER) for k in range(N)], truth)
+    assert s["hitch_rmse_deg"] == pytest.approx(math.sqrt(2 * 25.0 / N), abs=1e-6)
+    assert s["hitch_rmse_seen_deg"] == pytest.approx(0.0, abs=1e-9)

@@ -177,3 +177,20 @@ def test_footprint_points_fill_rotated_rectangles_one_or_many():
     many = footprint_points([[10.0, 5.0], [0.0, 0.0]], 4.0, 2.0, [math.pi / 2, 0.0], step_m=1.0)
     np.testing.assert_allclose(many[:15], one)
     np.testing.assert_allclose(many[15:], footprint_points((0.0, 0.0), 4.0, 2.0, 0.0, step_m=1.0))
+
+
+def test_ground_truth_counts_each_units_points_per_sensor(recording):
+    """Per sensor: the points of that sensor's sweep inside the unit's box, as for the total."""
+    params = load_params(recording.sensors_file)
+    k = 5
+    frame, gt = recording.frame(k), recording.ground_truth()[k]
+    v = gt["vehicles"][0]
+    for unit in ("truck", "trailer"):
+        by_sensor = v[unit]["points_by_sensor"]
+        assert set(by_sensor) == set(frame.scans) and sum(by_sensor.values()) == v[unit]["points"]
+        dims = v[unit]
+        for name, scan in frame.scans.items():
+            pts = transform_points(extrinsics_matrix(params.sensor(name).extrinsics), scan.points.astype(float))
+            local = transform_points(np.linalg.inv(pose_matrix(*dims["center"], 0, 0, dims["yaw_deg"])), pts)
+            inside = int(np.all(np.abs(local) <= np.array(dims["dimensions"]) / 2 + 0.2, axis=1).sum())
+            assert 0.7 * by_sensor[name] - 5 <= inside <= 1.1 * by_sensor[name] + 5, (unit, name)

@@ -91,6 +91,23 @@ def interpolate_ground_truth(
     return {"frame": nearer.get("frame"), "stamp_s": stamp_s, "vehicles": vehicles}
 
 
+def seen_by(lines: list[dict], sensors) -> list[dict]:
+    """The GT lines with each unit's ``points`` those of ``sensors`` only (a unit's
+    ``points_by_sensor``, as the simulator writes it; a unit without it keeps its count): a
+    subset of the LiDARs sees a unit only where its own sensors return points from it."""
+    chosen = set(sensors)
+
+    def unit(u):
+        if not u or "points_by_sensor" not in u:
+            return u
+        return {**u, "points": sum(n for name, n in u["points_by_sensor"].items() if name in chosen)}
+
+    def vehicle(v):
+        return {**v, **{k: unit(v.get(k)) for k in UNITS if k in v}}
+
+    return [{**line, "vehicles": [vehicle(v) for v in line.get("vehicles", [])]} for line in lines]
+
+
 # --------------------------------------------------------------------------- loaders
 
 

@@ -75,7 +75,7 @@ def run_pipeline(task: Task) -> list[dict]:
 def run_task(task: Task) -> dict:
     """Run one task: the pipeline, then the comparison. Returns records and frame rows tagged
     with the task's method, subset, recording and tag."""
-    from i2v_loc.evaluation.groundtruth import load_ground_truth
+    from i2v_loc.evaluation.groundtruth import load_ground_truth, seen_by
     from i2v_loc.evaluation.matching import match_states
 
     try:
@@ -85,6 +85,8 @@ def run_task(task: Task) -> dict:
             gt_lines = load_ground_truth(task.labels, rate_hz=open_recording(task.recording).rate_hz)
         else:
             gt_lines = load_ground_truth(task.recording)
+        if task.sensors:
+            gt_lines = seen_by(gt_lines, task.sensors)
         states = run_pipeline(task)
         params = recording_params(task.params, task.recording, task.sensors)
         records, frames = match_states(states, gt_lines, params, task.gate_m)

@@ -349,17 +349,19 @@ def _rounded(values, digits: int):
     return [_rounded(v, digits) for v in values]
 
 
-def _unit_gt(pose: np.ndarray, velocity_xy, unit, points: int) -> dict:
+def _unit_gt(pose: np.ndarray, velocity_xy, unit, by_sensor: dict[str, int]) -> dict:
     return {
         "center": _rounded(pose[:3, 3], 4),
         "dimensions": [unit.length_m, unit.width_m, unit.height_m],
         "yaw_deg": _rounded(_yaw_deg(pose), 4),
         "velocity": _rounded(velocity_xy, 4),
-        "points": int(points),
+        "points": int(sum(by_sensor.values())),
+        "points_by_sensor": {name: int(n) for name, n in by_sensor.items()},
     }
 
 
-def ground_truth_line(sim: Simulation, frame: int, counts: dict[int, int]) -> dict:
+def ground_truth_line(sim: Simulation, frame: int, counts: dict[str, dict[int, int]]) -> dict:
+    """The truth at frame ``frame``; ``counts``: per sensor, the returns of each unit (id 2 v, 2 v + 1)."""
     t = frame / sim.rate_hz
     dt = 0.02
     vehicles = []
@@ -368,13 +370,16 @@ def ground_truth_line(sim: Simulation, frame: int, counts: dict[int, int]) -> di
         truck, trailer = sim.tilt @ truck, sim.tilt @ trailer
         t_truck, t_trailer = truck[1], trailer[1]
         truck_gt = _unit_gt(
-            t_truck, (truck[2, :2, 3] - truck[0, :2, 3]) / (2 * dt), v.config.truck, counts.get(2 * v.vehicle_id, 0)
+            t_truck,
+            (truck[2, :2, 3] - truck[0, :2, 3]) / (2 * dt),
+            v.config.truck,
+            {name: c.get(2 * v.vehicle_id, 0) for name, c in counts.items()},
         )
         trailer_gt = _unit_gt(
             t_trailer,
             (trailer[2, :2, 3] - trailer[0, :2, 3]) / (2 * dt),
             v.config.trailer,
-            counts.get(2 * v.vehicle_id + 1, 0),
+            {name: c.get(2 * v.vehicle_id + 1, 0) for name, c in counts.items()},
         )
         vehicles.append(
             {
@@ -409,15 +414,14 @@ def simulate(cfg: SimConfig, progress=None) -> tuple[Simulation, dict[str, Senso
     stamps = {lidar.name: np.zeros(sim.n_frames, dtype=np.int64) for lidar in sim.lidars}
     gt = []
     for k in range(sim.n_frames):
-        counts: dict[int, int] = {}
+        counts: dict[str, dict[int, int]] = {}
         for lidar in sim.lidars:
             sweep_start = k / sim.rate_hz + lidar.phase_s
             measured, hit = sim.caster.measure(lidar, sweep_start, rng_noise)
             ranges[lidar.name][k] = meters_to_range_mm(measured)
             hit = np.where(ranges[lidar.name][k] > 0, hit, -2)
             ids, n = np.unique(hit[hit >= 0], return_counts=True)
-            for i, c in zip(ids, n):
-                counts[int(i)] = counts.get(int(i), 0) + int(c)
+            counts[lidar.name] = {int(i): int(c) for i, c in zip(ids, n)}
             stamps[lidar.name][k] = int(round((sweep_start + lidar.clock_offset_s) * 1e9))
         gt.append(ground_truth_line(sim, k, counts))
         if progress is not None:
