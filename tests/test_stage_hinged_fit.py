@@ -62,7 +62,19 @@ def test_fit_with_one_face_occluded(hitch_deg, face):
 
 @pytest.mark.parametrize("name, hitch_tol_deg", [("man_tgx", 0.3), ("twizy", 0.5)])  # the Twizy's trailer is 2.5 m long
 def test_semitrailer_and_drawbar_trailer_at_45_deg(name, hitch_tol_deg):
-    check(VehicleModel.from_config(name, PARAMS.vehicles[name]), 45.0, hitch_tol_deg=hitch_tol_deg)
+    """Over ten noise draws: one draw moves the Twizy's 2 m car's yaw by up to 0.45 deg (the even
+    thinning's too), so the errors are judged as RMS, each draw's position within 3 cm."""
+    model, hitch = VehicleModel.from_config(name, PARAMS.vehicles[name]), np.radians(45.0)
+    dx, dy, dyaw, dhitch = PRIOR_OFFSET
+    prior = Prior(TRUTH[0] + dx, TRUTH[1] + dy, TRUTH[2] + dyaw, hitch + dhitch, model)
+    errors = []
+    for seed in range(10):
+        points = vehicle_points(model, *TRUTH, hitch, sensors=SENSORS, seed=1000 + seed)
+        m = fit(points, prior, PARAMS.articulated, iterations=20)
+        assert np.hypot(m.x_m - TRUTH[0], m.y_m - TRUTH[1]) < 0.03 and np.mean(m.explained) > 0.95
+        errors.append((np.degrees(m.yaw_rad - TRUTH[2]), np.degrees(m.hitch_rad - hitch)))
+    yaw_rms, hitch_rms = np.sqrt(np.mean(np.square(errors), axis=0))
+    assert yaw_rms < 0.25 and hitch_rms < hitch_tol_deg
 
 
 def test_rigid_vehicle_fit():
