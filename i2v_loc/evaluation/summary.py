@@ -109,7 +109,7 @@ def summarize(records: list[dict], frame_rows: list[dict]) -> dict:
     out["hitch_rmse_deg"] = m.rmse(hitch)
     out["hitch_frames"] = int(np.isfinite(hitch).sum())
     # the frames where both units were seen (each had its points; with a sensor subset, the subset's)
-    out["hitch_rmse_seen_deg"] = m.rmse(hitch[visible]) if len(hitch) else float("nan")
+    out["hitch_rmse_seen_deg"] = m.rmse(hitch[visible])
     for prefix, label in (("dcap", ""), ("static", "static_")):
         dt = column(gt, f"{prefix}_dT_m")
         ok = np.isfinite(dt)

@@ -216,7 +216,7 @@ class ArticulatedPipeline(ParameterHandoff):
                 box.width_m / 2 + MOTION_MARGIN_M,
                 tuple(v),
                 rate,
-                age_s if np.isfinite(age_s) else float("nan"),
+                age_s,
             )
             for c, yaw, box, v, rate, _, _ in units
             if np.hypot(*v) >= MIN_MOTION_SPEED_M_S

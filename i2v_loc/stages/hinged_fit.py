@@ -220,7 +220,6 @@ def _covariance(at: _Faces, sigmas: np.ndarray, params: ArticulatedParams) -> np
     """Gauss-Newton covariance of the pose (the model's dimensions fitted too marginalised) with the
     Cauchy weights of the residuals, the noise from the explained residuals and the weak prior."""
     scale = params.fit_loss_scale_m
-    n_pose = min(len(sigmas), 4)
     return kernels.fit_covariance(
         at.residual,
         at.jacobian,
@@ -229,7 +228,7 @@ def _covariance(at: _Faces, sigmas: np.ndarray, params: ArticulatedParams) -> np
         params.fit_inlier_m,
         scale**2,
         params.fit_noise_floor_m**2,
-        np.zeros(n_pose),
+        min(len(sigmas), 4),
     )
 
 
@@ -243,6 +242,5 @@ def _observed(marginal: np.ndarray, prior_sigmas: np.ndarray, floor: np.ndarray)
     """The pose directions the points measured and their noise: the marginal information less the
     weak prior's, in the prior's units (so that metres and radians compare), kept where it exceeds
     the prior's own; the floor added to the noise (``kernels.observed_directions``)."""
-    return kernels.observed_directions(
-        np.array(marginal, dtype=float), np.array(prior_sigmas, dtype=float), np.array(floor, dtype=float)
-    )
+    # the prior's sigmas may be a slice of the read-only WEAK_PRIOR_SIGMAS: a writable copy, one kernel type
+    return kernels.observed_directions(marginal, np.array(prior_sigmas, dtype=float), floor)

@@ -958,11 +958,11 @@ def _cauchy_weighted(jacobian, residual, scale):
 
 
 @njit(**_JIT)
-def fit_covariance(residual, jacobian, prior_information, scale, inlier_m, no_inlier_noise2, noise_floor2, floor):
-    """The hinged fit's covariance of its first ``floor.shape[0]`` parameters: Gauss-Newton with
-    the Cauchy weights of the residuals and the noise of the inliers' residuals (their median
-    square / 0.455, else ``no_inlier_noise2``; at least ``noise_floor2``), plus the weak prior
-    (``prior_information``: its diagonal, 1 / sigma^2), plus ``floor`` squared on the diagonal.
+def fit_covariance(residual, jacobian, prior_information, scale, inlier_m, no_inlier_noise2, noise_floor2, k):
+    """The hinged fit's covariance of its first ``k`` parameters (the others marginalised):
+    Gauss-Newton with the Cauchy weights of the residuals and the noise of the inliers' residuals
+    (their median square / 0.455, else ``no_inlier_noise2``; at least ``noise_floor2``), plus the
+    weak prior (``prior_information``: its diagonal, 1 / sigma^2).
     numpy's order of operations; the inverse as numpy takes it (LAPACK gesv against the identity)."""
     n, n_params = jacobian.shape
     squares = np.empty(n)
@@ -983,11 +983,7 @@ def fit_covariance(residual, jacobian, prior_information, scale, inlier_m, no_in
     for j in range(n_params):
         info[j, j] += prior_information[j]
     covariance = np.linalg.solve(info, np.eye(n_params))
-    k = floor.shape[0]
-    out = covariance[:k, :k].copy()
-    for j in range(k):
-        out[j, j] += floor[j] * floor[j]
-    return out
+    return covariance[:k, :k].copy()
 
 
 @njit(**_JIT)
@@ -1254,7 +1250,7 @@ def warm_up() -> None:
     geometry = np.r_[np.zeros(5), 0.0, np.tile([2.0, 4.0, 2.0, 0.5, 3.0], 2)]
     ranges = np.array([2.0, 16.5, -1.5, 1.5])
     _, residual, jacobian, _, _, _ = irls(xy, z, geometry, 0.25, 4, True, True, v0, np.ones(7), 0.1, 0.2, 2, ranges)
-    fit_covariance(residual, jacobian, np.ones(7), 0.1, 0.3, 0.01, 0.0004, np.ones(4))
+    fit_covariance(residual, jacobian, np.ones(7), 0.1, 0.3, 0.01, 0.0004, 4)
     observed_directions(np.eye(4), np.ones(4), np.ones(4))
     fit_faces(xy, z, geometry, 0.25, 4, True, True, v0)  # the tests call it on its own
     any_closer(xy, xy, 0.5)

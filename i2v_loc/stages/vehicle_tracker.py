@@ -498,7 +498,7 @@ class VehicleTracker:
 
     def _may_start(self, seed: Seed, rigid_allowed: bool) -> bool:
         """A rigid seed once the background is learned and it moved."""
-        return not seed.rigid or (rigid_allowed and seed.travel_m >= self.params.start_travel_m)
+        return self._may_fit(seed) and (rigid_allowed or not seed.rigid)
 
     def _seed_clusters(self, points: np.ndarray, ground) -> list[tuple[np.ndarray, Rect]]:
         """Connected components tall enough to be a vehicle, those closer than ``start_join_m`` joined
