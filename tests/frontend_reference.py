@@ -168,6 +168,7 @@ class BackgroundMap:
         self.dilated[~inside.ravel()] = OUTSIDE
         self.history = deque()
         self.frames_seen = 0
+        self.pending = None
 
     samples = property(lambda self: len(self.history))
     ready = property(lambda self: self.samples >= self.params.min_samples)
@@ -190,11 +191,14 @@ class BackgroundMap:
         columns = index // self.padded[2]
         if len(protected) and self.ready:
             foreground |= in_region & self._protected_columns(protected, self.params.keep_margin_m)[columns]
+        pending, self.pending = self.pending, None
         if self.frames_seen % self.params.learn_every_frames == 0:
             learn = in_region
             if len(protected):
                 learn = learn & ~self._protected_columns(protected, self.params.protect_margin_m)[columns]
-            self.learn(index[learn])
+            self.pending = index[learn]  # counted in on the next frame
+        if pending is not None:
+            self.learn(pending)
         self.frames_seen += 1
         return in_region, foreground
 

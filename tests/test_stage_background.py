@@ -135,7 +135,11 @@ def test_a_huge_or_infinite_region_is_refused_with_a_value_error(x_max_m):
     check_grid(BackgroundParams(), RegionParams())  # the default region fits
 
 
-def test_a_frame_says_whether_the_map_learned_from_it():
+def test_a_learning_frames_sample_is_counted_in_on_the_next_frame():
     bg = BackgroundMap(BackgroundParams(enabled=True, **{**FAST, "learn_every_frames": 3}), REGION)
-    results = run(bg, [ground()] * 7)
-    assert [r.learned for r in results] == [True, False, False, True, False, False, True]
+    samples = []
+    for _ in range(7):
+        bg.process(ground().astype(np.float32))
+        samples.append(bg.samples)
+    assert samples == [0, 1, 1, 1, 2, 2, 2]
+    assert bg.counts.max() == 2 and np.count_nonzero(bg.counts) == len(ground())  # every point its own voxel

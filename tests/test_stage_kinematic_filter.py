@@ -140,10 +140,12 @@ def test_the_filter_computes_what_filterpys_ukf_computes(articulated):
     rng = np.random.default_rng(7)
     z0, r = np.array([1.0, 2.0, 0.3, 0.1])[:n_z], np.diag([0.01, 0.01, 1e-4, 1e-4][:n_z])
     ours = kf.KinematicFilter(z0, r, 0.0, -0.3, 7.0, articulated, PARAMS.articulated, 1.0)
-    points = MerweScaledSigmaPoints(6, alpha=0.3, beta=2.0, kappa=0.0, sqrt_method=kf._sqrt)
+    points = MerweScaledSigmaPoints(6, alpha=0.3, beta=2.0, kappa=0.0, sqrt_method=lambda p: np.linalg.cholesky(p).T)
+    measured, z_angles = ([0, 1, 2, HITCH], [2, 3]) if articulated else ([0, 1, 2], [2])
     theirs = UnscentedKalmanFilter(
-        6, n_z, 0.1, lambda x: ours._hx(x), lambda x, dt: ours._fx(x, dt), points,
-        x_mean_fn=kf._mean_x, z_mean_fn=kf._mean_z, residual_x=kf._residual_x, residual_z=kf._residual_z,
+        6, n_z, 0.1, lambda x: x[measured], lambda x, dt: propagate(x, dt, -0.3, 7.0, articulated), points,
+        x_mean_fn=lambda s, w: ref_mean(s, w, [2, HITCH]), z_mean_fn=lambda s, w: ref_mean(s, w, z_angles),
+        residual_x=lambda a, b: ref_residual(a, b, [2, HITCH]), residual_z=lambda a, b: ref_residual(a, b, z_angles),
     )  # fmt: skip
     theirs.x, theirs.P = ours.ukf.x.copy(), ours.ukf.P.copy()
     for k in range(1, 120):
@@ -164,6 +166,20 @@ def test_the_filter_computes_what_filterpys_ukf_computes(articulated):
 
 def ref_wrap(angle):
     return (angle + np.pi) % (2 * np.pi) - np.pi
+
+
+def ref_mean(sigmas, weights, angles):
+    """The weighted mean of the rows, the angle columns on the circle (filterpy's recipe)."""
+    mean = weights @ sigmas
+    for i in angles:
+        mean[i] = np.arctan2(weights @ np.sin(sigmas[:, i]), weights @ np.cos(sigmas[:, i]))
+    return mean
+
+
+def ref_residual(a, b, angles):
+    d = np.subtract(a, b)
+    d[..., angles] = ref_wrap(d[..., angles])
+    return d
 
 
 def ref_derivative(s, kingpin_m, trailer_axle_m, articulated):
@@ -191,7 +207,6 @@ def ref_propagate(state, dt_s, kingpin_m, trailer_axle_m, articulated):
 @pytest.mark.parametrize("articulated", [True, False])
 def test_the_compiled_kinematics_and_sigma_means_are_numpys(articulated):
     from i2v_loc.stages import kernels
-    from i2v_loc.stages import kinematic_filter as kf
 
     rng = np.random.default_rng(11)
     for _ in range(200):
@@ -206,24 +221,35 @@ def test_the_compiled_kinematics_and_sigma_means_are_numpys(articulated):
         assert np.array_equal(propagate(states, dt, -0.35, 7.9, articulated), want)
         assert np.array_equal(propagate(states[3], dt, -0.35, 7.9, articulated), want[3])
         weights = rng.normal(size=13)
-        mean = weights @ want
-        for i in (2, HITCH):
-            mean[i] = np.arctan2(weights @ np.sin(want[:, i]), weights @ np.cos(want[:, i]))
+        mean = ref_mean(want, weights, [2, HITCH])
         # a weighted sum through BLAS: numpy's and scipy's builds part by 1e-15 on an AVX-512 Xeon
-        assert np.allclose(kf._mean_x(want, weights), mean, rtol=1e-12, atol=1e-12)
-        d = np.subtract(want, states[:1])
-        d[:, [2, HITCH]] = ref_wrap(d[:, [2, HITCH]])
-        assert np.array_equal(kf._residual_x(want, states[:1]), d)
+        assert np.allclose(kernels.angle_mean(want, weights, np.array([2, HITCH])), mean, rtol=1e-12, atol=1e-12)
+        assert np.array_equal(
+            kernels.angle_residuals(want, states[:1], np.array([2, HITCH])), ref_residual(want, states[:1], [2, HITCH])
+        )
         z = np.ascontiguousarray(want[:, [0, 1, 2, HITCH]] if articulated else want[:, :3])
         dz = np.subtract(z, z[4])
         dz[:, 2:] = ref_wrap(dz[:, 2:])
-        assert np.array_equal(kf._residual_z(z, z[4][None, :]), dz)
-        assert np.array_equal(kf._residual_z(z[1], z[4]), dz[1])
+        assert np.array_equal(kernels.angle_residuals(z, z[4][None, :], np.arange(2, z.shape[1])), dz)
     # the wrap's edges: exactly +-pi and beyond several turns
     edges = np.array([[0.0, 0.0, np.pi, 0.0, 0.0, -np.pi], [1.0, 0.0, 7 * np.pi, 0.0, 0.0, -1e-300]])
     assert np.array_equal(
         propagate(edges, 0.0, -0.35, 7.9, articulated), ref_propagate(edges, 0.0, -0.35, 7.9, articulated)
     )
+
+
+def test_the_sigma_points_factor_is_choleskys_and_survives_a_covariance_rounded_indefinite():
+    from i2v_loc.stages import kernels
+
+    rng = np.random.default_rng(3)
+    a = rng.normal(size=(6, 6))
+    p = a @ a.T + 0.1 * np.eye(6)
+    assert np.allclose(kernels.upper_factor(p), np.linalg.cholesky(p).T, rtol=1e-12, atol=1e-14)
+    v, _ = np.linalg.qr(a)
+    indefinite = (v * np.array([4.0, 1.0, 0.5, 0.1, 1e-3, -1e-9])) @ v.T  # one eigenvalue rounded below 0
+    u = kernels.upper_factor(indefinite)
+    clipped = (v * np.array([4.0, 1.0, 0.5, 0.1, 1e-3, 1e-12])) @ v.T
+    assert np.allclose(u.T @ u, clipped, atol=1e-12)
 
 
 def test_a_fit_fused_in_its_observed_directions_only():

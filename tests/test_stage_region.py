@@ -63,12 +63,17 @@ def test_bounds_must_be_ordered():
         apply_patch(Params(), {"region": {"x_min_m": 10, "x_max_m": 5}})
 
 
-def test_the_ground_is_refitted_every_n_frames_and_a_refit_due_on_a_busy_frame_waits_one():
+def test_the_ground_is_fitted_until_found_then_refitted_every_n_frames_over_two_frames():
+    """The sample on one frame, RANSAC on it on the next; a refit that finds no ground starts over."""
     region = Region(RegionParams(ground_refit_frames=3))
-    fitted = []
-    region.fit_ground = lambda points, in_region=None: fitted.append(frame) or "plane"
-    busy = {3, 7, 8}  # the background learned on these frames
-    for frame in range(12):
-        assert region.ground(np.zeros((0, 3)), None, busy=frame in busy) == "plane"
-    # frame 0: none yet; 3 is busy: 4; then 7 due but busy, 8 (one frame late) fits anyway; 11
-    assert fitted == [0, 4, 8, 11]
+    sampled, fitted = [], []
+    region._sample = lambda points, in_region: sampled.append(frame) or frame
+    region._fit = lambda sample: fitted.append((frame, sample)) or (None if frame in (0, 1, 9) else "plane")
+    planes = []
+    for frame in range(15):  # noqa: B007 (the lambdas read it)
+        planes.append(region.ground(np.zeros((0, 3)), None))
+    # 0, 1: none found, fitted on the frame itself; 2 found; 5 sampled, 6 fitted on it; 9's fit of
+    # 8's sample finds none: 10 fits its own; 13 sampled, 14 fitted
+    assert sampled == [0, 1, 2, 5, 8, 10, 13]
+    assert fitted == [(0, 0), (1, 1), (2, 2), (6, 5), (9, 8), (10, 10), (14, 13)]
+    assert planes[:2] == [None, None] and planes[9] is None and planes[10] == planes[14] == "plane"

@@ -107,7 +107,7 @@ class ArticulatedPipeline(ParameterHandoff):
         units = list(self._unit_boxes())  # the last frame's vehicles, for the map and the de-skew
         if self.background is not None:
             split = self.background.process(merged.points, self._protected_boxes(units))
-            region = self.region.process(merged.points, split.in_region, split.foreground, busy=split.learned)
+            region = self.region.process(merged.points, split.in_region, split.foreground)
         else:
             region = self.region.process(merged.points)
         points = region.points  # the region's own gathered copy: interpolated in place

@@ -18,7 +18,9 @@ pipeline's choice (those that have travelled; a parked trailer never does).
 
 The map is a dense grid: ``counts`` (uint8 per voxel) and ``dilated`` (how many background voxels
 in each voxel's 3x3x3 neighbourhood). One compiled pass per frame looks every point up and, on a
-learning frame, counts its voxel. Once the window is full the threshold is fixed and only the
+learning frame, lists its voxel once (the sample); the sample is counted in on the next frame, so
+the pass and the scattered counting never add up in one frame (a decision follows a frame later:
+nothing against a window of seconds). Once the window is full the threshold is fixed and only the
 voxels whose count changed are re-decided; while the window fills the threshold grows with the
 sample count, so every voxel counted so far is re-decided (all others cannot change).
 """
@@ -37,6 +39,7 @@ from i2v_loc.stages import kernels
 FORMAT_VERSION = 1
 OUTSIDE = np.uint16(60000)  # padding marker in ``dilated`` (above any neighbourhood count)
 _NO_COLUMNS = np.zeros(0, dtype=bool)
+_NO_CELLS = np.zeros(0, dtype=np.int64)
 
 
 @dataclass
@@ -81,7 +84,6 @@ def _padding(params: BackgroundParams) -> int:
 class BackgroundResult:
     in_region: np.ndarray  # (N,) bool: inside the region of interest (the grid)
     foreground: np.ndarray  # (N,) bool: in the region and not background (= in_region until the map is ready)
-    learned: bool = False  # the frame was a learning sample (the map's costlier frames)
 
 
 class BackgroundMap:
@@ -115,6 +117,7 @@ class BackgroundMap:
             cells // 8 + 1, dtype=np.uint8
         )  # a bit per voxel for the learning pass, clear between frames
         self._occupied: list[np.ndarray] = []  # while the window fills: the voxels counted for the first time
+        self._pending: np.ndarray | None = None  # the last learning frame's sample, counted in on the next frame
         self._shift = (self.origin - self.pad * params.voxel_size_m).astype(np.float32)
         self._scale = np.float32(1.0 / params.voxel_size_m)
         self._upper = np.array(self.padded, dtype=np.float32) - np.float32(0.5)
@@ -144,37 +147,42 @@ class BackgroundMap:
 
     def process(self, points: np.ndarray, protected: list[ProtectedBox] = ()) -> BackgroundResult:
         """Region and foreground masks of ``points`` (yard frame) with the map as it was before this
-        frame; then learns from the frame when it is a learning frame. One compiled pass over the
-        points does the lookup, the counting and (window full) finds the voxels that turn background."""
+        frame; on a learning frame the frame's sample (its voxels) is taken, and counted in on the
+        next frame: the map's two costly halves, a pass over the points and the scattered counts
+        and decisions, never fall on one frame (the map's decisions follow a frame later)."""
         points = np.ascontiguousarray(points, dtype=np.float32)
         n = len(points)
         result = BackgroundResult(np.empty(n, dtype=bool), np.empty(n, dtype=bool))
         learning = self.frames_seen % self.params.learn_every_frames == 0
-        sliding = learning and self.samples >= self.params.window_frames
-        old = self.history.popleft() if sliding else None
-        if sliding:
-            kernels.forget_counts(old, self.counts)  # first: the pass then sees every voxel's final count
-        threshold, forget = self._thresholds(self.params.window_frames)
         keep = self._protected_columns(protected, self.params.keep_margin_m) if self.ready else None
         protect = self._protected_columns(protected, self.params.protect_margin_m) if learning else None
         learned = np.empty(n if learning else 0, dtype=np.int64)
-        flips = np.empty(n + len(old) if sliding else 0, dtype=np.int64)
-        n_learned, n_flips = kernels.background_pass(
+        n_learned = kernels.background_pass(
             points, self._shift, self._scale, self._upper, self._grid, self._free_bits, self.ready,
             _NO_COLUMNS if keep is None else keep, learning, _NO_COLUMNS if protect is None else protect,
-            self.counts, self._seen, result.in_region, result.foreground, learned,
-            sliding, threshold, self.is_background, flips,
+            self._seen, result.in_region, result.foreground, learned,
         )  # fmt: skip
-        index = learned[:n_learned].copy()
-        if sliding:
-            n_flips = kernels.forgotten(old, self.counts, self.is_background, threshold, forget, flips, n_flips)
-            kernels.flip_cells(flips[:n_flips], self.is_background, self.dilated, self._free_bits, self._offsets)
-            self.history.append(index)
-        elif learning:
-            self._filling(index)
+        if self._pending is not None:
+            self._add_sample(self._pending)
+        self._pending = learned[:n_learned].copy() if learning else None
         self.frames_seen += 1
-        result.learned = learning
         return result
+
+    def _add_sample(self, index: np.ndarray) -> None:
+        """Count a sample in; once the window is full the oldest goes out, and only the voxels of the
+        two can change their decision."""
+        if self.samples < self.params.window_frames:
+            kernels.count_sample(index, self.counts, False, 0, self.is_background, _NO_CELLS)
+            self._filling(index)
+            return
+        old = self.history.popleft()
+        kernels.forget_counts(old, self.counts)  # first: the new sample's voxels then reach their final count
+        threshold, forget = self._thresholds(self.params.window_frames)
+        flips = np.empty(len(index) + len(old), dtype=np.int64)
+        n_flips = kernels.count_sample(index, self.counts, True, threshold, self.is_background, flips)
+        n_flips = kernels.forgotten(old, self.counts, self.is_background, threshold, forget, flips, n_flips)
+        kernels.flip_cells(flips[:n_flips], self.is_background, self.dilated, self._free_bits, self._offsets)
+        self.history.append(index)
 
     def _filling(self, index: np.ndarray) -> None:
         """A sample while the window fills: the thresholds moved, so every voxel ever counted may
@@ -269,4 +277,5 @@ class BackgroundMap:
         self.counts[cells] = window
         self.history = deque([cells.astype(np.int64)] * window)
         self._occupied = []
+        self._pending = None
         self._rebuild()

@@ -16,6 +16,9 @@ from numba import njit, types
 from numba.extending import intrinsic
 
 _JIT = {"cache": True, "nogil": True}
+# helpers called per point or per voxel with arrays: inlined by numba itself, else every call counts
+# each array's reference up and down (atomic operations: 40 ns a call instead of 1)
+_INLINE = {**_JIT, "inline": "always"}
 
 # voxel grouping: an occupancy bit per key when the key range is at most this times the points
 # (plus a constant), else an open-addressing hash table
@@ -56,6 +59,17 @@ def sweep_to_yard(points, offsets, rot, trans, min_r2, max_r2, out_points, out_o
 
 
 @njit(**_JIT)
+def _cos_sin_small(angle):
+    """cos and sin of an angle that is small in nearly every call (a box's turn while a sweep is
+    captured: below 0.2 rad) by their Taylor series to within 1e-7 below 0.25 rad, where the library
+    calls cost as much as the whole box test."""
+    if abs(angle) > 0.25:
+        return math.cos(angle), math.sin(angle)
+    a2 = angle * angle
+    return 1.0 - a2 * (0.5 - a2 * (1.0 / 24.0 - a2 / 720.0)), angle * (1.0 - a2 * (1.0 / 6.0 - a2 / 120.0))
+
+
+@njit(**_JIT)
 def interpolate(points, lag_s, boxes):
     """Move each point inside a box to the reference time (in place); the first box holding a
     point moves it. ``boxes`` rows: centre x, y, cos yaw, sin yaw, half length, half width,
@@ -70,8 +84,8 @@ def interpolate(points, lag_s, boxes):
             if age == age:
                 since = age - np.float64(lag_s[i])
                 cx, cy = cx + boxes[b, 6] * since, cy + boxes[b, 7] * since
-                turn = boxes[b, 8] * since
-                c, s = c * math.cos(turn) - s * math.sin(turn), s * math.cos(turn) + c * math.sin(turn)
+                cos_turn, sin_turn = _cos_sin_small(boxes[b, 8] * since)
+                c, s = c * cos_turn - s * sin_turn, s * cos_turn + c * sin_turn
             dx = points[i, 0] - np.float32(cx)
             dy = points[i, 1] - np.float32(cy)
             along = np.float64(dx) * c + np.float64(dy) * s
@@ -92,39 +106,18 @@ def interpolate(points, lag_s, boxes):
 
 @njit(**_JIT)
 def background_pass(
-    points,
-    shift,
-    scale,
-    upper,
-    grid,
-    free_bits,
-    ready,
-    keep_columns,
-    learn,
-    protect_columns,
-    counts,
-    seen,
-    in_region,
-    foreground,
-    learned,
-    evaluate,
-    threshold,
-    is_background,
-    flips,
-):
+    points, shift, scale, upper, grid, free_bits, ready, keep_columns, learn, protect_columns, seen,
+    in_region, foreground, learned,
+):  # fmt: skip
     """Per point: its voxel of the padded grid (``grid``: voxels along x, y, z and the padding), in
     the region (inside the padding), foreground (the map before this frame: ``free_bits``, a bit per
     voxel, small enough to stay in cache); on a learning frame each region voxel outside the
-    protected columns counts once.
-    ``keep_columns`` / ``protect_columns`` are empty when no box is protected; ``seen`` is a bit per
-    voxel, all clear between calls (an eighth of a byte array: it stays in cache). With ``evaluate``
-    (the window is full and the old sample already taken off the counts) a counted voxel that
-    reaches ``threshold`` and is not background is listed in ``flips``: with fixed thresholds and
-    every voxel decided, that is the only way a count going up changes a decision. Returns the
-    number of voxels counted (their indices in ``learned``) and of voxels listed.
+    protected columns is listed once in ``learned`` (the sample). ``keep_columns`` /
+    ``protect_columns`` are empty when no box is protected; ``seen`` is a bit per voxel, all clear
+    between calls (an eighth of a byte array: it stays in cache). Returns the sample's size.
 
-    The point loop only finds the voxels (no integer division, no scattered count); the counts
-    and the decisions follow in short loops over the counted voxels, whose cache misses overlap."""
+    The point loop only finds the voxels (no integer division, no scattered count): the sample is
+    counted in by ``count_sample``, on the next frame."""
     ny, nz, pad = grid[1], grid[2], grid[3]
     # in the region: pad <= index < size - pad, one unsigned comparison per axis
     wx, wy, wz = np.uint64(grid[0] - 2 * pad), np.uint64(ny - 2 * pad), np.uint64(nz - 2 * pad)
@@ -151,17 +144,8 @@ def background_pass(
             learned[n] = flat
             n += 1
     for j in range(n):
-        counts[learned[j]] += 1
-    n_flips = 0
-    if evaluate:
-        for j in range(n):
-            flat = learned[j]
-            if counts[flat] == threshold and not is_background[flat]:
-                flips[n_flips] = flat
-                n_flips += 1
-    for j in range(n):
         seen[learned[j] >> 3] = 0
-    return n, n_flips
+    return n
 
 
 @njit(**_JIT)
@@ -169,6 +153,24 @@ def _clip_grid(q, upper):
     """``q`` clipped to [0, upper] (the padded grid: outside points land in the padding)."""
     q = q if q > np.float32(0.0) else np.float32(0.0)
     return q if q < upper else upper
+
+
+@njit(**_JIT)
+def count_sample(cells, counts, evaluate, threshold, is_background, flips):
+    """Count a sample (its voxels, each once) in. With ``evaluate`` (the window is full and the old
+    sample already taken off the counts) a voxel that reaches ``threshold`` and is not background
+    is listed in ``flips``: with fixed thresholds and every voxel decided, that is the only way a
+    count going up changes a decision. Returns the number listed. (The counts first, then the
+    decisions, in short loops whose cache misses overlap.)"""
+    for c in cells:
+        counts[c] += 1
+    n_flips = 0
+    if evaluate:
+        for c in cells:
+            if counts[c] == threshold and not is_background[c]:
+                flips[n_flips] = c
+                n_flips += 1
+    return n_flips
 
 
 @njit(**_JIT)
@@ -191,7 +193,7 @@ def forgotten(cells, counts, is_background, threshold, forget, flips, n_flips):
     return n_flips
 
 
-@njit(**_JIT)
+@njit(**_INLINE)
 def _count_neighbourhood(c, offsets, dilated, free_bits, step):
     """Add ``step`` (+1 or -1) to the background count of the voxels around ``c``; a voxel whose
     count leaves or reaches 0 loses or gets its foreground bit."""
@@ -345,7 +347,7 @@ def _popcount(typingctx, x):
     return types.uint64(types.uint64), codegen
 
 
-@njit(**_JIT)
+@njit(**_INLINE)
 def _hash_slot(table_keys, key):
     """Open addressing, linear probing; the key mixed first (splitmix64's finaliser: grid keys are
     regular, and probing clusters on them otherwise)."""
@@ -373,29 +375,30 @@ def voxel_ids(points, take, voxel, one):
     float64 for ``one`` = 1.0); the offsets from the minimum are never negative, so the integer
     conversion is the floor."""
     n = points.shape[0]
-    lo = np.full(3, one)
-    lo[:] = np.inf
+    # bounds and grid steps in scalars: a minimum kept in an array is stored and loaded every point
+    lo_x = lo_y = lo_z = one * np.float32(np.inf)
+    hi_x = hi_y = hi_z = -lo_x
     n_taken = 0
     for i in range(n):
         if take[i]:
             n_taken += 1
-            for a in range(3):
-                v = points[i, a] * one
-                if v < lo[a]:
-                    lo[a] = v
+            x, y, z = points[i, 0] * one, points[i, 1] * one, points[i, 2] * one
+            lo_x, lo_y, lo_z = min(lo_x, x), min(lo_y, y), min(lo_z, z)
+            hi_x, hi_y, hi_z = max(hi_x, x), max(hi_y, y), max(hi_z, z)
     dims = np.ones(3, dtype=np.int64)
-    ijk = np.empty((n, 3), dtype=np.int64)
-    for i in range(n):
-        if take[i]:
-            for a in range(3):
-                q = np.int64((points[i, a] * one - lo[a]) / voxel)
-                ijk[i, a] = q
-                dims[a] = max(dims[a], q + 1)
+    if n_taken:  # the index grows with the coordinate: the highest point's is the largest
+        dims[0] = np.int64((hi_x - lo_x) / voxel) + 1
+        dims[1] = np.int64((hi_y - lo_y) / voxel) + 1
+        dims[2] = np.int64((hi_z - lo_z) / voxel) + 1
+    ny, nz = dims[1], dims[2]
     keys = np.full(n, EMPTY, dtype=np.int64)
     n_keys = np.int64(0)
     for i in range(n):
         if take[i]:
-            keys[i] = (ijk[i, 0] * dims[1] + ijk[i, 1]) * dims[2] + ijk[i, 2]
+            qx = np.int64((points[i, 0] * one - lo_x) / voxel)
+            qy = np.int64((points[i, 1] * one - lo_y) / voxel)
+            qz = np.int64((points[i, 2] * one - lo_z) / voxel)
+            keys[i] = (qx * ny + qy) * nz + qz
             n_keys = max(n_keys, keys[i] + 1)
     ids = np.full(n, EMPTY, dtype=np.int64)
     no_table = np.empty(0, dtype=np.int64)
@@ -475,7 +478,7 @@ def voxel_sums(points, values, ids, n_vox):
     return sums, counts
 
 
-@njit(**_JIT)
+@njit(**_INLINE)
 def _lookup(key, bits, word_rank, table_keys, table_ids):
     """Id of the voxel of ``key`` (a key of the grid) in a grouping of ``voxel_ids``, -1 if none."""
     if bits.shape[0] > 0:
@@ -490,7 +493,7 @@ def _lookup(key, bits, word_rank, table_keys, table_ids):
     return table_ids[slot] if table_keys[slot] == key else EMPTY
 
 
-@njit(**_JIT)
+@njit(**_INLINE)
 def _root(parent, v):
     while parent[v] != v:
         parent[v] = parent[parent[v]]
@@ -498,7 +501,7 @@ def _root(parent, v):
     return v
 
 
-@njit(**_JIT)
+@njit(**_INLINE)
 def _union(parent, a, b):
     """Joins the trees of a and b under the smaller root."""
     a, b = _root(parent, a), _root(parent, b)
@@ -523,9 +526,11 @@ def _component_labels(parent):
 @njit(**_JIT)
 def voxel_components(voxel_keys, dims, bits, word_rank, table_keys, table_ids):
     """26-connected components of the occupied voxels, numbered in the order of their first voxel
-    in key (raster) order."""
+    in key (raster) order. The neighbour pairs are found first, then joined: lookups and unions in
+    one loop ran ten times slower."""
     n_vox = voxel_keys.shape[0]
-    parent = np.arange(n_vox)
+    pairs = np.empty((13 * n_vox, 2), dtype=np.int64)
+    n_pairs = 0
     for v in range(n_vox):
         key = voxel_keys[v]
         i = key // (dims[1] * dims[2])
@@ -540,9 +545,11 @@ def voxel_components(voxel_keys, dims, bits, word_rank, table_keys, table_ids):
                     if ni >= dims[0] or nj < 0 or nj >= dims[1] or nk < 0 or nk >= dims[2]:
                         continue
                     w = _lookup((ni * dims[1] + nj) * dims[2] + nk, bits, word_rank, table_keys, table_ids)
-                    if w < 0:
-                        continue
-                    _union(parent, v, w)
+                    pairs[n_pairs, 0], pairs[n_pairs, 1] = v, w
+                    n_pairs += w >= 0
+    parent = np.arange(n_vox)
+    for t in range(n_pairs):
+        _union(parent, pairs[t, 0], pairs[t, 1])
     return _component_labels(parent)
 
 
@@ -616,7 +623,7 @@ def counting_order(labels, n_labels):
 # ----------------------------------------------------------------------------- rectangles
 
 
-@njit(**_JIT)
+@njit(**_INLINE)
 def _cross(o, a, b):
     return (a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0])
 
@@ -1175,6 +1182,78 @@ def angle_mean(sigmas, weights, angle_columns):
     return mean
 
 
+# ----------------------------------------------------------------------------- unscented filter
+
+
+@njit(**_JIT)
+def upper_factor(p):
+    """U with U^T U = p (Cholesky); a covariance that lost definiteness to rounding is factored
+    through its eigen-decomposition with the eigenvalues clipped at 1e-12."""
+    n = p.shape[0]
+    low = np.zeros_like(p)
+    for j in range(n):
+        d = p[j, j]
+        for k in range(j):
+            d -= low[j, k] * low[j, k]
+        if not d > 0.0:
+            w, v = np.linalg.eigh((p + p.T) / 2)
+            return np.ascontiguousarray((v * np.sqrt(np.maximum(w, 1e-12))).T)
+        low[j, j] = math.sqrt(d)
+        for i in range(j + 1, n):
+            e = p[i, j]
+            for k in range(j):
+                e -= low[i, k] * low[j, k]
+            low[i, j] = e / low[j, j]
+    return np.ascontiguousarray(low.T)
+
+
+@njit(**_JIT)
+def _sigma_points(x, p, spread):
+    """Merwe's scaled sigma points: x, x + each row of U, x - each row (U^T U = spread p)."""
+    u = upper_factor(spread * p)
+    n = x.shape[0]
+    sigmas = np.empty((2 * n + 1, n))
+    sigmas[0] = x
+    for i in range(n):
+        sigmas[1 + i] = x + u[i]
+        sigmas[1 + n + i] = x - u[i]
+    return sigmas
+
+
+@njit(**_JIT)
+def _weighted_cross(a, b, wc):
+    """sum_i wc_i a_i^T b_i over the rows of a and b."""
+    return np.dot(np.ascontiguousarray(a.T * wc), b)
+
+
+@njit(**_JIT)
+def ukf_predict(x, p, wm, wc, spread, q, step_s, steps, kingpin_m, trailer_axle_m, articulated, angles):
+    """One unscented prediction over the one-trailer kinematics (``steps`` midpoint steps of
+    ``step_s``): the state, its covariance and the sigma points drawn around them for the update."""
+    sigmas = propagate_states(_sigma_points(x, p, spread), step_s, steps, kingpin_m, trailer_axle_m, articulated)
+    mean = angle_mean(sigmas, wm, angles)
+    d = angle_residuals(sigmas, mean.reshape(1, -1), angles)
+    cov = _weighted_cross(d, d, wc) + q
+    return mean, cov, _sigma_points(mean, cov, spread)
+
+
+@njit(**_JIT)
+def ukf_update(x, p, sigmas_f, wm, wc, measured, z, r, rows, x_angles, z_angles):
+    """Fuse ``z`` (noise ``r``) of the state's ``measured`` columns, only the directions ``rows``
+    (k, m) of it (r is k x k). Returns the state, its covariance and the innovation's Mahalanobis
+    distance."""
+    sigmas_h = np.ascontiguousarray(sigmas_f[:, measured])
+    zp = angle_mean(sigmas_h, wm, z_angles)
+    dz = angle_residuals(sigmas_h, zp.reshape(1, -1), z_angles)
+    dx = angle_residuals(sigmas_f, x.reshape(1, -1), x_angles)
+    s = np.dot(np.dot(rows, _weighted_cross(dz, dz, wc)), np.ascontiguousarray(rows.T)) + r
+    pxz = np.dot(_weighted_cross(dx, dz, wc), np.ascontiguousarray(rows.T))
+    y = np.dot(rows, angle_residuals(z.reshape(1, -1), zp.reshape(1, -1), z_angles)[0])
+    si = np.linalg.inv(s)
+    k = np.dot(pxz, si)
+    return x + np.dot(k, y), p - np.dot(k, np.dot(s, np.ascontiguousarray(k.T))), math.sqrt(np.dot(np.dot(y, si), y))
+
+
 # ----------------------------------------------------------------------------- warm-up
 
 _WARM = False
@@ -1206,16 +1285,12 @@ def warm_up() -> None:
         np.zeros(16, dtype=np.bool_),
         True,
         np.zeros(16, dtype=np.bool_),
-        np.zeros(64, dtype=np.uint8),
         np.zeros(8, dtype=np.uint8),
         np.empty(3, dtype=np.bool_),
         np.empty(3, dtype=np.bool_),
         np.empty(3, dtype=np.int64),
-        True,
-        1,
-        flags,
-        np.empty(3, dtype=np.int64),
     )
+    count_sample(np.zeros(2, dtype=np.int64), np.zeros(64, dtype=np.uint8), True, 1, flags, np.empty(2, dtype=np.int64))
     one_cell = np.array([5], dtype=np.int64)
     forget_counts(one_cell, np.ones(64, np.uint8))
     forgotten(one_cell, np.zeros(64, np.uint8), flags, 1, 0, np.empty(1, dtype=np.int64), 0)
@@ -1264,4 +1339,28 @@ def warm_up() -> None:
     for columns in (np.array([2, 5]), np.array([2, 3]), np.array([2])):
         angle_residuals(states, states[:1], columns)
         angle_mean(states, np.ones(13), columns)
+    weights, x_angles = np.ones(13), np.array([2, 5])
+    for articulated, measured, z_angles in (
+        (True, np.array([0, 1, 2, 5]), np.array([2, 3])),
+        (False, np.arange(3), np.array([2])),
+    ):
+        x, p, sigmas = ukf_predict(
+            np.zeros(6), np.eye(6), weights, weights, 6.0, np.eye(6), 0.1, 1, -0.3, 7.0, articulated, x_angles
+        )
+        rows = np.eye(len(measured))
+        ukf_update(x, p, sigmas, weights, weights, measured, np.zeros(len(measured)), rows, rows, x_angles, z_angles)
+        ukf_update(
+            x,
+            p,
+            sigmas,
+            weights,
+            weights,
+            measured,
+            np.zeros(len(measured)),
+            rows[:1, :1],
+            rows[:1],
+            x_angles,
+            z_angles,
+        )
+    upper_factor(-np.eye(6))
     _WARM = True

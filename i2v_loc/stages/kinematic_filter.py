@@ -11,7 +11,6 @@ Measurement: the hinged fit's (x, y, ψ1, γ) with its covariance.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -38,94 +37,39 @@ def propagate(state: np.ndarray, dt_s: float, kingpin_m: float, trailer_axle_m: 
     return out.reshape(s.shape)
 
 
-def _sqrt(p: np.ndarray) -> np.ndarray:
-    """Upper factor U with U^T U = p; a covariance that lost definiteness to rounding is clipped."""
-    try:
-        return np.linalg.cholesky(p).T
-    except np.linalg.LinAlgError:
-        w, v = np.linalg.eigh((p + p.T) / 2)
-        return (v * np.sqrt(np.clip(w, 1e-12, None))).T
-
-
-def _unscented_transform(sigmas, wm, wc, noise_cov=None, mean_fn=None, residual_fn=None):
-    """filterpy's unscented transform with the residuals taken as one array."""
-    x = mean_fn(sigmas, wm)
-    y = residual_fn(sigmas, x[None, :])
-    p = (y.T * wc) @ y
-    return x, p + noise_cov if noise_cov is not None else p
-
-
 class _Ukf:
-    """An unscented Kalman filter with Merwe's scaled sigma points, computed as filterpy's
-    ``UnscentedKalmanFilter`` computes them (same operations, same order: the same numbers) with
-    the sigma points propagated, transformed and cross-correlated as whole arrays. (filterpy itself
-    imports scipy.stats: half a second of every start-up.)"""
+    """An unscented Kalman filter with Merwe's scaled sigma points over the one-trailer kinematics,
+    computed as filterpy's ``UnscentedKalmanFilter`` computes them (the same sigma points, weights,
+    transforms and gain) with each step one compiled call (``kernels.ukf_predict``,
+    ``kernels.ukf_update``). (filterpy itself imports scipy.stats: half a second of every start-up.)"""
 
-    def __init__(self, n: int, fx, hx, alpha: float, beta: float, kappa: float, mean_x, mean_z, residual_x, residual_z):
+    def __init__(self, n: int, alpha: float, beta: float, kappa: float, measured: np.ndarray):
         lambda_ = alpha**2 * (n + kappa) - n
         self.wm = np.full(2 * n + 1, 0.5 / (n + lambda_))
         self.wc = self.wm.copy()
         self.wc[0] = lambda_ / (n + lambda_) + (1 - alpha**2 + beta)
         self.wm[0] = lambda_ / (n + lambda_)
         self.spread = lambda_ + n
-        self.fx, self.hx = fx, hx
-        self.mean_x, self.mean_z, self.residual_x, self.residual_z = mean_x, mean_z, residual_x, residual_z
+        self.measured = measured  # the state's columns the measurement holds
+        self._z_angles = _ANGLES_Z[len(measured)]
+        self._all_rows = np.eye(len(measured))
         self.x, self.P = np.zeros(n), np.eye(n)
         self.sigmas_f = np.zeros((2 * n + 1, n))
         self.mahalanobis = 0.0
 
-    def sigma_points(self, x: np.ndarray, p: np.ndarray) -> np.ndarray:
-        """x, x + each row of U, x - each row (U^T U = spread P), in C order: the weighted sums over
-        them take another path through BLAS, and another rounding, over a Fortran-ordered copy."""
-        u = _sqrt(self.spread * p)
-        n = len(x)
-        sigmas = np.empty((2 * n + 1, n))
-        sigmas[0], sigmas[1 : n + 1], sigmas[n + 1 :] = x, x + u, x - u
-        return sigmas
-
-    def predict(self, dt: float, q: np.ndarray) -> None:
-        sigmas = self.fx(self.sigma_points(self.x, self.P), dt)
-        self.x, self.P = _unscented_transform(sigmas, self.wm, self.wc, q, self.mean_x, self.residual_x)
-        self.sigmas_f = self.sigma_points(self.x, self.P)
+    def predict(self, dt: float, q: np.ndarray, kingpin_m: float, trailer_axle_m: float, articulated: bool) -> None:
+        steps = max(1, int(np.ceil(abs(dt) / MAX_STEP_S)))
+        self.x, self.P, self.sigmas_f = kernels.ukf_predict(
+            self.x, self.P, self.wm, self.wc, self.spread, q, dt / steps, steps,
+            float(kingpin_m), float(trailer_axle_m), articulated, _ANGLES_X,
+        )  # fmt: skip
 
     def update(self, z: np.ndarray, r: np.ndarray, rows: np.ndarray | None = None) -> None:
         """Fuse ``z`` with noise ``r``; with ``rows`` (k, m) only those directions of z (r is k x k)."""
-        sigmas_h = self.hx(self.sigmas_f)
-        zp, s = _unscented_transform(sigmas_h, self.wm, self.wc, None, self.mean_z, self.residual_z)
-        dx = self.residual_x(self.sigmas_f, self.x[None, :])
-        pxz = (dx.T * self.wc) @ self.residual_z(sigmas_h, zp[None, :])
-        y = self.residual_z(z, zp)
-        if rows is not None:
-            s, pxz, y = rows @ s @ rows.T, pxz @ rows.T, rows @ y
-        s = s + r
-        si = np.linalg.inv(s)
-        k = pxz @ si
-        self.x = self.x + k @ y
-        self.P = self.P - k @ (s @ k.T)
-        self.mahalanobis = math.sqrt(float((y.T @ si) @ y))
-
-
-def _residual_x(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    return _angle_residuals(a, b, _ANGLES_X)
-
-
-def _mean_x(sigmas: np.ndarray, weights: np.ndarray) -> np.ndarray:
-    return kernels.angle_mean(sigmas, weights, _ANGLES_X)
-
-
-def _residual_z(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    return _angle_residuals(a, b, _ANGLES_Z[a.shape[-1]])
-
-
-def _mean_z(sigmas: np.ndarray, weights: np.ndarray) -> np.ndarray:
-    return kernels.angle_mean(sigmas, weights, _ANGLES_Z[sigmas.shape[1]])
-
-
-def _angle_residuals(a: np.ndarray, b: np.ndarray, columns: np.ndarray) -> np.ndarray:
-    """a - b with the angle columns wrapped, for rows (k, n) or single vectors (n,) (filterpy's)."""
-    a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
-    d = kernels.angle_residuals(np.atleast_2d(a), np.atleast_2d(b), columns)
-    return d.reshape(np.broadcast_shapes(a.shape, b.shape))
+        self.x, self.P, self.mahalanobis = kernels.ukf_update(
+            self.x, self.P, self.sigmas_f, self.wm, self.wc, self.measured, z, np.ascontiguousarray(r, dtype=float),
+            self._all_rows if rows is None else np.ascontiguousarray(rows, dtype=float), _ANGLES_X, self._z_angles,
+        )  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -163,7 +107,7 @@ class KinematicFilter:
         self.articulated = articulated
         self.kingpin_m, self.trailer_axle_m = kingpin_m, trailer_axle_m
         self.stamp_s = stamp_s
-        self.ukf = _Ukf(6, self._fx, self._hx, 0.3, 2.0, 0.0, _mean_x, _mean_z, _residual_x, _residual_z)
+        self.ukf = _Ukf(6, 0.3, 2.0, 0.0, np.array([X, Y, YAW, HITCH] if articulated else [X, Y, YAW]))
         x = np.zeros(6)
         x[[X, Y, YAW]] = z[:3]
         x[SPEED] = speed_m_s
@@ -190,13 +134,6 @@ class KinematicFilter:
         self.ukf.P = p
         self._in_a_row = 0
 
-    def _fx(self, x: np.ndarray, dt: float) -> np.ndarray:
-        return propagate(x, dt, self.kingpin_m, self.trailer_axle_m, self.articulated)
-
-    def _hx(self, x: np.ndarray) -> np.ndarray:
-        """The measured part of the state(s), in C order (see ``_Ukf.sigma_points``)."""
-        return np.ascontiguousarray(x[..., [X, Y, YAW, HITCH]] if self.articulated else x[..., :3])
-
     def _q(self, dt_s: float) -> np.ndarray:
         p = self.params
         dt = max(dt_s, 1e-3)
@@ -215,7 +152,7 @@ class KinematicFilter:
     def predict(self, stamp_s: float) -> FilterState:
         dt = stamp_s - self.stamp_s if np.isfinite(stamp_s) else 0.1
         if dt > 0:
-            self.ukf.predict(dt, self._q(dt))
+            self.ukf.predict(dt, self._q(dt), self.kingpin_m, self.trailer_axle_m, self.articulated)
             self.stamp_s = stamp_s
         return self.state
 

@@ -52,6 +52,7 @@ class Region:
         self.rng = np.random.default_rng(seed)
         self._plane: GroundPlane | None = None
         self._frames_since_fit = 0
+        self._pending_sample: np.ndarray | None = None  # a refit's sample, fitted on the next frame
         self._low = np.array([params.x_min_m, params.y_min_m, params.z_min_m], dtype=np.float32)
         self._high = np.array([params.x_max_m, params.y_max_m, params.z_max_m], dtype=np.float32)
         kernels.warm_up()
@@ -61,16 +62,13 @@ class Region:
         points: np.ndarray,
         in_region: np.ndarray | None = None,
         candidates: np.ndarray | None = None,
-        busy: bool = False,
     ) -> RegionResult:
         """Points inside the region and off the ground. ``in_region`` (bool mask) replaces the
         passthrough box; ``candidates`` (bool mask inside the region, e.g. the foreground) limits
-        which points are kept, while the ground is still fitted on the whole region. ``busy``: an
-        earlier stage did costlier work this frame (the background map learned): a refit due now
-        waits one frame, so that the two never add up in one frame."""
+        which points are kept, while the ground is still fitted on the whole region."""
         points = np.ascontiguousarray(points)
         in_region = self.roi_mask(points) if in_region is None else in_region
-        plane = self.ground(points, in_region, busy)
+        plane = self.ground(points, in_region)
         take = in_region if candidates is None else candidates
         if plane is None:
             index = np.flatnonzero(take)
@@ -84,13 +82,20 @@ class Region:
         # np.take: a quarter of the time of the fancy index on rows
         return RegionResult(np.take(points, index, axis=0), plane, roi_points, n_taken - n_kept, index)
 
-    def ground(self, points: np.ndarray, in_region: np.ndarray | None = None, busy: bool = False) -> GroundPlane | None:
-        """The ground plane of the points in the region, refitted every ``ground_refit_frames`` frames
-        (and while none is found); a refit due on a ``busy`` frame waits one frame."""
+    def ground(self, points: np.ndarray, in_region: np.ndarray | None = None) -> GroundPlane | None:
+        """The ground plane of the points in the region: fitted on every frame until one is found,
+        then refitted every ``ground_refit_frames`` frames in two halves on two frames, the sample
+        (the region's voxel centroids) on one, RANSAC on it on the next, so that no frame pays for
+        both (the ground is static: a plane a frame late is the same plane)."""
         self._frames_since_fit += 1
-        due = self._frames_since_fit >= self.params.ground_refit_frames + (1 if busy else 0)
-        if self._plane is None or due:
-            self._plane = self.fit_ground(points, in_region)
+        every = self.params.ground_refit_frames
+        if self._plane is None or every == 1:
+            self._plane = self._fit(self._sample(points, in_region))
+            self._frames_since_fit = 0
+        elif self._pending_sample is not None:
+            self._plane, self._pending_sample = self._fit(self._pending_sample), None
+        elif self._frames_since_fit >= every:
+            self._pending_sample = self._sample(points, in_region)
             self._frames_since_fit = 0
         return self._plane
 
@@ -99,10 +104,12 @@ class Region:
         kernels.box_mask(np.ascontiguousarray(points, dtype=np.float32), self._low, self._high, mask)
         return mask
 
-    def fit_ground(self, points: np.ndarray, in_region: np.ndarray | None = None) -> GroundPlane | None:
-        """RANSAC on the voxel centroids (float64) of the points in the region (all without a mask)."""
+    def _sample(self, points: np.ndarray, in_region: np.ndarray | None) -> np.ndarray:
+        sample, _ = voxel_centroids(points, self.params.ransac_sample_voxel_m, take=in_region, float64=True)
+        return sample
+
+    def _fit(self, sample: np.ndarray) -> GroundPlane | None:
         p = self.params
-        sample, _ = voxel_centroids(points, p.ransac_sample_voxel_m, take=in_region, float64=True)
         if len(sample) < 3:
             return None
         normals, offsets = self._hypotheses(sample)
