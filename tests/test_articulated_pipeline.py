@@ -17,7 +17,15 @@ from i2v_loc.pipelines.paper import PaperPipeline
 from i2v_loc.sim.kinematics import Articulation, step
 from i2v_loc.stages.hinged_fit import Prior, fit
 from i2v_loc.stages.vehicle_model import VehicleModel
-from i2v_loc.stages.vehicle_tracker import SEED_RETRY_FRAMES, Seed, VehicleTracker, _gap_filled, _gap_open, _supported
+from i2v_loc.stages.vehicle_tracker import (
+    SEED_RETRY_FRAMES,
+    Seed,
+    VehicleTracker,
+    _gap_filled,
+    _gap_open,
+    _shift_along_m,
+    _supported,
+)
 
 PARAMS = Params()
 SENSORS = ((0.0, -15.0, 4.0), (-22.0, 22.0, 4.0), (22.0, 22.0, 4.0))
@@ -666,3 +674,15 @@ def test_a_reach_that_stays_put_while_moving_is_the_trailers_end():
         seen.add(10.3)  # the rear face itself
         seen.add_reach(10.5)
     assert seen.measured == 10.3
+
+
+def test_a_model_change_shifts_the_reference_point_by_its_fronts_and_kingpin_not_by_a_rear():
+    volvo = VehicleModel.from_config("volvo_fh", Params().vehicles["volvo_fh"])
+    longer = volvo.with_boxes(volvo.tractor, replace(volvo.trailer, length_m=volvo.trailer.length_m + 1.5))
+    assert _shift_along_m(volvo, longer) == 0.0  # only the trailer's rear face moved
+    front = volvo.with_boxes(volvo.tractor, replace(volvo.trailer, front_m=volvo.trailer.front_m - 0.7))
+    assert _shift_along_m(volvo, front) == pytest.approx(0.7)
+    kingpin = replace(front, kingpin_behind_axle_m=volvo.kingpin_behind_axle_m + 0.2)
+    assert _shift_along_m(front, kingpin) == pytest.approx(0.2)
+    cab = volvo.with_boxes(replace(volvo.tractor, length_m=volvo.tractor.length_m + 0.3), volvo.trailer)
+    assert _shift_along_m(volvo, cab) == pytest.approx(0.3)  # the cab's rear face moved

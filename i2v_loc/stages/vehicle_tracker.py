@@ -304,7 +304,7 @@ class VehicleTracker:
     # ----------------------------------------------------------------- dimensions
 
     def _learn(self, track: _Track, m: Measurement) -> None:
-        model = track.model
+        before = model = track.model
         boxes = model.boxes
         local = unit_frames(m.points, m.vector, model)
         new_boxes = []
@@ -326,6 +326,7 @@ class VehicleTracker:
             self._retype(track, name)
         track.model = replace(track.model, name=name, trailer_axle_m=self._trailer_axle(track))
         track.filter.trailer_axle_m = track.model.trailer_axle_m
+        track.filter.loosen_position(_shift_along_m(before, track.model))
 
     def _learn_kingpin(self, track: _Track, prior: Prior, points: np.ndarray) -> None:
         """The kingpin's offset shows only at a hitch angle (straight, it trades with the trailer's
@@ -716,6 +717,17 @@ class VehicleTracker:
                 heading = [np.array([np.cos(h[2].yaw_rad), np.sin(h[2].yaw_rad)]) @ travel for h in pool[:2]]
                 chosen = pool[int(np.argmax(heading))]
         return chosen[0], chosen[2]
+
+
+def _shift_along_m(before: VehicleModel, after: VehicleModel) -> float:
+    """How far a model change moves a unit's faces along the vehicle relative to the tractor's
+    reference point (the fronts and the kingpin; a trailer's length moves only its rear face, which
+    pins the reference point only when nothing else does): as far, the next fit may move the point."""
+    shifts = [abs(after.tractor.front_m - before.tractor.front_m), abs(after.tractor.rear_m - before.tractor.rear_m)]
+    if before.trailer is not None and after.trailer is not None:
+        shifts.append(abs(after.kingpin_behind_axle_m - before.kingpin_behind_axle_m))
+        shifts.append(abs(after.trailer.front_m - before.trailer.front_m))
+    return max(shifts)
 
 
 def _supported(m: Measurement, model: VehicleModel, ground_z_m: float) -> bool:
