@@ -15,12 +15,13 @@ from i2v_loc.pipelines import build_pipeline
 from i2v_loc.pipelines.articulated import ArticulatedPipeline
 from i2v_loc.pipelines.paper import PaperPipeline
 from i2v_loc.sim.kinematics import Articulation, step
-from i2v_loc.stages.hinged_fit import Prior, fit
+from i2v_loc.stages.hinged_fit import FRONT, REAR, Measurement, Prior, fit
 from i2v_loc.stages.vehicle_model import VehicleModel
 from i2v_loc.stages.vehicle_tracker import (
     SEED_RETRY_FRAMES,
     Seed,
     VehicleTracker,
+    _face_span,
     _gap_filled,
     _gap_open,
     _shift_along_m,
@@ -686,3 +687,19 @@ def test_a_model_change_shifts_the_reference_point_by_its_fronts_and_kingpin_not
     assert _shift_along_m(front, kingpin) == pytest.approx(0.2)
     cab = volvo.with_boxes(replace(volvo.tractor, length_m=volvo.tractor.length_m + 0.3), volvo.trailer)
     assert _shift_along_m(volvo, cab) == pytest.approx(0.3)  # the cab's rear face moved
+
+
+def test_a_faces_span_is_measured_across_its_own_unit():
+    """The trailer's front face, at a 30 deg hitch, 2.1 m of its points across it and one point on
+    the cab's rear face: the span is taken across the trailer (yaw + hitch), not along the cab."""
+    yaw, hitch = 0.4, np.radians(30.0)
+    across = np.array([-np.sin(yaw + hitch), np.cos(yaw + hitch)])
+    along = np.array([np.cos(yaw + hitch), np.sin(yaw + hitch)])
+    xy = np.array([5.0, 1.0]) + np.outer(np.linspace(-1.05, 1.05, 8), across) + 0.02 * along
+    points = np.column_stack([np.vstack([xy, [[4.0, 0.5]]]), np.full(9, 2.0)])
+    unit = np.array([1] * 8 + [0], dtype=np.int8)
+    face = np.array([FRONT] * 8 + [REAR], dtype=np.int8)
+    m = Measurement(0.0, 0.0, yaw, hitch, np.eye(4), points, unit, 0.0, face=face)
+    assert _face_span(m, 1, FRONT) == pytest.approx(2.1)
+    assert _face_span(m, 0, REAR) == 0.0  # one point spans nothing
+    assert _face_span(replace(m, hitch_rad=0.0), 1, FRONT) < 2.1 * np.cos(hitch) + 1e-9  # seen askew

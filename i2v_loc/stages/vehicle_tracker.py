@@ -21,7 +21,7 @@ import numpy as np
 
 from i2v_loc.params import ArticulatedParams, VehicleConfig
 from i2v_loc.stages import kernels
-from i2v_loc.stages.hinged_fit import LEFT, REAR, RIGHT, TRAILER_LENGTH_RANGE_M, Measurement, Prior, fit, thin
+from i2v_loc.stages.hinged_fit import FRONT, LEFT, REAR, RIGHT, TRAILER_LENGTH_RANGE_M, Measurement, Prior, fit, thin
 from i2v_loc.stages.kinematic_filter import FilterState, KinematicFilter
 from i2v_loc.stages.primitives import Rect, grid_labels, median, min_area_rect, split_by_label, voxel_keys
 from i2v_loc.stages.vehicle_model import VehicleModel
@@ -347,7 +347,10 @@ class VehicleTracker:
         if turning:
             kingpin.add(m.kingpin_m)
             track.trailer_front.add(m.trailer_front_m)
-        elif np.sum((m.unit == 0) & (m.face == REAR)) >= REAR_FACE_MIN_POINTS:
+        elif (
+            np.sum((m.unit == 0) & (m.face == REAR)) >= REAR_FACE_MIN_POINTS
+            and _face_span(m, 1, FRONT) >= FACE_SEEN_SPAN * track.model.trailer.width_m
+        ):
             track.reach.add(m.trailer_front_m - m.kingpin_m)
 
     def _trailer_front(self, track: _Track) -> float:
@@ -717,6 +720,16 @@ class VehicleTracker:
                 heading = [np.array([np.cos(h[2].yaw_rad), np.sin(h[2].yaw_rad)]) @ travel for h in pool[:2]]
                 chosen = pool[int(np.argmax(heading))]
         return chosen[0], chosen[2]
+
+
+def _face_span(m: Measurement, unit: int, face: int) -> float:
+    """How far across its unit the points on one of its faces spread (0 for fewer than two)."""
+    on = (m.unit == unit) & (m.face == face)
+    if np.count_nonzero(on) < 2:
+        return 0.0
+    yaw = m.yaw_rad + (m.hitch_rad if unit == 1 else 0.0)
+    across = -np.sin(yaw) * m.points[on, 0] + np.cos(yaw) * m.points[on, 1]
+    return float(np.ptp(across))
 
 
 def _shift_along_m(before: VehicleModel, after: VehicleModel) -> float:
