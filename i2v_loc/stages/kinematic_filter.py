@@ -179,15 +179,12 @@ class KinematicFilter:
         self.ukf.x[YAW], self.ukf.x[HITCH] = wrap_rad(self.ukf.x[YAW]), wrap_rad(self.ukf.x[HITCH])
         return True
 
-    def loosen_position(self, along_m: float) -> None:
-        """The vehicle's model changed so that its next fit may place the reference point up to
-        ``along_m`` further along the heading: that much variance is added there, so that the jump
-        goes into the position and not into the speed (a trailer's front learned 0.46 m further
-        forward read as 4 m/s)."""
-        if along_m <= 0.0:
-            return
-        heading = np.array([np.cos(self.ukf.x[YAW]), np.sin(self.ukf.x[YAW])])
-        self.ukf.P[:2, :2] += along_m**2 * np.outer(heading, heading)
+    def move_pose(self, delta: np.ndarray) -> None:
+        """Move the pose (x, y, yaw[, hitch]) by ``delta`` without touching the motion or the
+        covariance (the model changed under the vehicle, the vehicle did not move)."""
+        idx = [X, Y, YAW, HITCH][: len(delta)]
+        self.ukf.x[idx] += delta
+        self.ukf.x[YAW], self.ukf.x[HITCH] = wrap_rad(self.ukf.x[YAW]), wrap_rad(self.ukf.x[HITCH])
 
     def shift_reference(self, forward_m: float) -> None:
         """Move the reference point ``forward_m`` along the tractor's heading (its model changed)."""

@@ -65,6 +65,7 @@ RECHECK_FRAMES = 20  # a moving rigid track is fitted as every model every this 
 SEED_RETRY_FRAMES = 20  # a seed that was no vehicle is fitted again after this many frames
 SHAPE_CHANGE_M = 0.5  # if its extent or centre moved this much
 SHAPE_POINTS_CHANGE = 0.3  # or its point count changed by this share
+MODEL_FOLLOW_MIN_M = 0.02  # a learned change that moves a face less is left to the filter (the fits' own noise)
 
 
 @dataclass(frozen=True)
@@ -295,7 +296,9 @@ class VehicleTracker:
             track.missed, track.last = 0, m
             if self.params.learn_dimensions:
                 self._learn_kingpin(track, prior, points)
+                before = (track.model, track.catalogue_name)
                 self._learn(track, m)
+                self._follow_model(track, prior, m, *before)
             track = self._recheck_rigid(track, points, stamp_s)
         else:
             track.missed += 1
@@ -304,7 +307,7 @@ class VehicleTracker:
     # ----------------------------------------------------------------- dimensions
 
     def _learn(self, track: _Track, m: Measurement) -> None:
-        before = model = track.model
+        model = track.model
         boxes = model.boxes
         local = unit_frames(m.points, m.vector, model)
         new_boxes = []
@@ -326,7 +329,20 @@ class VehicleTracker:
             self._retype(track, name)
         track.model = replace(track.model, name=name, trailer_axle_m=self._trailer_axle(track))
         track.filter.trailer_axle_m = track.model.trailer_axle_m
-        track.filter.loosen_position(_shift_along_m(before, track.model))
+
+    def _follow_model(self, track: _Track, prior: Prior, m: Measurement, before: VehicleModel, name: str) -> None:
+        """A learned change moved a front or the kingpin against the rear axle by more than
+        ``MODEL_FOLLOW_MIN_M``: the frame's points are fitted again with the new model and the
+        filter's pose moves by the difference of the two fits, so that the next fit's jump is not
+        read as motion (a trailer's front learned 0.46 m further forward read as 4.1 m/s; the fits
+        that followed fell outside the gate and the prediction ran 2.9 m away). A retyped vehicle's
+        reference point was moved by ``_retype`` itself."""
+        if track.catalogue_name != name or _shift_along_m(before, track.model) <= MODEL_FOLLOW_MIN_M:
+            return
+        start = replace(prior, x_m=m.x_m, y_m=m.y_m, yaw_rad=m.yaw_rad, hitch_rad=m.hitch_rad or 0.0)
+        again = fit(m.points, replace(start, model=track.model), self.params)
+        if again is not None:
+            track.filter.move_pose(again.vector - m.vector)
 
     def _learn_kingpin(self, track: _Track, prior: Prior, points: np.ndarray) -> None:
         """The kingpin's offset shows only at a hitch angle (straight, it trades with the trailer's
