@@ -57,6 +57,14 @@ def planar_poses(x, y, yaw_rad, z=0.0) -> np.ndarray:
     return t
 
 
+def rigid_inverse(t: np.ndarray) -> np.ndarray:
+    """The inverse of a rigid 4x4 transform: the rotation transposed, the translation turned back."""
+    out = np.eye(4)
+    out[:3, :3] = t[:3, :3].T
+    out[:3, 3] = -(t[:3, :3].T @ t[:3, 3])
+    return out
+
+
 def planar_pose(x: float, y: float, yaw_rad: float, z: float = 0.0) -> np.ndarray:
     """4x4 transform of a pose on the ground plane."""
     return planar_poses(x, y, yaw_rad, z)[0]

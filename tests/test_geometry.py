@@ -12,6 +12,7 @@ from i2v_loc.geometry import (
     planar_pose,
     planar_poses,
     pose_matrix,
+    rigid_inverse,
     rotate_xy,
     rotation_angle_rad,
     transform_points,
@@ -101,3 +102,12 @@ def test_box_corners_of_one_box_and_of_a_stack():
     assert stack.shape == (2, 4, 2)
     np.testing.assert_allclose(stack[0], [[1.0, 0.5], [1.0, -0.5], [-1.0, -0.5], [-1.0, 0.5]])
     np.testing.assert_allclose(stack[1], corners, atol=1e-12)
+
+
+def test_a_rigid_inverse_undoes_the_transform():
+    from i2v_loc.geometry import extrinsics_matrix
+    from i2v_loc.params import Extrinsics
+
+    t = extrinsics_matrix(Extrinsics(x_m=3.0, y_m=-7.5, z_m=2.0, yaw_deg=130.0, pitch_deg=-4.0, roll_deg=2.5))
+    inverse = rigid_inverse(t)
+    assert np.allclose(inverse @ t, np.eye(4), atol=1e-12) and np.allclose(inverse, np.linalg.inv(t), atol=1e-12)

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from i2v_loc.frame import Frame
-from i2v_loc.geometry import box_poses
+from i2v_loc.geometry import box_poses, rigid_inverse
 from i2v_loc.params import Params
 from i2v_loc.pipelines.handoff import ParameterHandoff
 from i2v_loc.results import FrameResult, StageTimer, UnitResult, VehicleResult, _r, count_frame, frame_result
@@ -147,7 +147,7 @@ class ArticulatedPipeline(ParameterHandoff):
             truck,
             trailer,
             float(np.degrees(s.hitch_rad)),
-            np.linalg.inv(t_trailer) @ t_truck,
+            rigid_inverse(t_trailer) @ t_truck,
             "articulated",
             float(np.degrees(s.hitch_std_rad)),
             s.jackknife,

@@ -26,6 +26,7 @@ LEVEL.flags.writeable = False
 class LevelFrame:
     def __init__(self) -> None:
         self.rotation = LEVEL  # yard -> level
+        self._followed: GroundPlane | None = None  # the plane last followed (refitted every few frames only)
 
     @property
     def normal(self) -> np.ndarray:
@@ -34,8 +35,9 @@ class LevelFrame:
 
     def update(self, ground: GroundPlane | None) -> None:
         """Follow the ground plane of this frame (none found: keep the last)."""
-        if ground is None:
+        if ground is None or ground is self._followed:
             return
+        self._followed = ground
         target = ground.normal if _angle_deg(ground.normal, UP) > LEVEL_MAX_TILT_DEG else UP
         if _angle_deg(target, self.normal) > TURN_MIN_DEG:
             self.rotation = _rotation_onto_up(target)

@@ -279,8 +279,9 @@ class VehicleTracker:
         owner = np.full(len(points), -1, dtype=np.int64)
         best = np.full(len(points), np.inf)
         margin = self.params.gate_margin_m
+        xy = np.ascontiguousarray(points[:, :2], dtype=float)
         for i, prior in enumerate(priors):
-            d = box_distance(points, prior)
+            d = box_distance(xy, prior)
             take = (d <= margin) & (d < best)
             owner[take], best[take] = i, d[take]
         return owner
@@ -916,8 +917,8 @@ def unit_frames(points: np.ndarray, v: np.ndarray, model: VehicleModel) -> list[
 
 
 def box_distance(points: np.ndarray, prior: Prior) -> np.ndarray:
-    """Planar distance of each point to the nearer of the prior's boxes (0 inside); the trailer's box
-    reaches ``trailer_slack_m`` further back."""
+    """Planar distance of each point (N, 2 or 3) to the nearer of the prior's boxes (0 inside); the
+    trailer's box reaches ``trailer_slack_m`` further back."""
     model = prior.model
     boxes = [
         (*origin, yaw, box.rear_m - slack, box.front_m, box.width_m / 2)
