@@ -291,6 +291,24 @@ def test_suite_refuses_unknown_keys_and_vehicles(tmp_path, capsys):
     assert not (tmp_path / "o").exists()  # checked before anything is generated
 
 
+def test_a_suite_is_generated_again_under_other_seeds(tmp_path, capsys):
+    """--seed-offset draws every entry again (a held-out check); alone it is an error."""
+    import yaml
+
+    short = _write(tmp_path / "short.yaml", {"recordings": [{"scenario": "straight", "seed": 7, "duration_s": 0.2}]})
+    scans = {}
+    for offset in (0, 100):
+        out = tmp_path / f"o{offset}"
+        assert main(["sim", "--suite", str(short), "--out", str(out), "--seed-offset", str(offset)]) == 0
+        meta = yaml.safe_load((out / "man_tgx_straight" / "meta.yaml").read_text())
+        assert meta["seed"] == 7 + offset
+        scans[offset] = sorted((out / "man_tgx_straight" / "scans").iterdir())[0].read_bytes()
+    assert scans[0] != scans[100]  # other draws
+    capsys.readouterr()
+    assert main(["sim", "--out", str(tmp_path / "one"), "--seed-offset", "3"]) == 2
+    assert "--seed-offset applies to --suite" in capsys.readouterr().err
+
+
 def test_two_vehicles_with_clutter_beside_them_and_no_collision(suite_recordings):
     entry, rec = suite_recordings["two"]
     gt = rec.ground_truth()

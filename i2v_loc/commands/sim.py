@@ -49,6 +49,12 @@ def register(sub) -> None:
     p.add_argument(
         "--suite", help="generate every entry of a suite (name in samples/suites/ or a YAML file) into --out"
     )
+    p.add_argument(
+        "--seed-offset",
+        type=int,
+        default=0,
+        help="with --suite: add this to every entry's seed (the same recordings under other random draws: a held-out check)",
+    )
     p.set_defaults(func=_run)
 
 
@@ -61,6 +67,8 @@ def _run(args) -> int:
         if args.format != "native":
             raise UserError("--format applies to one recording; convert suite entries with `i2v-loc sources --convert`")
         return _run_suite(args, params)
+    if args.seed_offset:
+        raise UserError("--seed-offset applies to --suite; give one recording its seed with --seed")
     extra = _extra_vehicles(args.vehicles_file, params)
     vehicles = [v.strip() for v in (args.vehicles or args.vehicle).split(",") if v.strip()]
     unknown = [v for v in vehicles if v not in params.vehicles and v not in extra]
@@ -152,6 +160,7 @@ def _run_suite(args, params) -> int:
             f"{suite_file}: recording names must be unique, got {', '.join(sorted({n for n in names if names.count(n) > 1}))}"
         )
     for name, clean, case_params in cases:
+        clean["seed"] = clean.get("seed", 0) + args.seed_offset
         _generate(clean, case_params, out / name, str(out / name / "preview.png") if args.preview is not None else None)
     print(f"suite {suite_file.stem}: {len(entries)} recordings in {out}")
     return 0
