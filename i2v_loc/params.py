@@ -295,7 +295,7 @@ class RegionParams(Section):
         10,
         ge=1,
         le=1000,
-        description="Fit the ground plane every this many frames and keep it in between (1 = every frame; the ground is static); a refit due on a frame the background map learns from waits one frame",
+        description="Fit the ground plane every this many frames and keep it in between (1 = every frame; the ground is static); a refit samples the region on one frame and fits the sample on the next",
     )
 
     @model_validator(mode="after")
