@@ -340,8 +340,8 @@ class VehicleTracker:
         reference point was moved by ``_retype`` itself."""
         if track.catalogue_name != name or _shift_along_m(before, track.model) <= MODEL_FOLLOW_MIN_M:
             return
-        start = replace(prior, x_m=m.x_m, y_m=m.y_m, yaw_rad=m.yaw_rad, hitch_rad=m.hitch_rad or 0.0)
-        again = fit(m.points, replace(start, model=track.model), self.params)
+        start = replace(prior, x_m=m.x_m, y_m=m.y_m, yaw_rad=m.yaw_rad, hitch_rad=m.hitch_rad or 0.0, model=track.model)
+        again = fit(m.points, start, self.params)
         if again is not None:
             track.filter.move_pose(again.vector - m.vector)
 
@@ -751,8 +751,9 @@ def _face_span(m: Measurement, unit: int, face: int) -> float:
 
 def _shift_along_m(before: VehicleModel, after: VehicleModel) -> float:
     """How far a model change moves a unit's faces along the vehicle relative to the tractor's
-    reference point (the fronts and the kingpin; a trailer's length moves only its rear face, which
-    pins the reference point only when nothing else does): as far, the next fit may move the point."""
+    reference point (the fronts, the cab's rear and the kingpin; a trailer's length moves only its
+    rear face, which pins the reference point only when nothing else does): as far, the next fit
+    may move the point."""
     shifts = [abs(after.tractor.front_m - before.tractor.front_m), abs(after.tractor.rear_m - before.tractor.rear_m)]
     if before.trailer is not None and after.trailer is not None:
         shifts.append(abs(after.kingpin_behind_axle_m - before.kingpin_behind_axle_m))
