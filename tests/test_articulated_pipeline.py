@@ -703,3 +703,19 @@ def test_a_faces_span_is_measured_across_its_own_unit():
     assert _face_span(m, 1, FRONT) == pytest.approx(2.1)
     assert _face_span(m, 0, REAR) == 0.0  # one point spans nothing
     assert _face_span(replace(m, hitch_rad=0.0), 1, FRONT) < 2.1 * np.cos(hitch) + 1e-9  # seen askew
+
+
+def test_a_side_running_on_through_the_gap_just_outside_the_cab_fills_it():
+    """A parked trailer's side, fitted as cab and trailer, lies 0.1 m outside the model cab's width
+    along the whole gap and cab slice: the gap is filled (counted with the cab's sides), not open."""
+    model = VehicleModel.from_config("volvo_fh", PARAMS.vehicles["volvo_fh"])
+    points = vehicle_points(model, 0.0, 3.0, 0.0, sensors=SENSORS)
+    m = fit(points, Prior(0.0, 3.0, 0.0, 0.0, model), PARAMS.articulated)
+    x0, y0, yaw = m.vector[:3]
+    grid_x, grid_z = np.meshgrid(np.arange(-1.0, 4.0, 0.1), np.arange(model.trailer.floor_m + 0.45, 2.4, 0.1))
+    side_y = model.tractor.width_m / 2 + 0.1
+    local = np.column_stack([grid_x.ravel(), np.full(grid_x.size, side_y)])
+    c, s = np.cos(yaw), np.sin(yaw)
+    xy = np.column_stack([x0 + c * local[:, 0] - s * local[:, 1], y0 + s * local[:, 0] + c * local[:, 1]])
+    side = np.column_stack([xy, grid_z.ravel()])
+    assert _gap_filled(side, m, model, 0.0) and not _gap_open(side, m, model, 0.0)

@@ -809,7 +809,8 @@ def _gap_counts(
     """Points in the middle half of the model's gap between cab and trailer, in a slice of the cab
     just ahead of it (as long, at least ``CAB_SLICE_MIN_M``: a gap of a metre leaves a slice of half
     a metre, a handful of points) between the trailer's floor and the lower roof, within the cab's
-    width, and the gap's length over the slice's; None unless articulated and nearly straight."""
+    width and ``END_BAND_M`` beyond its sides, and the gap's length over the slice's; None unless
+    articulated and nearly straight."""
     if model.trailer is None or abs(m.hitch_rad) > GAP_TEST_MAX_HITCH_RAD:
         return None
     trailer_front = model.trailer.front_m - model.kingpin_behind_axle_m  # in the tractor's frame at hitch 0
@@ -820,7 +821,9 @@ def _gap_counts(
     slice_m = max(length, CAB_SLICE_MIN_M)
     (q,) = unit_frames(cluster, m.vector, model.with_boxes(model.tractor, None))
     z_rel = cluster[:, 2] - ground_z_m
-    band = (np.abs(q[:, 1]) <= model.tractor.width_m / 2) & (z_rel >= model.trailer.floor_m + END_BAND_M)
+    # the cab's sides count with their surface: a parked trailer's side running on through the
+    # "gap" lay just outside the model's cab width and left the gap empty (held-out seeds)
+    band = (np.abs(q[:, 1]) <= model.tractor.width_m / 2 + END_BAND_M) & (z_rel >= model.trailer.floor_m + END_BAND_M)
     band &= z_rel <= min(model.tractor.top_m, model.trailer.top_m) - END_BAND_M
     start = trailer_front + length / 2
     in_gap = int(np.sum(band & (q[:, 0] >= start) & (q[:, 0] <= start + length)))
