@@ -700,9 +700,10 @@ def test_a_faces_span_is_measured_across_its_own_unit():
     unit = np.array([1] * 8 + [0], dtype=np.int8)
     face = np.array([FRONT] * 8 + [REAR], dtype=np.int8)
     m = Measurement(0.0, 0.0, yaw, hitch, np.eye(4), points, unit, 0.0, face=face)
-    assert _face_span(m, 1, FRONT) == pytest.approx(2.1)
-    assert _face_span(m, 0, REAR) == 0.0  # one point spans nothing
-    assert _face_span(replace(m, hitch_rad=0.0), 1, FRONT) < 2.1 * np.cos(hitch) + 1e-9  # seen askew
+    model = VehicleModel.from_config("volvo_fh", PARAMS.vehicles["volvo_fh"])
+    assert _face_span(m, model, 1, FRONT) == pytest.approx(2.1)
+    assert _face_span(m, model, 0, REAR) == 0.0  # one point spans nothing
+    assert _face_span(replace(m, hitch_rad=0.0), model, 1, FRONT) < 2.1 * np.cos(hitch) + 1e-9  # seen askew
 
 
 def test_a_side_running_on_through_the_gap_just_outside_the_cab_fills_it():

@@ -1347,20 +1347,10 @@ def warm_up() -> None:
         x, p, sigmas = ukf_predict(
             np.zeros(6), np.eye(6), weights, weights, 6.0, np.eye(6), 0.1, 1, -0.3, 7.0, articulated, x_angles
         )
-        rows = np.eye(len(measured))
-        ukf_update(x, p, sigmas, weights, weights, measured, np.zeros(len(measured)), rows, rows, x_angles, z_angles)
-        ukf_update(
-            x,
-            p,
-            sigmas,
-            weights,
-            weights,
-            measured,
-            np.zeros(len(measured)),
-            rows[:1, :1],
-            rows[:1],
-            x_angles,
-            z_angles,
-        )
+        for rows in (np.eye(len(measured)), np.eye(len(measured))[:1]):  # all directions, one
+            noise = np.eye(len(rows))
+            ukf_update(
+                x, p, sigmas, weights, weights, measured, np.zeros(len(measured)), noise, rows, x_angles, z_angles
+            )
     upper_factor(-np.eye(6))
     _WARM = True

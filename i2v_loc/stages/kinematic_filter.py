@@ -27,12 +27,17 @@ INITIAL_CURVATURE_SIGMA_1_M = 0.05
 MAX_STEP_S = 0.1  # the kinematics are integrated in midpoint steps no longer than this
 
 
+def _midpoint_steps(dt_s: float) -> tuple[float, int]:
+    """(step length, number of steps) of ``dt_s`` in midpoint steps no longer than ``MAX_STEP_S``."""
+    steps = max(1, int(np.ceil(abs(dt_s) / MAX_STEP_S)))
+    return float(dt_s / steps), steps
+
+
 def propagate(state: np.ndarray, dt_s: float, kingpin_m: float, trailer_axle_m: float, articulated: bool) -> np.ndarray:
     """The state (6,) or states (k, 6) ``dt_s`` later (midpoint steps, compiled: ``kernels.propagate_states``)."""
     s = np.array(state, dtype=float)
-    steps = max(1, int(np.ceil(abs(dt_s) / MAX_STEP_S)))
     out = kernels.propagate_states(
-        np.atleast_2d(s), float(dt_s / steps), steps, float(kingpin_m), float(trailer_axle_m), bool(articulated)
+        np.atleast_2d(s), *_midpoint_steps(dt_s), float(kingpin_m), float(trailer_axle_m), bool(articulated)
     )
     return out.reshape(s.shape)
 
@@ -58,9 +63,8 @@ class _Ukf:
         self.mahalanobis = 0.0
 
     def predict(self, dt: float, q: np.ndarray, kingpin_m: float, trailer_axle_m: float, articulated: bool) -> None:
-        steps = max(1, int(np.ceil(abs(dt) / MAX_STEP_S)))
         self.x, self.P, self.sigmas_f = kernels.ukf_predict(
-            self.x, self.P, self.wm, self.wc, self.spread, q, dt / steps, steps,
+            self.x, self.P, self.wm, self.wc, self.spread, q, *_midpoint_steps(dt),
             float(kingpin_m), float(trailer_axle_m), articulated, _ANGLES_X,
         )  # fmt: skip
 

@@ -366,7 +366,7 @@ class VehicleTracker:
             track.trailer_front.add(m.trailer_front_m)
         elif (
             np.sum((m.unit == 0) & (m.face == REAR)) >= REAR_FACE_MIN_POINTS
-            and _face_span(m, 1, FRONT) >= FACE_SEEN_SPAN * track.model.trailer.width_m
+            and _face_span(m, track.model, 1, FRONT) >= FACE_SEEN_SPAN * track.model.trailer.width_m
         ):
             track.reach.add(m.trailer_front_m - m.kingpin_m)
 
@@ -739,14 +739,13 @@ class VehicleTracker:
         return chosen[0], chosen[2]
 
 
-def _face_span(m: Measurement, unit: int, face: int) -> float:
-    """How far across its unit the points on one of its faces spread (0 for fewer than two)."""
+def _face_span(m: Measurement, model: VehicleModel, unit: int, face: int) -> float:
+    """How far across its unit the points on one of its faces spread (0 for fewer than two; the
+    unit frame's origin does not matter, so any model of the vehicle will do)."""
     on = (m.unit == unit) & (m.face == face)
     if np.count_nonzero(on) < 2:
         return 0.0
-    yaw = m.yaw_rad + (m.hitch_rad if unit == 1 else 0.0)
-    across = -np.sin(yaw) * m.points[on, 0] + np.cos(yaw) * m.points[on, 1]
-    return float(np.ptp(across))
+    return float(np.ptp(unit_frames(m.points[on], m.vector, model)[unit][:, 1]))
 
 
 def _shift_along_m(before: VehicleModel, after: VehicleModel) -> float:
