@@ -118,6 +118,7 @@ class BackgroundMap:
         )  # a bit per voxel for the learning pass, clear between frames
         self._occupied: list[np.ndarray] = []  # while the window fills: the voxels counted for the first time
         self._pending: np.ndarray | None = None  # the last learning frame's sample, counted in on the next frame
+        self._cells, self._columns = _NO_CELLS, _NO_CELLS  # the pass's scratch (voxel and column per point)
         self._shift = (self.origin - self.pad * params.voxel_size_m).astype(np.float32)
         self._scale = np.float32(1.0 / params.voxel_size_m)
         self._upper = np.array(self.padded, dtype=np.float32) - np.float32(0.5)
@@ -157,10 +158,12 @@ class BackgroundMap:
         keep = self._protected_columns(protected, self.params.keep_margin_m) if self.ready else None
         protect = self._protected_columns(protected, self.params.protect_margin_m) if learning else None
         learned = np.empty(n if learning else 0, dtype=np.int64)
+        if len(self._cells) < n:  # scratch kept between frames: fresh pages cost more than the pass
+            self._cells, self._columns = np.empty(2 * n, dtype=np.int64), np.empty(2 * n, dtype=np.int64)
         n_learned = kernels.background_pass(
             points, self._shift, self._scale, self._upper, self._grid, self._free_bits, self.ready,
             _NO_COLUMNS if keep is None else keep, learning, _NO_COLUMNS if protect is None else protect,
-            self._seen, result.in_region, result.foreground, learned,
+            self._seen, result.in_region, result.foreground, learned, self._cells, self._columns,
         )  # fmt: skip
         if self._pending is not None:
             self._add_sample(self._pending)
