@@ -375,21 +375,32 @@ def test_a_vehicle_folded_beyond_the_start_limit_does_not_start(hitch_deg):
     assert reports[0].state.jackknife and reports[0].model.name == "volvo_fh"
 
 
+def _column(x, y, height=2.0, n=20):
+    """A tight column of ``n`` points from 0.2 m up to ``height`` above flat ground at (x, y)."""
+    return np.column_stack([np.full(n, x), np.full(n, y), np.linspace(0.2, height, n)])
+
+
 def test_seed_parts_are_joined_by_their_nearest_points():
-    """Parts closer than the distance (point to point) are one group, chained; none, one, or parts
-    whose footprints overlap without close points are handled."""
-    from i2v_loc.stages.vehicle_tracker import _join_near
+    """Components closer than the join distance (point to point) are one cluster, chained; one
+    whose footprint overlaps another's grown one without close points stays apart; clusters list
+    their components largest first, each component's points in point order."""
+    from i2v_loc.stages.vehicle_tracker import seed_groups
 
-    def part(*xy):
-        return np.column_stack([np.array(xy, float).reshape(-1, 2), np.zeros(len(xy))])
+    def groups(*parts, join=2.0, min_diagonal=0.0):
+        points = np.vstack(parts)
+        return seed_groups(points, lambda x, y: 0.0, 0.2, 1.0, 3, join, min_diagonal)
 
-    assert _join_near([], 2.0) == []
-    assert _join_near([part((0, 0))], 2.0) == [[0]]
-    a, b, c, d = part((0, 0), (1, 0)), part((2.9, 0)), part((4.5, 0.5)), part((1.5, 1.5), (10, 10))
-    groups = _join_near([a, b, c, d], 2.0)  # a-b 1.9, b-c 1.67: chained; d's nearest point 1.58 from a
-    assert sorted(sorted(g) for g in groups) == [[0, 1, 2, 3]]
-    far = part((0, 3), (6, 3))  # its footprint overlaps a's grown one, but no point is within 2 m
-    assert sorted(sorted(g) for g in _join_near([a, far], 2.0)) == [[0], [1]]
+    assert groups(np.zeros((0, 3))) == []
+    a = np.vstack([_column(0, 0), _column(1, 0)])  # two components 1 m apart: joined
+    b, c = _column(2.9, 0, n=24), _column(4.5, 0.5)  # a-b 1.9 m, b-c 1.67 m: chained
+    d = _column(1.5, 1.5)  # 1.58 m from a's nearest point
+    (one,) = groups(a, b, c, d)
+    assert len(one) == len(a) + len(b) + len(c) + len(d)
+    assert np.array_equal(one[:24], b)  # the largest component first, in point order
+    far = np.vstack([_column(0, 3), _column(6, 3)])  # overlaps a's grown footprint, no point within 2 m
+    got = groups(a, far)
+    assert sorted(len(g) for g in got) == [20, 20, 40]  # a joined; far's two columns 6 m apart stay apart
+    assert [len(g) for g in groups(a, far, min_diagonal=0.9)] == [40]  # only a's footprint is that long
 
 
 def test_the_seeds_closeness_test_is_a_kd_tree_query():
@@ -416,21 +427,21 @@ def test_the_seeds_closeness_test_is_a_kd_tree_query():
         assert kernels.any_closer(exact, np.array([q]) * 0.999, 2.0)
 
 
-def test_seed_heights_are_the_bincount_heights():
-    from i2v_loc.stages.vehicle_tracker import _heights, ground_heights
+def test_seed_components_too_small_or_too_low_are_left_out():
+    """A component needs ``min_points`` points and its top ``min_height`` above the ground under its
+    centre (a sloped ground: the height is taken there, not at z = 0)."""
+    from i2v_loc.stages.vehicle_tracker import seed_groups
 
-    rng = np.random.default_rng(2)
-    points = rng.normal(0, 5, (500, 3)).astype(np.float32)
-    labels = np.r_[np.arange(40), rng.integers(0, 40, 460)]  # every label has points, as grid_labels' do
+    def sloped(x, y):  # a 2 % grade along x, 0.3 m up at the origin
+        return 0.3 + 0.02 * x
 
-    def ground(x, y):
-        return 0.1 + 0.02 * x - 0.01 * y
-
-    counts = np.bincount(labels)
-    centres = np.column_stack([np.bincount(labels, points[:, i]) for i in (0, 1)]) / counts[:, None]
-    top = np.full(len(counts), -np.inf)
-    np.maximum.at(top, labels, points[:, 2])
-    assert np.array_equal(_heights(points, labels, ground), top - ground_heights(ground, centres))
+    tall = _column(-10, 2, height=1.5) + [0, 0, sloped(-10, 2)]  # 1.5 m above its ground
+    low = _column(20, 8, height=0.9) + [0, 0, sloped(20, 8)]  # 0.9 m: too low (1.0 m needed)
+    high_but_few = _column(5, -3, n=2) + [0, 0, 1.0]
+    sunk = _column(40, 0, height=1.5)  # 1.5 m above z = 0 but the ground there is 1.1 m up
+    points = np.vstack([tall, low, high_but_few, sunk])
+    (only,) = seed_groups(points, sloped, 0.2, 1.0, 3, 0.5, 0.0)
+    assert np.array_equal(only, tall)
 
 
 def dock(x_m: float, y_m: float, yaw_rad: float) -> np.ndarray:
@@ -616,26 +627,6 @@ def test_the_windowed_median_is_numpys_median_of_the_window(size):
         reference.append(float(value))
         assert _windowed_median(window, float(value), size) == float(np.median(reference))
     assert list(window) == list(reference) and window.ordered == sorted(reference)
-
-
-def test_seed_heights_are_each_components_top_above_the_ground_under_it():
-    from i2v_loc.stages.vehicle_tracker import _heights
-
-    def sloped(x, y):  # a 2 % grade along x, 0.3 m up at the origin
-        return 0.3 + 0.02 * x
-
-    rng = np.random.default_rng(3)
-    tops, centres = [2.0, 3.7, 1.1], [(-10.0, 2.0), (5.0, -3.0), (20.0, 8.0)]
-    clouds, labels = [], []
-    for label, (top, (x, y)) in enumerate(zip(tops, centres)):
-        xy = rng.normal((x, y), 0.8, (40, 2))
-        xy -= xy.mean(axis=0) - (x, y)  # the centre exactly there
-        z = sloped(x, y) + rng.uniform(0.2, top, 40)
-        z[7] = sloped(x, y) + top
-        clouds.append(np.column_stack([xy, z]))
-        labels += [label] * 40
-    heights = _heights(np.vstack(clouds), np.array(labels), sloped)
-    assert np.allclose(heights, tops, atol=1e-9)
 
 
 def test_a_unit_whose_points_lie_mostly_under_its_floor_is_not_supported():

@@ -1127,6 +1127,71 @@ def join_parts(xy, starts, distance):
 
 
 @njit(**_JIT)
+def seed_groups(points, voxel, one, ground_z0, ground_dx, ground_dy, min_height, min_points, join_m, min_diagonal):
+    """The start's clusters in one call: 26-connected components of ``voxel`` voxels (``grid_labels``)
+    of at least ``min_points`` points whose highest point stands ``min_height`` above the ground
+    under their centre (the plane z0 + dx x + dy y), largest first (ties: in raster order); those
+    with points closer than ``join_m`` joined (``join_parts``); kept when their footprint's diagonal
+    reaches ``min_diagonal``. Returns the point indices of the clusters one after the other (each:
+    its components in that order, each component's points in point order) and their bounds."""
+    n = points.shape[0]
+    ids, voxel_keys, dims, bits, word_rank, table_keys, table_ids = voxel_ids(points, np.ones(n, np.bool_), voxel, one)
+    if bits.shape[0] == 0:
+        voxel_keys = np.sort(voxel_keys)
+        rank_in_key_order(voxel_keys, ids, table_keys, table_ids)
+    labels = voxel_components(voxel_keys, dims, bits, word_rank, table_keys, table_ids)[ids]
+    n_labels = labels.max() + 1 if n else 0
+    counts, sums, top = label_extents(points, labels, n_labels)
+    order, _ = counting_order(labels, n_labels)
+    first = np.zeros(n_labels + 1, dtype=np.int64)
+    first[1:] = np.cumsum(counts)
+    parts = np.empty(n_labels, dtype=np.int64)
+    n_parts = 0
+    for g in np.argsort(-counts, kind="mergesort"):
+        centre_x, centre_y = sums[g, 0] / counts[g], sums[g, 1] / counts[g]
+        height = top[g] - (ground_z0 + ground_dx * centre_x + ground_dy * centre_y)
+        parts[n_parts] = g
+        n_parts += counts[g] >= min_points and height >= min_height
+    starts = np.zeros(n_parts + 1, dtype=np.int64)
+    for k in range(n_parts):
+        starts[k + 1] = starts[k] + counts[parts[k]]
+    rows = np.empty(starts[n_parts], dtype=np.int64)
+    for k in range(n_parts):
+        rows[starts[k] : starts[k + 1]] = order[first[parts[k]] : first[parts[k] + 1]]
+    xy = np.empty((rows.shape[0], 2))
+    for r in range(rows.shape[0]):
+        xy[r, 0], xy[r, 1] = points[rows[r], 0], points[rows[r], 1]
+    roots = join_parts(xy, starts, join_m)
+    out = np.empty(rows.shape[0], dtype=np.int64)
+    bounds = [0]
+    for root in range(n_parts):
+        if roots[root] != root:
+            continue  # a group is listed at its first part (its root)
+        begin = bounds[-1]
+        end = begin
+        for k in range(root, n_parts):
+            if roots[k] == root:
+                out[end : end + counts[parts[k]]] = rows[starts[k] : starts[k + 1]]
+                end += counts[parts[k]]
+        if _footprint_diagonal(points, out[begin:end]) >= min_diagonal:
+            bounds.append(end)
+        # else the next group overwrites its rows
+    return out[: bounds[-1]], np.array(bounds, dtype=np.int64)
+
+
+@njit(**_INLINE)
+def _footprint_diagonal(points, rows):
+    """The diagonal of the xy bounding box of the points ``rows`` (in the points' precision, as
+    numpy's ``ptp`` of them)."""
+    lo_x = hi_x = points[rows[0], 0]
+    lo_y = hi_y = points[rows[0], 1]
+    for r in rows:
+        lo_x, hi_x = min(lo_x, points[r, 0]), max(hi_x, points[r, 0])
+        lo_y, hi_y = min(lo_y, points[r, 1]), max(hi_y, points[r, 1])
+    return math.hypot(hi_x - lo_x, hi_y - lo_y)
+
+
+@njit(**_JIT)
 def label_extents(points, labels, n_labels):
     """Per label: point count, sums of x and of y (in point order, as np.bincount sums) and the
     highest z."""
@@ -1353,9 +1418,9 @@ def warm_up() -> None:
     fit_covariance(residual, jacobian, np.ones(7), 0.1, 0.3, 0.01, 0.0004, 4)
     observed_directions(np.eye(4), np.ones(4), np.ones(4))
     fit_faces(xy, z, geometry, 0.25, 4, True, True, v0)  # the tests call it on its own
-    any_closer(xy, xy, 0.5)
-    join_parts(xy, np.array([0, 1, 3]), 0.5)
-    label_extents(p32, np.zeros(3, dtype=np.int64), 1)
+    any_closer(xy, xy, 0.5)  # the tests call it on its own
+    for points, one in ((p32, np.float32(1.0)), (p64, 1.0)):  # level ground keeps float32; a slope float64
+        seed_groups(points, one * 0.5, one, 0.0, 0.0, 0.0, 0.0, 1, 0.5, 0.0)
     wrap_angles(np.zeros(2))
     hitch_rate(1.0, 0.1, 0.2, -0.3, 7.0)
     states = np.zeros((13, 6))

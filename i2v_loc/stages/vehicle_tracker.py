@@ -23,7 +23,7 @@ from i2v_loc.params import ArticulatedParams, VehicleConfig
 from i2v_loc.stages import kernels
 from i2v_loc.stages.hinged_fit import FRONT, LEFT, REAR, RIGHT, TRAILER_LENGTH_RANGE_M, Measurement, Prior, fit, thin
 from i2v_loc.stages.kinematic_filter import FilterState, KinematicFilter
-from i2v_loc.stages.primitives import Rect, grid_labels, median, min_area_rect, split_by_label, voxel_keys
+from i2v_loc.stages.primitives import Rect, median, min_area_rect, voxel_keys
 from i2v_loc.stages.vehicle_model import VehicleModel
 
 START_HITCHES_DEG = (-90.0, -60.0, -30.0, 0.0, 30.0, 60.0, 90.0)
@@ -527,16 +527,16 @@ class VehicleTracker:
         ``start_min_width_m`` wide (a wall, or a vehicle seen from one side only, is a plane)."""
         p = self.params
         points = _below_tall_structures(points, ground, p.start_voxel_m)
-        if len(points) == 0:
-            return []
-        labels = grid_labels(points, p.start_voxel_m)
-        tall = _heights(points, labels, ground) >= p.start_min_height_m
-        parts = [points[idx] for idx in split_by_label(labels) if len(idx) >= p.fit_min_points and tall[labels[idx[0]]]]
         out = []
-        for group in _join_near(parts, p.start_join_m):
-            cluster = np.vstack([parts[i] for i in group])
-            if np.hypot(*np.ptp(cluster[:, :2], axis=0)) < p.start_min_length_m:
-                continue  # no rectangle around it is that long
+        for cluster in seed_groups(
+            points,
+            ground,
+            p.start_voxel_m,
+            p.start_min_height_m,
+            p.fit_min_points,
+            p.start_join_m,
+            p.start_min_length_m,
+        ):
             rect = min_area_rect(cluster[:, :2])
             if p.start_min_length_m <= rect.length_m <= p.start_max_length_m and rect.width_m >= p.start_min_width_m:
                 out.append((cluster, rect))
@@ -859,24 +859,30 @@ def _near_any(x: np.ndarray, marks: np.ndarray, tolerance: float) -> np.ndarray:
     return nearest <= tolerance
 
 
-def _heights(points: np.ndarray, labels: np.ndarray, ground) -> np.ndarray:
-    """Per label, its highest point above the ground under its points' centre."""
-    counts, sums, top = kernels.label_extents(points, labels, int(labels.max()) + 1)
-    return top - ground_heights(ground, sums / counts[:, None])
-
-
-def _join_near(parts: list[np.ndarray], distance_m: float) -> list[list[int]]:
-    """Groups of indices of ``parts`` linked by point pairs closer than ``distance_m``, each group
-    in index order, the groups in the order of their first index."""
-    if not parts:
+def seed_groups(
+    points: np.ndarray,
+    ground,
+    voxel_m: float,
+    min_height_m: float,
+    min_points: int,
+    join_m: float,
+    min_diagonal_m: float,
+) -> list[np.ndarray]:
+    """The points of each start cluster (``kernels.seed_groups``): connected ``voxel_m`` components
+    of ``min_points`` points reaching ``min_height_m`` above the ground under their centre, joined
+    where points of two come closer than ``join_m`` (a cab and its trailer are apart by up to about
+    1.5 m), whose footprint's diagonal reaches ``min_diagonal_m`` (no rectangle around a shorter one
+    is that long)."""
+    if len(points) == 0:
         return []
-    starts = np.cumsum([0] + [len(part) for part in parts])
-    xy = np.ascontiguousarray(np.vstack(parts)[:, :2], dtype=float)
-    roots = kernels.join_parts(xy, starts, float(distance_m))
-    groups: dict[int, list[int]] = {}
-    for i, root in enumerate(roots.tolist()):
-        groups.setdefault(root, []).append(i)
-    return list(groups.values())
+    dtype = np.float32 if points.dtype == np.float32 else np.float64  # the grid in the points' precision
+    points = np.ascontiguousarray(points, dtype=dtype)
+    z0 = ground(0.0, 0.0)
+    rows, bounds = kernels.seed_groups(
+        points, dtype(voxel_m), dtype(1.0), z0, ground(1.0, 0.0) - z0, ground(0.0, 1.0) - z0,
+        float(min_height_m), int(min_points), float(join_m), float(min_diagonal_m),
+    )  # fmt: skip
+    return [points[rows[a:b]] for a, b in zip(bounds[:-1].tolist(), bounds[1:].tolist())]
 
 
 def _with_trailer_length(model: VehicleModel, length_m: float | None) -> VehicleModel:
