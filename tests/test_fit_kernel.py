@@ -320,14 +320,25 @@ def ref_box_distance(points, prior):
 
 @pytest.mark.parametrize("hitch_deg", [-70.0, -20.0, 0.0, 35.0, 90.0])
 @pytest.mark.parametrize("slack_m", [0.0, 3.5])
-def test_the_gates_box_distance_is_the_numpy_one(hitch_deg, slack_m):
-    from i2v_loc.stages.vehicle_tracker import box_distance
+def test_the_gate_gives_each_point_to_the_nearest_track_within_the_margin(hitch_deg, slack_m):
+    """Two overlapping vehicles' priors (an articulated one and a rigid bus beside it): each point
+    goes to the track whose boxes are nearer by the numpy distances, within the gate's margin;
+    a tie to the first."""
+    from i2v_loc.stages.vehicle_tracker import VehicleTracker
 
     rng = np.random.default_rng(int(hitch_deg * 10 + slack_m * 100) % 2**31)
     man = VehicleModel.from_config("man_tgx", PARAMS.vehicles["man_tgx"])
-    for model in (man, VehicleModel.rigid("rigid", 11.6, 2.55, 3.1)):
-        prior = Prior(3.0, -2.0, 0.7, math.radians(hitch_deg), model, 0.0, slack_m)
-        points = np.column_stack([rng.uniform(-25, 25, (4000, 2)), rng.uniform(0, 4, 4000)]).astype(np.float32)
-        got, want = box_distance(points, prior), ref_box_distance(points.astype(float), prior)
-        assert np.allclose(got, want, rtol=0, atol=1e-9)
-        assert np.count_nonzero(got == 0.0) > 30 and np.count_nonzero(got > 5.0) > 500  # inside and far
+    priors = [
+        Prior(3.0, -2.0, 0.7, math.radians(hitch_deg), man, 0.0, slack_m),
+        Prior(6.0, 1.5, 0.9, 0.0, VehicleModel.rigid("rigid", 11.6, 2.55, 3.1), 0.0, 0.0),
+    ]
+    points = np.column_stack([rng.uniform(-25, 25, (4000, 2)), rng.uniform(0, 4, 4000)]).astype(np.float32)
+    tracker = VehicleTracker(PARAMS.articulated, PARAMS.vehicles)
+    margin = PARAMS.articulated.gate_margin_m
+    got = tracker._claim(points, priors)
+    distances = np.array([ref_box_distance(points.astype(float), prior) for prior in priors])
+    want = np.where(distances.min(axis=0) <= margin, np.argmin(distances, axis=0), -1)
+    assert np.array_equal(got, want)
+    for track in (-1, 0, 1):  # inside, beside and far from each
+        assert np.count_nonzero(got == track) > 30
+    assert np.count_nonzero((distances[0] == 0) & (distances[1] == 0)) > 0  # both inside: the first's

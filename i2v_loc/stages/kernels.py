@@ -807,21 +807,33 @@ def _face_table(geometry):
 
 
 @njit(**_JIT)
-def box_distances(xy, boxes):
-    """Planar distance of each point (N, 2) to the nearest of ``boxes`` (K, 6: origin x, y and yaw
-    of the box's unit frame, the box's rear and front along its x, its half width; 0 inside)."""
-    n = xy.shape[0]
-    squared = np.full(n, np.inf)
-    for k in range(boxes.shape[0]):
-        ox, oy, c, s = boxes[k, 0], boxes[k, 1], math.cos(boxes[k, 2]), math.sin(boxes[k, 2])
-        rear, front, half = boxes[k, 3], boxes[k, 4], boxes[k, 5]
+def claim_points(points, boxes, track_of_box, n_tracks, margin):
+    """The track whose boxes are nearest each point (N, 2 or more columns; the planar distance, 0
+    inside), if within ``margin``; -1 for none. ``boxes`` (K, 6): origin x, y and yaw of the box's
+    unit frame, the box's rear and front along its x, its half width; ``track_of_box`` (K,) the
+    track each belongs to. A tie goes to the lower track."""
+    n = points.shape[0]
+    owner = np.full(n, -1, dtype=np.int64)
+    best = np.full(n, np.inf)
+    squared = np.empty(n)
+    for t in range(n_tracks):
+        squared[:] = np.inf
+        for k in range(boxes.shape[0]):
+            if track_of_box[k] != t:
+                continue
+            ox, oy, c, s = boxes[k, 0], boxes[k, 1], math.cos(boxes[k, 2]), math.sin(boxes[k, 2])
+            rear, front, half = boxes[k, 3], boxes[k, 4], boxes[k, 5]
+            for i in range(n):
+                d0, d1 = np.float64(points[i, 0]) - ox, np.float64(points[i, 1]) - oy
+                qx, qy = c * d0 + s * d1, -s * d0 + c * d1
+                dx = max(max(rear - qx, qx - front), 0.0)
+                dy = max(abs(qy) - half, 0.0)
+                squared[i] = min(squared[i], dx * dx + dy * dy)
         for i in range(n):
-            d0, d1 = xy[i, 0] - ox, xy[i, 1] - oy
-            qx, qy = c * d0 + s * d1, -s * d0 + c * d1
-            dx = max(max(rear - qx, qx - front), 0.0)
-            dy = max(abs(qy) - half, 0.0)
-            squared[i] = min(squared[i], dx * dx + dy * dy)
-    return np.sqrt(squared)
+            d = math.sqrt(squared[i])
+            if d <= margin and d < best[i]:
+                owner[i], best[i] = t, d
+    return owner
 
 
 @njit(**_JIT)
@@ -1406,7 +1418,8 @@ def warm_up() -> None:
     counting_order(np.array([1, 0, 1], dtype=np.int64), 2)
     radius_components(p64, 0.5)
     min_area_rect(np.ascontiguousarray(p64[:, :2]))
-    box_distances(np.ascontiguousarray(p64[:, :2]), np.zeros((2, 6)))
+    for points in (p32, p64):  # level ground keeps float32; a slope float64
+        claim_points(points, np.zeros((2, 6)), np.array([0, 0]), 1, 0.5)
     for n_boxes in (1, 2):
         geometry = np.r_[np.zeros(5), 1.0, np.tile([2.0, 4.0, 2.0, 0.5, 3.0], n_boxes)]
         nearest_faces(np.ascontiguousarray(p64[:, :2]), np.ascontiguousarray(p64[:, 2]), geometry, 0.25, 2 + n_boxes)

@@ -276,15 +276,13 @@ class VehicleTracker:
 
     def _claim(self, points: np.ndarray, priors: list[Prior]) -> np.ndarray:
         """Index of the track whose predicted boxes (grown by the gate margin) are nearest each point; -1 none."""
-        owner = np.full(len(points), -1, dtype=np.int64)
-        best = np.full(len(points), np.inf)
-        margin = self.params.gate_margin_m
-        xy = np.ascontiguousarray(points[:, :2], dtype=float)
-        for i, prior in enumerate(priors):
-            d = box_distance(xy, prior)
-            take = (d <= margin) & (d < best)
-            owner[take], best[take] = i, d[take]
-        return owner
+        if not priors:
+            return np.full(len(points), -1, dtype=np.int64)
+        boxes = [prior_boxes(prior) for prior in priors]
+        track_of_box = np.repeat(np.arange(len(priors)), [len(b) for b in boxes])
+        return kernels.claim_points(
+            points, np.vstack(boxes), track_of_box, len(priors), float(self.params.gate_margin_m)
+        )
 
     def _step(self, track: _Track, prior: Prior, points: np.ndarray, stamp_s: float) -> VehicleReport:
         track.ground_z_m = prior.ground_z_m
@@ -925,14 +923,16 @@ def unit_frames(points: np.ndarray, v: np.ndarray, model: VehicleModel) -> list[
     return out
 
 
-def box_distance(points: np.ndarray, prior: Prior) -> np.ndarray:
-    """Planar distance of each point (N, 2 or 3) to the nearer of the prior's boxes (0 inside); the
-    trailer's box reaches ``trailer_slack_m`` further back."""
+def prior_boxes(prior: Prior) -> np.ndarray:
+    """The prior's boxes as ``kernels.claim_points`` takes them (K, 6): unit frame origin x, y and
+    yaw, rear, front, half width; the trailer's box reaches ``trailer_slack_m`` further back."""
     model = prior.model
-    boxes = [
-        (*origin, yaw, box.rear_m - slack, box.front_m, box.width_m / 2)
-        for (origin, yaw), box, slack in zip(
-            _unit_origins(prior.vector, model), model.boxes, (0.0, prior.trailer_slack_m)
-        )
-    ]
-    return kernels.box_distances(np.ascontiguousarray(points[:, :2], dtype=float), np.array(boxes, dtype=float))
+    return np.array(
+        [
+            (*origin, yaw, box.rear_m - slack, box.front_m, box.width_m / 2)
+            for (origin, yaw), box, slack in zip(
+                _unit_origins(prior.vector, model), model.boxes, (0.0, prior.trailer_slack_m)
+            )
+        ],
+        dtype=float,
+    )
