@@ -202,7 +202,20 @@ def test_fitted_dimensions_move_the_faces_like_a_rebuilt_model(free_length, free
     xy, z = random_points(model, v, int(hitch_deg) + 300)
     got = kernel_faces_of(v, xy, z, prior)
     assert_same(got, ref_faces_of(v, xy, z, prior, TOP_BAND_M))
-    assert got.on_rear.any() and got.jacobian.shape[1] == len(v)
+    assert ((got.unit == 1) & (got.face == hinged_fit.REAR)).any() and got.jacobian.shape[1] == len(v)
+
+
+def test_fit_labels_are_the_numpy_masks():
+    """A fit's unit and face labels and its count of explained points on the trailer's rear face."""
+    rng = np.random.default_rng(9)
+    n = 2000
+    unit, face = rng.integers(0, 2, n), rng.integers(-1, 4, n)
+    distance, residual = rng.exponential(0.2, n), rng.normal(0, 0.2, n)
+    units, faces, rear = kernels.fit_labels(unit, face, distance, residual, 0.15, hinged_fit.REAR)
+    explained = distance <= 0.15
+    assert np.array_equal(units, np.where(explained, unit, -1)) and units.dtype == np.int8
+    assert np.array_equal(faces, np.where(np.abs(residual) <= 0.15, face, -1)) and faces.dtype == np.int8
+    assert rear == np.count_nonzero(explained & (unit == 1) & (face == hinged_fit.REAR)) > 50
 
 
 def kernel_faces_of(v, xy, z, prior):

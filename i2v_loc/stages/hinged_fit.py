@@ -114,11 +114,6 @@ class _Faces:
     distance: np.ndarray  # (N,) to the face itself (beyond its ends too; inf above every roof)
     face: np.ndarray  # (N,) 0 front, 1 rear, 2 left, 3 right, -1 on the roof or under the floor
 
-    @property
-    def on_rear(self) -> np.ndarray:
-        """On the trailer's rear face (not its roof or undercarriage)."""
-        return (self.unit == 1) & (self.face == REAR)
-
 
 def thin(points: np.ndarray, max_points: int) -> np.ndarray:
     """An even stride down to ``max_points`` (the pipeline's points are voxel centroids already:
@@ -184,13 +179,10 @@ def fit(
     floor = _floor(params, n_pose)
     covariance = marginal + np.diag(floor**2)
     # explained: on a face, not only on its plane (a wall running on past a box's corner is no side of it)
-    explained = at.distance <= params.fit_inlier_m
-    unit = np.where(explained, at.unit, -1).astype(np.int8)
+    unit, face, rear = kernels.fit_labels(at.unit, at.face, at.distance, at.residual, params.fit_inlier_m, REAR)
     hitch = float(wrap_rad(v[3])) if prior.model.articulated else None
     length = float(v[4]) if prior.fits_length else None
     kingpin = (float(v[-2]), float(v[-1])) if prior.fits_kingpin else (None, None)
-    rear = int(np.sum(at.on_rear & explained))
-    face = np.where(np.abs(at.residual) <= params.fit_inlier_m, at.face, -1).astype(np.int8)
     return Measurement(
         float(v[0]),
         float(v[1]),

@@ -1000,6 +1000,23 @@ def _cauchy_weighted(jacobian, residual, scale):
 
 
 @njit(**_JIT)
+def fit_labels(unit, face, distance, residual, inlier_m, rear_face):
+    """What a fit's points are: the unit whose face explains each (within ``inlier_m`` of the face
+    itself, else -1), the face whose plane it lies on (within ``inlier_m`` of the plane, else -1),
+    both int8, and how many explained points lie on the trailer's rear face (``rear_face``)."""
+    n = unit.shape[0]
+    units = np.empty(n, dtype=np.int8)
+    faces = np.empty(n, dtype=np.int8)
+    rear = 0
+    for i in range(n):
+        explained = distance[i] <= inlier_m
+        units[i] = unit[i] if explained else -1
+        faces[i] = face[i] if abs(residual[i]) <= inlier_m else -1
+        rear += explained and unit[i] == 1 and face[i] == rear_face
+    return units, faces, rear
+
+
+@njit(**_JIT)
 def fit_covariance(residual, jacobian, prior_information, scale, inlier_m, no_inlier_noise2, noise_floor2, k):
     """The hinged fit's covariance of its first ``k`` parameters (the others marginalised):
     Gauss-Newton with the Cauchy weights of the residuals and the noise of the inliers' residuals
@@ -1429,6 +1446,7 @@ def warm_up() -> None:
     ranges = np.array([2.0, 16.5, -1.5, 1.5])
     _, residual, jacobian, _, _, _ = irls(xy, z, geometry, 0.25, 4, True, True, v0, np.ones(7), 0.1, 0.2, 2, ranges)
     fit_covariance(residual, jacobian, np.ones(7), 0.1, 0.3, 0.01, 0.0004, 4)
+    fit_labels(np.zeros(3, dtype=np.int64), np.zeros(3, dtype=np.int64), residual[:3], residual[:3], 0.1, 1)
     observed_directions(np.eye(4), np.ones(4), np.ones(4))
     fit_faces(xy, z, geometry, 0.25, 4, True, True, v0)  # the tests call it on its own
     any_closer(xy, xy, 0.5)  # the tests call it on its own
