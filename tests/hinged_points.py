@@ -62,19 +62,22 @@ def _face_grid(b: WorldBox, spacing: float) -> tuple[np.ndarray, np.ndarray, np.
     return world, normals @ rot.T, np.concatenate([p[2] for p in parts])
 
 
-def _blocked(sensor: np.ndarray, points: np.ndarray, b: WorldBox) -> np.ndarray:
-    """Whether the segment sensor -> point passes through the inside of box ``b`` (slab test)."""
+def _slab_interval(sensor: np.ndarray, direction: np.ndarray, b: WorldBox) -> tuple[np.ndarray, np.ndarray]:
+    """Where each ray sensor + t direction enters and leaves box ``b`` (t; enters >= leaves: it misses)."""
     c, s = np.cos(b.yaw_rad), np.sin(b.yaw_rad)
     rot = np.array([[c, s, 0], [-s, c, 0], [0, 0, 1.0]])
-    origin = np.r_[b.center_xy, 0.0]
-    o = rot @ (sensor - origin)
-    d = (points - origin) @ rot.T - o
+    o = rot @ (sensor - np.r_[b.center_xy, 0.0])
+    d = direction @ rot.T
     low = np.array([-b.box.length_m / 2, -b.box.width_m / 2, b.box.floor_m])
     high = np.array([b.box.length_m / 2, b.box.width_m / 2, b.box.top_m])
     with np.errstate(divide="ignore", invalid="ignore"):
         t1, t2 = (low - o) / d, (high - o) / d
-    t_near = np.nanmax(np.minimum(t1, t2), axis=1)
-    t_far = np.nanmin(np.maximum(t1, t2), axis=1)
+    return np.nanmax(np.minimum(t1, t2), axis=1), np.nanmin(np.maximum(t1, t2), axis=1)
+
+
+def _blocked(sensor: np.ndarray, points: np.ndarray, b: WorldBox) -> np.ndarray:
+    """Whether the segment sensor -> point passes through the inside of box ``b`` (slab test)."""
+    t_near, t_far = _slab_interval(sensor, points - sensor, b)
     return (t_near < t_far) & (t_far > 1e-6) & (t_near < 1.0 - 1e-6) & (t_far - t_near > 1e-6)
 
 
@@ -111,3 +114,29 @@ def vehicle_points(
             ray /= np.linalg.norm(ray, axis=1, keepdims=True)
             out.append(pts + ray * rng.normal(0.0, noise_m, (len(pts), 1)))
     return np.vstack(out) if out else np.zeros((0, 3))
+
+
+def _entry(sensor: np.ndarray, direction: np.ndarray, b: WorldBox) -> np.ndarray:
+    """Where each ray (sensor + t direction) enters box ``b`` (t; inf where it misses)."""
+    t_near, t_far = _slab_interval(sensor, direction, b)
+    return np.where((t_near < t_far) & (t_near > 0), t_near, np.inf)
+
+
+def cast_rays(boxes: list[WorldBox], sensors, columns: int = 1024, beams: int = 32):
+    """Each sensor's rays as a spinning LiDAR casts them (``columns`` azimuths, ``beams`` elevations
+    from -2 to -45 deg), each ending on the nearest box or on flat ground (z = 0): a vehicle's gap
+    shows as rays passing through it onto the ground or another vehicle beyond."""
+    from i2v_loc.stages.visibility import Rays
+
+    azimuth, elevation = np.meshgrid(
+        np.linspace(0.0, 2 * np.pi, columns, endpoint=False), np.radians(np.linspace(-2.0, -45.0, beams))
+    )
+    direction = np.column_stack([np.cos(azimuth.ravel()), np.sin(azimuth.ravel()), np.tan(elevation.ravel())])
+    parts = []
+    for sensor in np.asarray(sensors, dtype=float):
+        t = sensor[2] / -direction[:, 2]  # the ground
+        for b in boxes:
+            t = np.minimum(t, _entry(sensor, direction, b))
+        parts.append(sensor + direction * t[:, None])
+    bounds = np.arange(len(parts) + 1) * len(direction)
+    return Rays(np.vstack(parts).astype(np.float32), np.asarray(sensors, dtype=float), bounds, np.eye(3))

@@ -7,7 +7,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from hinged_points import vehicle_points, world_boxes
+from hinged_points import cast_rays, vehicle_points, world_boxes
 
 from i2v_loc.frame import Frame, SensorScan
 from i2v_loc.params import Extrinsics, Params, SensorConfig, apply_patch
@@ -74,6 +74,15 @@ def drive(vehicles, seconds: float, speed, steer, sensors=SENSORS):
             )
 
 
+def seen(tracker, vehicles, states, sensors=SENSORS):
+    """The frame's rays onto ``vehicles`` ((model, _)) at ``states`` and the ground, while some is
+    not tracked yet (the rays matter to starts only; they take long to construct)."""
+    if len(tracker.tracks) >= len(vehicles):
+        return None
+    boxes = [b for (m, _), s in zip(vehicles, states) for b in world_boxes(m, s[0], s[1], s[2], s[3] - s[2])]
+    return cast_rays(boxes, sensors)
+
+
 def angle_deg(a: float) -> float:
     return float(np.degrees(np.arctan2(np.sin(a), np.cos(a))))
 
@@ -90,10 +99,9 @@ def errors(report, truth) -> tuple[float, float, float]:
 def test_turning_vehicle_is_started_named_and_tracked():
     tracker = VehicleTracker(PARAMS.articulated, PARAMS.vehicles)
     rows = []
-    for t, points, (truth,) in drive(
-        [(volvo(), (-12.0, 4.0, 0.0, 0.0))], 8.0, 2.5, lambda t: float(np.clip(0.4 * (t - 2.0), 0.0, 0.5))
-    ):
-        reports = tracker.process(points, flat, t)
+    vehicles = [(volvo(), (-12.0, 4.0, 0.0, 0.0))]
+    for t, points, (truth,) in drive(vehicles, 8.0, 2.5, lambda t: float(np.clip(0.4 * (t - 2.0), 0.0, 0.5))):
+        reports = tracker.process(points, flat, t, rays=seen(tracker, vehicles, [truth]))
         if t < 0.15:
             assert reports == []  # not before start_frames
         if reports:
@@ -203,7 +211,7 @@ def test_two_vehicles_side_by_side_keep_their_units():
     owner = {}
     frames = 0
     for t, points, truths in drive(pair, 6.0, 2.0, lambda t: 0.1 if t > 2 else 0.0):
-        reports = tracker.process(points, flat, t)
+        reports = tracker.process(points, flat, t, rays=seen(tracker, pair, truths))
         if t < 0.35:
             continue
         assert len(reports) == 2
@@ -218,8 +226,9 @@ def test_two_vehicles_side_by_side_keep_their_units():
 
 def test_vehicle_leaves_when_its_points_do():
     tracker = VehicleTracker(PARAMS.articulated, PARAMS.vehicles)
-    for t, points, _ in drive([(volvo(), (-12.0, 4.0, 0.0, 0.0))], 1.0, 2.0, 0.0):
-        tracker.process(points, flat, t)
+    vehicles = [(volvo(), (-12.0, 4.0, 0.0, 0.0))]
+    for t, points, truths in drive(vehicles, 1.0, 2.0, 0.0):
+        tracker.process(points, flat, t, rays=seen(tracker, vehicles, truths))
     assert len(tracker.tracks) == 1
     for k in range(PARAMS.articulated.leave_frames):
         reports = tracker.process(np.zeros((0, 3)), flat, 1.0 + 0.1 * k)
@@ -256,6 +265,39 @@ def test_a_box_that_never_moves_is_no_rigid_vehicle_but_a_standing_articulated_o
     assert len(reports) == 1 and reports[0].model.articulated
     assert abs(np.degrees(reports[0].state.hitch_rad) - 20.0) < 1.0
     assert np.hypot(reports[0].state.x_m - 2.0, reports[0].state.y_m - 3.0) < 0.1
+
+
+def test_a_standing_straight_tractor_trailer_seen_from_one_side_starts_when_its_gap_is_seen_empty():
+    """An unknown 10.5 m trailer behind a Volvo cab, standing straight, seen from one side: one box
+    fits its points about as well as any catalogue model, so it waits until it moves, unless the
+    sensor's rays are seen through the gap between cab and trailer onto a wall behind."""
+    from hinged_points import _blocked
+
+    from i2v_loc.stages.visibility import Rays
+
+    base = volvo()
+    model = base.with_boxes(base.tractor, replace(base.trailer, length_m=10.5))
+    sensor = np.array(SENSORS[0])
+    xs, zs = np.meshgrid(np.arange(-20.0, 20.0, 0.1), np.arange(0.2, 4.0, 0.1))
+    wall = np.column_stack([xs.ravel(), np.full(xs.size, 12.0), zs.ravel()])  # behind the vehicle
+    behind = wall[~np.any([_blocked(sensor, wall, b) for b in world_boxes(model, 0.0, 3.0, 0.0)], axis=0)]
+    gap_x = model.box_centers(0.0, 3.0, 0.0, 0.0)[0][0] - model.tractor.length_m / 2 - 0.4  # behind the cab
+    assert np.any(np.abs(behind[:, 0] - gap_x * 12.0 / 9.0) < 0.3)  # the wall shows through the gap
+
+    def started(with_rays: bool) -> int | None:
+        tracker = VehicleTracker(PARAMS.articulated, PARAMS.vehicles)
+        for k in range(12):
+            points = vehicle_points(model, 0.0, 3.0, 0.0, sensors=[sensor], seed=k)
+            returns = np.vstack([points, behind]).astype(np.float32)
+            rays = Rays(returns, sensor[None, :], np.array([0, len(returns)]), np.eye(3)) if with_rays else None
+            reports = tracker.process(points, flat, 0.1 * k, background_ready=False, rays=rays)
+            if reports:
+                assert reports[0].model.articulated and abs(reports[0].state.hitch_rad) < np.radians(2.0)
+                return k
+        return None
+
+    assert started(with_rays=False) is None
+    assert started(with_rays=True) is not None and started(with_rays=True) <= 3
 
 
 def test_articulated_method_end_to_end():
@@ -471,8 +513,10 @@ def test_a_vehicle_standing_at_a_dock_starts_and_keeps_its_trailer_length():
     wall = dock(*(rear - 0.25 * e), yaw)
     tracker = VehicleTracker(PARAMS.articulated, PARAMS.vehicles)
     lengths = []
-    for t, points, (truth,) in drive([(model, (*axle, yaw, yaw))], 8.0, lambda t: 0.0 if t < 2.0 else 1.0, 0.0):
-        reports = tracker.process(np.vstack([points, wall]), flat, t, background_ready=False)
+    vehicles = [(model, (*axle, yaw, yaw))]
+    for t, points, (truth,) in drive(vehicles, 8.0, lambda t: 0.0 if t < 2.0 else 1.0, 0.0):
+        rays = seen(tracker, vehicles, [truth])
+        reports = tracker.process(np.vstack([points, wall]), flat, t, background_ready=False, rays=rays)
         if t >= 0.25:
             assert len(reports) == 1 and reports[0].model.name == "volvo_fh"
             assert errors(reports[0], truth)[0] < 0.1
@@ -534,16 +578,21 @@ def test_a_lower_bound_on_the_trailer_length_does_not_rename_the_vehicle():
 
 def test_a_seed_longer_than_any_rigid_vehicle_starts_articulated():
     """A straight 16 m trailer's tractor-trailer seen from one side: longer than any coach (15 m),
-    it is no rigid vehicle, even where one box explains its side almost as well; it starts in its
-    3rd frame as an articulated vehicle."""
+    it is no rigid vehicle, even where one box explains its side almost as well; it starts as an
+    articulated vehicle once it moved ``start_travel_m`` (a parked trailer that long never does),
+    when it is fitted again."""
     model = volvo()
     l2 = model.trailer_axle_m * (16.0 - model.trailer.front_m) / (model.trailer.length_m - model.trailer.front_m)
     long_trailer = replace(model, name="truth", trailer=replace(model.trailer, length_m=16.0), trailer_axle_m=l2)
     tracker = VehicleTracker(PARAMS.articulated, PARAMS.vehicles)
     reports, truth = [], None
-    for t, points, (state,) in drive([(long_trailer, (-4.0, 5.0, 0.05, 0.05))], 1.0, 2.0, 0.0, SENSORS[:1]):
-        reports, truth = tracker.process(points, flat, t), state
-        if t >= 0.15:
+    vehicles = [(long_trailer, (-4.0, 5.0, 0.05, 0.05))]
+    # first fitted in its start_frames-th frame, standing there as far as its fits tell; fitted again
+    # SEED_RETRY_FRAMES later, having moved 4 m
+    moved_by = 0.1 * (PARAMS.articulated.start_frames - 1 + SEED_RETRY_FRAMES) + 0.05
+    for t, points, (state,) in drive(vehicles, 2.5, 2.0, 0.0, SENSORS[:1]):
+        reports, truth = tracker.process(points, flat, t, rays=seen(tracker, vehicles, [state], SENSORS[:1])), state
+        if t >= moved_by:
             assert len(reports) == 1 and reports[0].model.articulated
     assert abs(reports[0].model.trailer.length_m - 16.0) < 1.0  # its rear face is not seen from that side yet
     _, yaw, hitch = errors(reports[0], truth)  # its cab is the catalogue's nearest, not the truth's: no axle to compare
@@ -576,7 +625,9 @@ def test_two_units_are_judged_on_the_cheapest_supported_fit():
     wrong = replace(fit(points, Prior(*back, 0.05 + np.pi, 0.0, model), PARAMS.articulated, iterations=20), cost=0.0)
     assert not _supported(wrong, model, 0.0) and not _gap_open(points, wrong, model, 0.0)
     tracker = VehicleTracker(PARAMS.articulated, PARAMS.vehicles)
-    moving = Seed(np.array([2.0, 5.0]), np.array([0.0, 5.0]))
+    heading = np.array([np.cos(right.yaw_rad), np.sin(right.yaw_rad)])
+    tracker._ends_moved(moving := Seed(np.array([2.0, 5.0]), np.array([0.0, 5.0])), right, model)
+    moving.first_middle -= 2.0 * heading  # its first fit stood 2 m back
     assert tracker._two_units([(model, -1.0, wrong), (model, 1.0, right)], points, moving, 0.0) == (model, right)
     assert tracker._two_units([(model, -1.0, wrong)], points, moving, 0.0) is None
     standing = Seed(np.array([0.0, 5.0]), np.array([0.0, 5.0]))

@@ -43,6 +43,19 @@ def test_sweeps_outside_the_tolerance_are_dropped_and_the_reference_is_the_earli
     assert len(result.points) == 2
 
 
+def test_the_merge_tells_each_used_sweeps_rows_and_sensor_position():
+    """Rays need their origins: the merged cloud's rows of each sweep in sync and where its sensor
+    stands (yard frame); a sweep out of sync is left out of both."""
+    sensors = SENSORS + [SensorConfig(name="c", extrinsics=Extrinsics(x_m=-3, y_m=7, z_m=5), time_offset_s=-0.5)]
+    stage = Concatenation(ConcatenationParams(voxel_size_m=0, sync_tolerance_s=0.05), sensors)
+    scans = {"a": scan("a", 2.0, [[5, 0, -4], [6, 0, -4]]), "b": scan("b", 2.0, [[3, 2, -3]])}
+    merged = stage.merge({**scans, "c": scan("c", 2.6, [[1, 1, 1]] * 4)})  # c out of sync
+    assert merged.sweep_bounds.tolist() == [0, 2, 3]
+    assert merged.sweep_origins.tolist() == [[10.0, 0.0, 4.0], [0.0, 0.0, 4.0]]
+    merged = stage.merge({**scans, "c": scan("c", 2.5, [[1, 1, 1]] * 4)})  # c in sync, after a and b
+    assert merged.sweep_bounds.tolist() == [0, 2, 3, 7] and merged.sweep_origins[2].tolist() == [-3.0, 7.0, 5.0]
+
+
 def test_missing_empty_and_nan_are_counted_not_raised():
     sensors = SENSORS + [SensorConfig(name="c")]
     stage = Concatenation(ConcatenationParams(voxel_size_m=0), sensors)

@@ -23,6 +23,7 @@ from i2v_loc.stages.primitives import voxel_centroids
 from i2v_loc.stages.region import Region
 from i2v_loc.stages.vehicle_model import Box
 from i2v_loc.stages.vehicle_tracker import VehicleReport, VehicleTracker
+from i2v_loc.stages.visibility import Rays
 
 MOTION_MARGIN_M = 0.5
 MIN_MOTION_SPEED_M_S = 0.1
@@ -121,7 +122,8 @@ class ArticulatedPipeline(ParameterHandoff):
         if np.isfinite(merged.stamp_s):
             ready = self.background is None or self.background.ready
             level_points = self.level.points(points)
-            self._reports = self.tracker.process(level_points, ground, merged.stamp_s, background_ready=ready)
+            rays = Rays(merged.points, merged.sweep_origins, merged.sweep_bounds, self.level.rotation)
+            self._reports = self.tracker.process(level_points, ground, merged.stamp_s, ready, rays)
             self._reports_stamp_s = merged.stamp_s
         timer.lap("vehicles")
         vehicles = [self._result(r, ground) for r in self._reports]

@@ -51,6 +51,10 @@ class ConcatenationResult:
     faults: dict[str, str] = field(default_factory=dict)  # sensor -> reason
     dropped: dict[str, int] = field(default_factory=dict)  # reason -> count (sweeps; points for nan_points)
     lag_s: np.ndarray | None = None  # (N,) reference time minus each point's capture time (``merge`` only)
+    sweep_bounds: np.ndarray | None = (
+        None  # (S + 1,) each used sweep's first row in ``points``, then N (``merge`` only)
+    )
+    sweep_origins: np.ndarray | None = None  # (S, 3) each used sweep's sensor position, yard frame (``merge`` only)
 
 
 class Concatenation:
@@ -68,7 +72,7 @@ class Concatenation:
         if self.params.motion_interpolation and motion:
             self.interpolate(points, merged.lag_s, motion)
         merged.points, _ = voxel_centroids(points, self.params.voxel_size_m)
-        merged.lag_s = None
+        merged.lag_s = merged.sweep_bounds = merged.sweep_origins = None  # the rows are voxels now
         return merged
 
     def merge(self, scans: dict[str, SensorScan]) -> ConcatenationResult:
@@ -121,7 +125,10 @@ class Concatenation:
             [n for *_, n in kept_sweeps],
         )
         lag_s -= offsets
-        return ConcatenationResult(points, reference_s, [name for name, *_ in kept_sweeps], faults, dropped, lag_s)
+        bounds = np.cumsum([0] + [n for *_, n in kept_sweeps])
+        origins = np.array([self._to_yard[name][1] for name, *_ in kept_sweeps], dtype=float).reshape(-1, 3)
+        names = [name for name, *_ in kept_sweeps]
+        return ConcatenationResult(points, reference_s, names, faults, dropped, lag_s, bounds, origins)
 
     # ----------------------------------------------------------------- synchronisation
 

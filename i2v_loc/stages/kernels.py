@@ -1125,7 +1125,7 @@ def any_closer(a, b, distance):
 
 
 @njit(**_JIT)
-def join_parts(xy, starts, distance):
+def _join_parts(xy, starts, distance):
     """Root part of each part (rows ``starts[k]:starts[k + 1]`` of ``xy``) after joining every two
     parts with a pair of points closer than ``distance`` (``any_closer``; tried only where their
     footprints come within it), chained: the smallest part index of its group."""
@@ -1160,7 +1160,7 @@ def seed_groups(points, voxel, one, ground_z0, ground_dx, ground_dy, min_height,
     """The start's clusters in one call: 26-connected components of ``voxel`` voxels (``grid_labels``)
     of at least ``min_points`` points whose highest point stands ``min_height`` above the ground
     under their centre (the plane z0 + dx x + dy y), largest first (ties: in raster order); those
-    with points closer than ``join_m`` joined (``join_parts``); kept when their footprint's diagonal
+    with points closer than ``join_m`` joined (``_join_parts``); kept when their footprint's diagonal
     reaches ``min_diagonal``. Returns the point indices of the clusters one after the other (each:
     its components in that order, each component's points in point order) and their bounds."""
     n = points.shape[0]
@@ -1170,7 +1170,7 @@ def seed_groups(points, voxel, one, ground_z0, ground_dx, ground_dy, min_height,
         rank_in_key_order(voxel_keys, ids, table_keys, table_ids)
     labels = voxel_components(voxel_keys, dims, bits, word_rank, table_keys, table_ids)[ids]
     n_labels = labels.max() + 1 if n else 0
-    counts, sums, top = label_extents(points, labels, n_labels)
+    counts, sums, top = _label_extents(points, labels, n_labels)
     order, _ = counting_order(labels, n_labels)
     first = np.zeros(n_labels + 1, dtype=np.int64)
     first[1:] = np.cumsum(counts)
@@ -1190,7 +1190,7 @@ def seed_groups(points, voxel, one, ground_z0, ground_dx, ground_dy, min_height,
     xy = np.empty((rows.shape[0], 2))
     for r in range(rows.shape[0]):
         xy[r, 0], xy[r, 1] = points[rows[r], 0], points[rows[r], 1]
-    roots = join_parts(xy, starts, join_m)
+    roots = _join_parts(xy, starts, join_m)
     out = np.empty(rows.shape[0], dtype=np.int64)
     bounds = [0]
     for root in range(n_parts):
@@ -1221,7 +1221,7 @@ def _footprint_diagonal(points, rows):
 
 
 @njit(**_JIT)
-def label_extents(points, labels, n_labels):
+def _label_extents(points, labels, n_labels):
     """Per label: point count, sums of x and of y (in point order, as np.bincount sums) and the
     highest z."""
     counts = np.zeros(n_labels, dtype=np.int64)
@@ -1234,6 +1234,48 @@ def label_extents(points, labels, n_labels):
         sums[k, 1] += points[i, 1]
         top[k] = max(top[k], points[i, 2])
     return counts, sums, top
+
+
+# ----------------------------------------------------------------------------- visibility
+
+
+@njit(**_JIT)
+def rays_through_box(points, origins, bounds, rotation, box, beyond_m):
+    """How many rays (each sweep's origin to each of its returns, rows ``bounds[k]:bounds[k + 1]``;
+    yard frame, turned by ``rotation`` into the box's frame) cross the upright box and end at least
+    ``beyond_m`` past where they leave it. ``box``: centre x, y, cos and sin of its yaw, half length,
+    half width, bottom z, top z. The segment is clipped against the box's three slabs."""
+    cx, cy, c, s, half_l, half_w, z_low, z_high = box[0], box[1], box[2], box[3], box[4], box[5], box[6], box[7]
+    count = 0
+    for k in range(origins.shape[0]):
+        ox, oy, oz = _box_frame(origins[k, 0], origins[k, 1], origins[k, 2], rotation, cx, cy, c, s)
+        for i in range(bounds[k], bounds[k + 1]):
+            px, py, pz = _box_frame(points[i, 0], points[i, 1], points[i, 2], rotation, cx, cy, c, s)
+            dx, dy, dz = px - ox, py - oy, pz - oz
+            enter, leave = _slab(0.0, 1.0, ox, dx, -half_l, half_l)
+            enter, leave = _slab(enter, leave, oy, dy, -half_w, half_w)
+            enter, leave = _slab(enter, leave, oz, dz, z_low, z_high)
+            count += enter < leave and (1.0 - leave) * math.sqrt(dx * dx + dy * dy + dz * dz) >= beyond_m
+    return count
+
+
+@njit(**_INLINE)
+def _box_frame(x, y, z, rotation, cx, cy, c, s):
+    """A yard point turned into the level frame, then into the box's frame (its centre, its yaw)."""
+    lx = rotation[0, 0] * x + rotation[0, 1] * y + rotation[0, 2] * z - cx
+    ly = rotation[1, 0] * x + rotation[1, 1] * y + rotation[1, 2] * z - cy
+    lz = rotation[2, 0] * x + rotation[2, 1] * y + rotation[2, 2] * z
+    return c * lx + s * ly, -s * lx + c * ly, lz
+
+
+@njit(**_INLINE)
+def _slab(enter, leave, start, step, low, high):
+    """The segment's parameter interval [enter, leave] narrowed to the slab low <= start + t step <= high
+    (empty: enter >= leave)."""
+    if step == 0.0:
+        return (enter, leave) if low <= start <= high else (1.0, 0.0)
+    a, b = (low - start) / step, (high - start) / step
+    return max(enter, min(a, b)), min(leave, max(a, b))
 
 
 # ----------------------------------------------------------------------------- kinematic filter
@@ -1450,6 +1492,7 @@ def warm_up() -> None:
     observed_directions(np.eye(4), np.ones(4), np.ones(4))
     fit_faces(xy, z, geometry, 0.25, 4, True, True, v0)  # the tests call it on its own
     any_closer(xy, xy, 0.5)  # the tests call it on its own
+    rays_through_box(p32, p64[:1], np.array([0, 3]), np.eye(3), np.array([0.0, 0.0, 1.0, 0.0, 1.0, 1.0, 0.0, 1.0]), 0.3)
     for points, one in ((p32, np.float32(1.0)), (p64, 1.0)):  # level ground keeps float32; a slope float64
         seed_groups(points, one * 0.5, one, 0.0, 0.0, 0.0, 0.0, 1, 0.5, 0.0)
     wrap_angles(np.zeros(2))

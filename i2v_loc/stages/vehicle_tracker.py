@@ -25,6 +25,7 @@ from i2v_loc.stages.hinged_fit import FRONT, LEFT, REAR, RIGHT, TRAILER_LENGTH_R
 from i2v_loc.stages.kinematic_filter import FilterState, KinematicFilter
 from i2v_loc.stages.primitives import Rect, median, min_area_rect, voxel_keys
 from i2v_loc.stages.vehicle_model import VehicleModel
+from i2v_loc.stages.visibility import Rays
 
 START_HITCHES_DEG = (-90.0, -60.0, -30.0, 0.0, 30.0, 60.0, 90.0)
 COARSE_ITERATIONS = 4  # per start hitch; the best is refined with START_ITERATIONS
@@ -49,6 +50,8 @@ GAP_FILL_RATIO = 0.5
 GAP_MIN_POINTS = 5
 GAP_OPEN_RATIO = 0.1  # a moving seed with so few points in its gap is two units, however well one box fits
 GAP_OPEN_MIN_POINTS = 10
+GAP_SEEN_MIN_RAYS = 1  # a solid side stops every ray: one through a seed's gap shows it empty, not hidden
+GAP_SEEN_BEYOND_M = 0.3  # past the gap: a ray ending on a side running through it did not cross it
 CAB_SLICE_MIN_M = 1.0
 LENGTH_CONVERGED_OBSERVATIONS = 5
 SETTLED_SLACK_M = 0.5
@@ -112,8 +115,10 @@ class Seed:
     # best explained by one rigid box: fitted again once it has moved and the map is ready
     rigid: bool = False
     first_fit: np.ndarray | None = None  # xy of its first rigid fit
+    first_middle: np.ndarray | None = None  # xy of its first unshown two-unit fit's middle
     failed: _Shape | None = None  # its shape when it was last fitted and was no vehicle
     failed_frame: int = 0  # its frame count then
+    moving: bool = False  # known to move (a tracked vehicle's probe), however short its travel
 
     def retry_due(self, rigid_allowed: bool) -> bool:
         """A rigid seed that may start as one (it moved, the map is ready) at once; any other after
@@ -237,6 +242,7 @@ class VehicleTracker:
         self.catalogue = {name: VehicleModel.from_config(name, v) for name, v in catalogue.items()}
         self.tracks: list[_Track] = []
         self.seeds: list[Seed] = []
+        self._rays: Rays | None = None  # this frame's
         self._ids = count(1)
         self.rejected = 0  # fits outside a filter's innovation gate
 
@@ -247,12 +253,19 @@ class VehicleTracker:
     # ----------------------------------------------------------------- per frame
 
     def process(
-        self, points: np.ndarray, ground: Callable[[float, float], float], stamp_s: float, background_ready: bool = True
+        self,
+        points: np.ndarray,
+        ground: Callable[[float, float], float],
+        stamp_s: float,
+        background_ready: bool = True,
+        rays: Rays | None = None,
     ) -> list[VehicleReport]:
         """``points`` (N, 3): the foreground (off the ground and the background) in the yard frame;
         ``ground(x, y)``: the ground's height there. Until ``background_ready`` the foreground holds
         the yard too: only articulated vehicles start then (two hinged units are no wall, container
-        or parked trailer); a rigid one needs the learned background to tell it from a container."""
+        or parked trailer); a rigid one needs the learned background to tell it from a container.
+        ``rays``: the frame's sensor rays, which show whether a seed's gap was seen empty."""
+        self._rays = rays
         priors = [self._prior(t, stamp_s, ground) for t in self.tracks]
         owner = self._claim(points, priors)
         reports = []
@@ -575,9 +588,33 @@ class VehicleTracker:
                 float(np.mean(m.unit >= 0)) >= self.params.start_min_explained
                 and _supported(m, model, ground_z_m)
                 and not _gap_filled(cluster, m, model, ground_z_m)
+                and self._hinge_shown(seed, m, model, ground_z_m)
             ):
                 return model, m
         return None
+
+    def _hinge_shown(self, seed: Seed, m: Measurement, model: VehicleModel, ground_z_m: float) -> bool:
+        """Whether a straight articulated fit is two units: it moves (its ends moved
+        ``start_travel_m``, or it is a tracked vehicle's probe), or its gap was seen empty; a standing
+        straight one may be a parked trailer with a hole in its side (a pole's shadow). A rigid fit,
+        or a bent one, needs neither."""
+        if model.trailer is None or abs(m.hitch_rad) > GAP_TEST_MAX_HITCH_RAD:
+            return True
+        return seed.moving or self._gap_seen_empty(m, model, ground_z_m) or self._ends_moved(seed, m, model)
+
+    def _ends_moved(self, seed: Seed, m: Measurement, model: VehicleModel) -> bool:
+        """The middle between the fitted cab's front and trailer's rear moved ``start_travel_m``
+        since the seed's first unshown two-unit fit (both ends are where the points say, whichever
+        model and direction fits; the seed's centre alone jumps when a passing vehicle hides part of
+        a parked trailer)."""
+        heading = np.array([np.cos(m.yaw_rad), np.sin(m.yaw_rad)])
+        trailer_heading = np.array([np.cos(m.yaw_rad + m.hitch_rad), np.sin(m.yaw_rad + m.hitch_rad)])
+        front = m.vector[:2] + model.tractor.front_m * heading
+        rear = model.kingpin_xy(m.x_m, m.y_m, m.yaw_rad) + model.trailer.rear_m * trailer_heading
+        middle = (front + rear) / 2
+        if seed.first_middle is None:
+            seed.first_middle = middle
+        return float(np.hypot(*(middle - seed.first_middle))) >= self.params.start_travel_m
 
     def _tall_enough(self, cluster: np.ndarray, ground_z_m: float) -> bool:
         """As tall as some catalogue vehicle's higher unit, less ``LOW_SEED_SLACK_M`` (a Twizy is
@@ -588,15 +625,31 @@ class VehicleTracker:
     def _two_units(
         self, hypotheses, cluster: np.ndarray, seed: Seed, ground_z_m: float
     ) -> tuple[VehicleModel, Measurement] | None:
-        """Of a moving seed, the cheapest supported articulated fit (either direction) if it shows an
-        open gap between cab and trailer: driving straight and seen from one side, a tractor and an
-        unknown trailer fit one box of their measured size better than any catalogue model, and
-        started rigid; the model the wrong way round, its cab on a few trailer points, may cost less."""
-        if seed.travel_m < self.params.start_travel_m:
-            return None
+        """The cheapest supported articulated fit (either direction) if it shows an open gap between
+        cab and trailer and its hinge is shown (``_hinge_shown``: moving, or the gap seen empty):
+        driving straight and seen from one side, a tractor and an unknown trailer fit one box of
+        their measured size better than any catalogue model, and started rigid; the model the wrong
+        way round, its cab on a few trailer points, may cost less."""
         fits = sorted((h for h in hypotheses if h[0].articulated and self._unfolded(h[2])), key=lambda h: h[2].cost)
         model, _, m = next((h for h in fits if _supported(h[2], h[0], ground_z_m)), (None, None, None))
-        return (model, m) if model is not None and _gap_open(cluster, m, model, ground_z_m) else None
+        if model is None or not _gap_open(cluster, m, model, ground_z_m):
+            return None
+        return (model, m) if self._hinge_shown(seed, m, model, ground_z_m) else None
+
+    def _gap_seen_empty(self, m: Measurement, model: VehicleModel, ground_z_m: float) -> bool:
+        """At least ``GAP_SEEN_MIN_RAYS`` rays crossed the middle of the model's gap (``_gap_counts``'
+        box, within the cab's width) and ended ``GAP_SEEN_BEYOND_M`` beyond it: the gap is empty, not
+        hidden (a standing seed's hole may be a pole's shadow on a trailer's side)."""
+        if self._rays is None:
+            return False
+        start, length = _gap_middle(model)
+        centre = np.array([m.x_m, m.y_m]) + (start + length / 2) * np.array([np.cos(m.yaw_rad), np.sin(m.yaw_rad)])
+        low, high = _gap_band(model)
+        seen = self._rays.through(
+            tuple(centre), m.yaw_rad, length / 2, model.tractor.width_m / 2,
+            (ground_z_m + low, ground_z_m + high), GAP_SEEN_BEYOND_M,
+        )  # fmt: skip
+        return seen >= GAP_SEEN_MIN_RAYS
 
     def _articulated_choices(self, hypotheses) -> list[tuple[VehicleModel, Measurement]]:
         """Each catalogue model's cheapest fit, cheapest first, none folded beyond the start limit."""
@@ -658,7 +711,7 @@ class VehicleTracker:
             return track
         heading = np.array([np.cos(s.yaw_rad), np.sin(s.yaw_rad)]) * np.sign(s.speed_m_s)
         here = np.array([s.x_m, s.y_m])
-        probe = Seed(here, here - heading)  # the direction of travel, for a tie between the two ends
+        probe = Seed(here, here - heading, moving=True)  # the direction of travel, for a tie between the two ends
         chosen = self._candidate(points, min_area_rect(points[:, :2]), probe, track.ground_z_m, rigid_allowed=False)
         if chosen is None:
             return track
@@ -810,22 +863,33 @@ def _gap_counts(
     articulated and nearly straight."""
     if model.trailer is None or abs(m.hitch_rad) > GAP_TEST_MAX_HITCH_RAD:
         return None
-    trailer_front = model.trailer.front_m - model.kingpin_behind_axle_m  # in the tractor's frame at hitch 0
-    cab_rear = model.tractor.rear_m
-    length = (cab_rear - trailer_front) / 2
+    start, length = _gap_middle(model)
     if length <= 0.0:
         return None
+    cab_rear = model.tractor.rear_m
     slice_m = max(length, CAB_SLICE_MIN_M)
     (q,) = unit_frames(cluster, m.vector, model.with_boxes(model.tractor, None))
     z_rel = cluster[:, 2] - ground_z_m
+    low, high = _gap_band(model)
     # the cab's sides count with their surface: a parked trailer's side running on through the
     # "gap" lay just outside the model's cab width and left the gap empty (held-out seeds)
-    band = (np.abs(q[:, 1]) <= model.tractor.width_m / 2 + END_BAND_M) & (z_rel >= model.trailer.floor_m + END_BAND_M)
-    band &= z_rel <= min(model.tractor.top_m, model.trailer.top_m) - END_BAND_M
-    start = trailer_front + length / 2
+    band = (np.abs(q[:, 1]) <= model.tractor.width_m / 2 + END_BAND_M) & (z_rel >= low) & (z_rel <= high)
     in_gap = int(np.sum(band & (q[:, 0] >= start) & (q[:, 0] <= start + length)))
     in_cab = int(np.sum(band & (q[:, 0] >= cab_rear) & (q[:, 0] <= cab_rear + slice_m)))
     return in_gap, in_cab, length / slice_m
+
+
+def _gap_middle(model: VehicleModel) -> tuple[float, float]:
+    """Where the middle half of the gap between the trailer's front and the cab's rear begins along
+    the tractor's frame at hitch 0, and its length (not positive: no gap)."""
+    trailer_front = model.trailer.front_m - model.kingpin_behind_axle_m
+    length = (model.tractor.rear_m - trailer_front) / 2
+    return trailer_front + length / 2, length
+
+
+def _gap_band(model: VehicleModel) -> tuple[float, float]:
+    """The heights above the ground of the gap test: above the trailer's floor, below the lower roof."""
+    return model.trailer.floor_m + END_BAND_M, min(model.tractor.top_m, model.trailer.top_m) - END_BAND_M
 
 
 def _below_tall_structures(points: np.ndarray, ground, cell_m: float) -> np.ndarray:

@@ -1,0 +1,41 @@
+"""What the sensors saw through: a ray from a sensor to its return crossed every place between,
+so a place a ray crossed and ended beyond holds no surface (the points alone cannot tell an empty
+place from a hidden one: a pole's shadow on a trailer's side is a hole in its points too).
+
+Asked rarely (a vehicle's start), so nothing is precomputed: each question is one compiled pass
+over the frame's rays."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from i2v_loc.stages import kernels
+
+
+@dataclass
+class Rays:
+    """A frame's rays: each sweep's returns (yard frame) and its sensor's origin; ``to_level`` turns
+    the yard frame into the frame the questions are asked in (the tracker's level frame)."""
+
+    points: np.ndarray  # (N, 3) yard frame, the sweeps one after the other
+    origins: np.ndarray  # (S, 3) yard frame, one per sweep
+    bounds: np.ndarray  # (S + 1,) the sweeps' first rows, then N
+    to_level: np.ndarray  # (3, 3) rotation
+
+    def through(
+        self, center_xy: tuple[float, float], yaw_rad: float, half_length_m: float, half_width_m: float,
+        z_range_m: tuple[float, float], beyond_m: float,
+    ) -> int:  # fmt: skip
+        """How many rays cross the upright box (level frame: centre, yaw of its length, half sizes,
+        bottom and top) and end at least ``beyond_m`` past the point where they leave it."""
+        box = np.array(
+            [*center_xy, np.cos(yaw_rad), np.sin(yaw_rad), half_length_m, half_width_m, *z_range_m], dtype=float
+        )
+        return int(
+            kernels.rays_through_box(
+                self.points, self.origins, self.bounds, np.ascontiguousarray(self.to_level, dtype=float), box,
+                float(beyond_m),
+            )
+        )  # fmt: skip

@@ -1,0 +1,87 @@
+"""Rays through a box: counted against geometry worked out by hand."""
+
+import numpy as np
+import pytest
+
+from i2v_loc.stages.level_frame import _rotation_onto_up
+from i2v_loc.stages.visibility import Rays
+
+SENSOR = np.array([[0.0, -10.0, 3.0]])
+BOX = dict(center_xy=(0.0, 0.0), yaw_rad=0.0, half_length_m=0.5, half_width_m=1.0, z_range_m=(0.5, 2.5), beyond_m=0.3)
+
+
+def row(y, z, xs=np.linspace(-3, 3, 61)):
+    """Returns along x at (y, z): rays from the sensor fan out across the box."""
+    return np.column_stack([xs, np.full(len(xs), y), np.full(len(xs), z)]).astype(np.float32)
+
+
+def rays(points, origins=SENSOR, bounds=None, to_level=np.eye(3)):
+    bounds = np.array([0, len(points)]) if bounds is None else np.asarray(bounds)
+    return Rays(points, np.asarray(origins, dtype=float), bounds, to_level)
+
+
+def sampled_through(points, origin, box=BOX, samples=4000):
+    """The count by brute force: points along each segment, the segment counted when one lies in
+    the box and the last such lies ``beyond_m`` or more before the return."""
+    t = np.linspace(0.0, 1.0, samples)
+    (cx, cy), c, s = box["center_xy"], np.cos(box["yaw_rad"]), np.sin(box["yaw_rad"])
+    count = 0
+    for p in points.astype(float):
+        q = origin + t[:, None] * (p - origin)
+        x, y = c * (q[:, 0] - cx) + s * (q[:, 1] - cy), -s * (q[:, 0] - cx) + c * (q[:, 1] - cy)
+        z_low, z_high = box["z_range_m"]
+        inside = (np.abs(x) <= box["half_length_m"]) & (np.abs(y) <= box["half_width_m"])
+        inside &= (q[:, 2] >= z_low) & (q[:, 2] <= z_high)
+        if inside.any():
+            count += (1.0 - t[np.flatnonzero(inside)[-1]]) * np.linalg.norm(p - origin) >= box["beyond_m"]
+    return count
+
+
+def test_rays_that_cross_the_box_and_end_beyond_it_are_counted():
+    # returns 15 m from the sensor at y = 5: a ray meets the box's near face (y = -1) at 9/15 of its
+    # x, so the 17 with |x| <= 0.8 enter it (through the far face or a side) and end metres beyond
+    points = row(5.0, 1.0)
+    assert rays(points).through(**BOX) == 17 == sampled_through(points, SENSOR[0])
+
+
+def test_rays_ending_in_the_box_on_its_far_side_or_short_of_it_are_not():
+    assert rays(row(0.0, 1.0)).through(**BOX) == 0  # a surface inside
+    assert rays(row(-3.0, 1.0)).through(**BOX) == 0  # something in front hid the box
+    assert rays(row(5.0, 5.5)).through(**BOX) == 0  # passing above it
+    # a side 0.1 m beyond the far face: only rays leaving by a side face early enough count
+    side = row(1.1, 1.0)
+    assert rays(side).through(**BOX) == sampled_through(side, SENSOR[0]) == 2
+
+
+def test_random_rays_are_counted_as_by_sampling_the_segments():
+    rng = np.random.default_rng(4)
+    origin = np.array([3.0, -12.0, 4.0])
+    points = np.column_stack([rng.uniform(-4, 4, 400), rng.uniform(-3, 6, 400), rng.uniform(0, 3, 400)])
+    box = {**BOX, "yaw_rad": 0.4}
+    got = rays(points.astype(np.float32), [origin]).through(**box)
+    assert got == sampled_through(points.astype(np.float32), origin, box) and got > 20
+
+
+def test_each_sweep_has_its_own_origin():
+    """Two sensors, each sweep its rows: the second's rays pass beside the box; swapped, the first
+    sweep's rays come from the side and one of them grazes it."""
+    beside = np.array([[0.0, -10.0, 3.0], [10.0, -10.0, 3.0]])
+    first, second = row(5.0, 1.0), row(5.0, 1.0) + np.float32(10.0) * np.array([1, 0, 0], dtype=np.float32)
+    points = np.vstack([first, second])
+    assert rays(points, beside, [0, 61, 122]).through(**BOX) == 17
+    swapped = sampled_through(first, beside[1]) + sampled_through(second, beside[0])
+    assert rays(points, beside[::-1], [0, 61, 122]).through(**BOX) == swapped == 1
+
+
+@pytest.mark.parametrize("yaw_deg", [0.0, 30.0, 90.0])
+def test_a_turned_box_in_a_tilted_level_frame_counts_as_the_same_box_in_the_yard(yaw_deg):
+    """The same rays and box, all turned about z and the yard tilted: the box is asked in the level
+    frame, the rays are given in the yard's."""
+    turn = np.radians(yaw_deg)
+    rz = np.array([[np.cos(turn), -np.sin(turn), 0.0], [np.sin(turn), np.cos(turn), 0.0], [0.0, 0.0, 1.0]])
+    to_level = _rotation_onto_up(np.array([0.05, -0.03, 1.0]) / np.linalg.norm([0.05, -0.03, 1.0]))
+    to_yard = to_level.T
+    points = (row(5.0, 1.0).astype(float) @ rz.T @ to_yard.T).astype(np.float32)
+    origins = SENSOR @ rz.T @ to_yard.T
+    box = {**BOX, "yaw_rad": turn}
+    assert rays(points, origins, to_level=to_level).through(**box) == 17
