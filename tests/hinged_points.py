@@ -140,3 +140,13 @@ def cast_rays(boxes: list[WorldBox], sensors, columns: int = 1024, beams: int = 
         parts.append(sensor + direction * t[:, None])
     bounds = np.arange(len(parts) + 1) * len(direction)
     return Rays(np.vstack(parts).astype(np.float32), np.asarray(sensors, dtype=float), bounds, np.eye(3))
+
+
+def unhidden(points: np.ndarray, boxes: list[WorldBox], sensor) -> np.ndarray:
+    """The points of a scene (ground, walls) that ``sensor`` sees past ``boxes``: vehicles hide what
+    lies behind them."""
+    sensor = np.asarray(sensor, dtype=float)
+    hidden = np.zeros(len(points), dtype=bool)
+    for b in boxes:
+        hidden |= _blocked(sensor, points, b)
+    return points[~hidden]

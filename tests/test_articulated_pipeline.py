@@ -7,7 +7,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from hinged_points import cast_rays, vehicle_points, world_boxes
+from hinged_points import cast_rays, unhidden, vehicle_points, world_boxes
 
 from i2v_loc.frame import Frame, SensorScan
 from i2v_loc.params import Extrinsics, Params, SensorConfig, apply_patch
@@ -300,6 +300,20 @@ def test_a_standing_straight_tractor_trailer_seen_from_one_side_starts_when_its_
     assert started(with_rays=True) is not None and started(with_rays=True) <= 3
 
 
+def test_a_unit_the_rays_cross_is_no_body():
+    """The rays end on a standing Volvo's faces: its fit is solid. The same fit moved 4 m aside
+    stands on empty ground the rays cross (as a "cab" beside a parked trailer did): seen through."""
+    model = volvo()
+    points = vehicle_points(model, 0.0, 3.0, 0.3, np.radians(20.0), sensors=SENSORS)
+    m = fit(points, Prior(0.0, 3.0, 0.3, np.radians(20.0), model), PARAMS.articulated, iterations=20)
+    tracker = VehicleTracker(PARAMS.articulated, PARAMS.vehicles)
+    tracker._rays = cast_rays(world_boxes(model, 0.0, 3.0, 0.3, np.radians(20.0)), SENSORS)
+    assert not tracker._seen_through(m, model, 0.0)
+    assert tracker._seen_through(replace(m, y_m=m.y_m - 4.0), model, 0.0)
+    tracker._rays = None  # without rays nothing is known to be seen through
+    assert not tracker._seen_through(replace(m, y_m=m.y_m - 4.0), model, 0.0)
+
+
 def test_articulated_method_end_to_end():
     """Through the front end: one sensor, a ground plane, a wall; the vehicle drives in after the
     background warm-up. The state line is the pipeline's, plus hitch sigma and jackknife."""
@@ -320,7 +334,10 @@ def test_articulated_method_end_to_end():
     for t, points, (truth,) in drive(
         [(model, (-25.0, 4.0, 0.0, 0.0))], 9.0, 2.5, lambda t: 0.2 if t > 5 else 0.0, sensors=((0.0, -15.0, 4.0),)
     ):
-        scene = np.vstack([ground, wall, points if t >= 1.0 else np.zeros((0, 3))])
+        boxes = world_boxes(model, truth[0], truth[1], truth[2], truth[3] - truth[2]) if t >= 1.0 else []
+        scene = np.vstack(
+            [unhidden(np.vstack([ground, wall]), boxes, (0.0, -15.0, 4.0)), points[: len(points) * bool(boxes)]]
+        )
         scan = SensorScan("s1", t, (scene - [0.0, -15.0, 4.0]).astype(np.float32), None)
         line = pipeline.process(Frame(int(round(t * 10)), {"s1": scan})).to_json()
         lines.append(line)
@@ -383,8 +400,9 @@ def test_without_the_background_map_vehicles_start_at_once():
     gx, gy = np.meshgrid(np.arange(-30, 30, 0.4), np.arange(-12, 20, 0.4))
     ground = np.column_stack([gx.ravel(), gy.ravel(), np.zeros(gx.size)])
     reported = []
-    for t, points, (_truth,) in drive([(volvo(), (-8.0, 4.0, 0.0, 0.0))], 0.6, 2.0, 0.0, sensors=((0.0, -15.0, 4.0),)):
-        scan = SensorScan("s1", t, (np.vstack([ground, points]) - [0.0, -15.0, 4.0]).astype(np.float32), None)
+    for t, points, (truth,) in drive([(volvo(), (-8.0, 4.0, 0.0, 0.0))], 0.6, 2.0, 0.0, sensors=((0.0, -15.0, 4.0),)):
+        seen = unhidden(ground, world_boxes(volvo(), truth[0], truth[1], truth[2], 0.0), (0.0, -15.0, 4.0))
+        scan = SensorScan("s1", t, (np.vstack([seen, points]) - [0.0, -15.0, 4.0]).astype(np.float32), None)
         result = pipeline.process(Frame(int(round(t * 10)), {"s1": scan}))
         reported.append(len(result.vehicles))
         assert "background" not in result.latency_ms

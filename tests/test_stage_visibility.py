@@ -41,16 +41,16 @@ def test_rays_that_cross_the_box_and_end_beyond_it_are_counted():
     # returns 15 m from the sensor at y = 5: a ray meets the box's near face (y = -1) at 9/15 of its
     # x, so the 17 with |x| <= 0.8 enter it (through the far face or a side) and end metres beyond
     points = row(5.0, 1.0)
-    assert rays(points).through(**BOX) == 17 == sampled_through(points, SENSOR[0])
+    assert rays(points).through(**BOX)[0] == 17 == sampled_through(points, SENSOR[0])
 
 
 def test_rays_ending_in_the_box_on_its_far_side_or_short_of_it_are_not():
-    assert rays(row(0.0, 1.0)).through(**BOX) == 0  # a surface inside
-    assert rays(row(-3.0, 1.0)).through(**BOX) == 0  # something in front hid the box
-    assert rays(row(5.0, 5.5)).through(**BOX) == 0  # passing above it
+    assert rays(row(0.0, 1.0)).through(**BOX) == (0, 11)  # a surface inside: the 11 returns with |x| <= 0.5 end in it
+    assert rays(row(-3.0, 1.0)).through(**BOX)[0] == 0  # something in front hid the box
+    assert rays(row(5.0, 5.5)).through(**BOX)[0] == 0  # passing above it
     # a side 0.1 m beyond the far face: only rays leaving by a side face early enough count
     side = row(1.1, 1.0)
-    assert rays(side).through(**BOX) == sampled_through(side, SENSOR[0]) == 2
+    assert rays(side).through(**BOX)[0] == sampled_through(side, SENSOR[0]) == 2
 
 
 def test_random_rays_are_counted_as_by_sampling_the_segments():
@@ -58,8 +58,12 @@ def test_random_rays_are_counted_as_by_sampling_the_segments():
     origin = np.array([3.0, -12.0, 4.0])
     points = np.column_stack([rng.uniform(-4, 4, 400), rng.uniform(-3, 6, 400), rng.uniform(0, 3, 400)])
     box = {**BOX, "yaw_rad": 0.4}
-    got = rays(points.astype(np.float32), [origin]).through(**box)
+    got, ended = rays(points.astype(np.float32), [origin]).through(**box)
     assert got == sampled_through(points.astype(np.float32), origin, box) and got > 20
+    c, s = np.cos(0.4), np.sin(0.4)
+    along, across = c * points[:, 0] + s * points[:, 1], -s * points[:, 0] + c * points[:, 1]
+    inside = (np.abs(along) <= 0.5) & (np.abs(across) <= 1.0) & (points[:, 2] >= 0.5) & (points[:, 2] <= 2.5)
+    assert ended == np.count_nonzero(inside) > 0
 
 
 def test_each_sweep_has_its_own_origin():
@@ -68,9 +72,9 @@ def test_each_sweep_has_its_own_origin():
     beside = np.array([[0.0, -10.0, 3.0], [10.0, -10.0, 3.0]])
     first, second = row(5.0, 1.0), row(5.0, 1.0) + np.float32(10.0) * np.array([1, 0, 0], dtype=np.float32)
     points = np.vstack([first, second])
-    assert rays(points, beside, [0, 61, 122]).through(**BOX) == 17
+    assert rays(points, beside, [0, 61, 122]).through(**BOX)[0] == 17
     swapped = sampled_through(first, beside[1]) + sampled_through(second, beside[0])
-    assert rays(points, beside[::-1], [0, 61, 122]).through(**BOX) == swapped == 1
+    assert rays(points, beside[::-1], [0, 61, 122]).through(**BOX)[0] == swapped == 1
 
 
 @pytest.mark.parametrize("yaw_deg", [0.0, 30.0, 90.0])
@@ -84,4 +88,4 @@ def test_a_turned_box_in_a_tilted_level_frame_counts_as_the_same_box_in_the_yard
     points = (row(5.0, 1.0).astype(float) @ rz.T @ to_yard.T).astype(np.float32)
     origins = SENSOR @ rz.T @ to_yard.T
     box = {**BOX, "yaw_rad": turn}
-    assert rays(points, origins, to_level=to_level).through(**box) == 17
+    assert rays(points, origins, to_level=to_level).through(**box)[0] == 17

@@ -1243,10 +1243,11 @@ def _label_extents(points, labels, n_labels):
 def rays_through_box(points, origins, bounds, rotation, box, beyond_m):
     """How many rays (each sweep's origin to each of its returns, rows ``bounds[k]:bounds[k + 1]``;
     yard frame, turned by ``rotation`` into the box's frame) cross the upright box and end at least
-    ``beyond_m`` past where they leave it. ``box``: centre x, y, cos and sin of its yaw, half length,
-    half width, bottom z, top z. The segment is clipped against the box's three slabs."""
+    ``beyond_m`` past where they leave it, and how many end in it. ``box``: centre x, y, cos and
+    sin of its yaw, half length, half width, bottom z, top z. The segment is clipped against the
+    box's three slabs."""
     cx, cy, c, s, half_l, half_w, z_low, z_high = box[0], box[1], box[2], box[3], box[4], box[5], box[6], box[7]
-    count = 0
+    count = ended = 0
     for k in range(origins.shape[0]):
         ox, oy, oz = _box_frame(origins[k, 0], origins[k, 1], origins[k, 2], rotation, cx, cy, c, s)
         for i in range(bounds[k], bounds[k + 1]):
@@ -1255,8 +1256,10 @@ def rays_through_box(points, origins, bounds, rotation, box, beyond_m):
             enter, leave = _slab(0.0, 1.0, ox, dx, -half_l, half_l)
             enter, leave = _slab(enter, leave, oy, dy, -half_w, half_w)
             enter, leave = _slab(enter, leave, oz, dz, z_low, z_high)
-            count += enter < leave and (1.0 - leave) * math.sqrt(dx * dx + dy * dy + dz * dz) >= beyond_m
-    return count
+            crossed = enter < leave and (1.0 - leave) * math.sqrt(dx * dx + dy * dy + dz * dz) >= beyond_m
+            count += crossed
+            ended += abs(px) <= half_l and abs(py) <= half_w and z_low <= pz <= z_high
+    return count, ended
 
 
 @njit(**_INLINE)

@@ -52,6 +52,8 @@ GAP_OPEN_RATIO = 0.1  # a moving seed with so few points in its gap is two units
 GAP_OPEN_MIN_POINTS = 10
 GAP_SEEN_MIN_RAYS = 1  # a solid side stops every ray: one through a seed's gap shows it empty, not hidden
 GAP_SEEN_BEYOND_M = 0.3  # past the gap: a ray ending on a side running through it did not cross it
+SOLID_INSET_M = 0.5  # a unit's box this far inside its faces is crossed by no ray (a sweep's motion blurs them)
+SEEN_THROUGH_RATIO = 0.1  # of the rays ending on a unit, at most this many cross it (real ones: under 0.01)
 CAB_SLICE_MIN_M = 1.0
 LENGTH_CONVERGED_OBSERVATIONS = 5
 SETTLED_SLACK_M = 0.5
@@ -589,9 +591,36 @@ class VehicleTracker:
                 and _supported(m, model, ground_z_m)
                 and not _gap_filled(cluster, m, model, ground_z_m)
                 and self._hinge_shown(seed, m, model, ground_z_m)
+                and not self._seen_through(m, model, ground_z_m)
             ):
                 return model, m
         return None
+
+    def _seen_through(self, m: Measurement, model: VehicleModel, ground_z_m: float) -> bool:
+        """Whether some unit of the fit is no solid body: more than ``SEEN_THROUGH_RATIO`` as many
+        rays crossed its box (``SOLID_INSET_M`` inside its faces) and ended beyond as ended on it
+        (within ``SOLID_INSET_M`` of its box). A parked trailer with a pole beside it had started
+        as a tractor bent at 34 degrees: the rays crossed the "cab" between pole and trailer."""
+        if self._rays is None:
+            return False
+        inset = SOLID_INSET_M
+        for (origin, yaw), box in zip(_unit_origins(m.vector, model), model.boxes):
+            centre = tuple(np.asarray(origin) + box.center_x_m * np.array([np.cos(yaw), np.sin(yaw)]))
+            half_l, half_w, floor, top = (
+                box.length_m / 2,
+                box.width_m / 2,
+                ground_z_m + box.floor_m,
+                ground_z_m + box.top_m,
+            )
+            through, _ = self._rays.through(
+                centre, yaw, half_l - inset, half_w - inset, (floor + inset, top - inset), GAP_SEEN_BEYOND_M
+            )
+            _, ended = self._rays.through(
+                centre, yaw, half_l + inset, half_w + inset, (floor - inset, top + inset), GAP_SEEN_BEYOND_M
+            )
+            if through > SEEN_THROUGH_RATIO * ended:
+                return True
+        return False
 
     def _hinge_shown(self, seed: Seed, m: Measurement, model: VehicleModel, ground_z_m: float) -> bool:
         """Whether a straight articulated fit is two units: it moves (its ends moved
@@ -645,7 +674,7 @@ class VehicleTracker:
         start, length = _gap_middle(model)
         centre = np.array([m.x_m, m.y_m]) + (start + length / 2) * np.array([np.cos(m.yaw_rad), np.sin(m.yaw_rad)])
         low, high = _gap_band(model)
-        seen = self._rays.through(
+        seen, _ = self._rays.through(
             tuple(centre), m.yaw_rad, length / 2, model.tractor.width_m / 2,
             (ground_z_m + low, ground_z_m + high), GAP_SEEN_BEYOND_M,
         )  # fmt: skip

@@ -27,15 +27,15 @@ class Rays:
     def through(
         self, center_xy: tuple[float, float], yaw_rad: float, half_length_m: float, half_width_m: float,
         z_range_m: tuple[float, float], beyond_m: float,
-    ) -> int:  # fmt: skip
+    ) -> tuple[int, int]:  # fmt: skip
         """How many rays cross the upright box (level frame: centre, yaw of its length, half sizes,
-        bottom and top) and end at least ``beyond_m`` past the point where they leave it."""
+        bottom and top) and end at least ``beyond_m`` past the point where they leave it, and how
+        many end in it."""
         box = np.array(
             [*center_xy, np.cos(yaw_rad), np.sin(yaw_rad), half_length_m, half_width_m, *z_range_m], dtype=float
         )
-        return int(
-            kernels.rays_through_box(
-                self.points, self.origins, self.bounds, np.ascontiguousarray(self.to_level, dtype=float), box,
-                float(beyond_m),
-            )
+        through, ended = kernels.rays_through_box(
+            self.points, self.origins, self.bounds, np.ascontiguousarray(self.to_level, dtype=float), box,
+            float(beyond_m),
         )  # fmt: skip
+        return int(through), int(ended)
