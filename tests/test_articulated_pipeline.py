@@ -643,9 +643,7 @@ def test_two_units_are_judged_on_the_cheapest_supported_fit():
     wrong = replace(fit(points, Prior(*back, 0.05 + np.pi, 0.0, model), PARAMS.articulated, iterations=20), cost=0.0)
     assert not _supported(wrong, model, 0.0) and not _gap_open(points, wrong, model, 0.0)
     tracker = VehicleTracker(PARAMS.articulated, PARAMS.vehicles)
-    heading = np.array([np.cos(right.yaw_rad), np.sin(right.yaw_rad)])
-    tracker._ends_moved(moving := Seed(np.array([2.0, 5.0]), np.array([0.0, 5.0])), right, model)
-    moving.first_middle -= 2.0 * heading  # its first fit stood 2 m back
+    moving = Seed(np.array([2.0, 5.0]), np.array([0.0, 5.0]))
     assert tracker._two_units([(model, -1.0, wrong), (model, 1.0, right)], points, moving, 0.0) == (model, right)
     assert tracker._two_units([(model, -1.0, wrong)], points, moving, 0.0) is None
     standing = Seed(np.array([0.0, 5.0]), np.array([0.0, 5.0]))
