@@ -12,13 +12,16 @@ class SensorScan:
     """One sweep of one sensor.
 
     ``points`` are in the sensor's own frame; ``time_offset_s`` is each point's capture time
-    relative to ``stamp_s`` (the sweep start on the sensor's clock).
+    relative to ``stamp_s`` (the sweep start on the sensor's clock). ``from_sensor`` False: the
+    points were gathered elsewhere (a cloud file already in the yard frame): no ray is known to run
+    from the sensor's position to them.
     """
 
     sensor: str
     stamp_s: float
     points: np.ndarray  # (N, 3) float32
     time_offset_s: np.ndarray  # (N,) float32
+    from_sensor: bool = True
 
     def __post_init__(self) -> None:
         self.points = np.asarray(self.points, dtype=np.float32).reshape(-1, 3)

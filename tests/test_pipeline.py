@@ -36,7 +36,8 @@ def ground(seed=0, half_m=25.0, n=20000):
 
 
 def frame_of(index, stamp_s, clouds: dict):
-    return Frame(index, {name: SensorScan(name, stamp_s, pts, None) for name, pts in clouds.items()})
+    """Points constructed in the yard frame, not as a sensor at its origin would see them: no rays."""
+    return Frame(index, {name: SensorScan(name, stamp_s, pts, None, from_sensor=False) for name, pts in clouds.items()})
 
 
 @pytest.mark.parametrize("method", ["paper", "default"])

@@ -54,6 +54,9 @@ def test_the_merge_tells_each_used_sweeps_rows_and_sensor_position():
     assert merged.sweep_origins.tolist() == [[10.0, 0.0, 4.0], [0.0, 0.0, 4.0]]
     merged = stage.merge({**scans, "c": scan("c", 2.5, [[1, 1, 1]] * 4)})  # c in sync, after a and b
     assert merged.sweep_bounds.tolist() == [0, 2, 3, 7] and merged.sweep_origins[2].tolist() == [-3.0, 7.0, 5.0]
+    gathered = SensorScan("b", 2.0, np.array([[3, 2, -3]], dtype=np.float32), None, from_sensor=False)
+    merged = stage.merge({"a": scans["a"], "b": gathered})  # a cloud gathered elsewhere: its origin is not known
+    assert merged.sweep_origins[0].tolist() == [10.0, 0.0, 4.0] and np.isnan(merged.sweep_origins[1]).all()
 
 
 def test_missing_empty_and_nan_are_counted_not_raised():

@@ -66,6 +66,12 @@ def test_random_rays_are_counted_as_by_sampling_the_segments():
     assert ended == np.count_nonzero(inside) > 0
 
 
+def test_a_sweep_whose_sensor_position_is_not_known_tells_nothing():
+    points = np.vstack([row(5.0, 1.0), row(0.0, 1.0)])
+    unknown = rays(points, [[np.nan] * 3, SENSOR[0]], [0, 61, 122])
+    assert unknown.through(**BOX) == (0, 11)  # the first sweep's 17 crossings are not known; the second's 11 end inside
+
+
 def test_each_sweep_has_its_own_origin():
     """Two sensors, each sweep its rows: the second's rays pass beside the box; swapped, the first
     sweep's rays come from the side and one of them grazes it."""

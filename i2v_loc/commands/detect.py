@@ -52,7 +52,8 @@ def run(args) -> int:
     except ValueError as err:
         raise UserError(str(err)) from err
     params = single_sweep(params.model_copy(update={"sensors": [sensor]}), method)
-    result = build_pipeline(params, method).process(Frame(0, {sensor.name: SensorScan(sensor.name, 0.0, points, None)}))
+    scan = SensorScan(sensor.name, 0.0, points, None, from_sensor=bool(args.sensor))  # a yard-frame cloud: no rays
+    result = build_pipeline(params, method).process(Frame(0, {sensor.name: scan}))
     line = result.to_json()
     # one sweep: faults name the sensor; the counts of what was dropped are the state line's
     report = {

@@ -122,7 +122,10 @@ class ArticulatedPipeline(ParameterHandoff):
         if np.isfinite(merged.stamp_s):
             ready = self.background is None or self.background.ready
             level_points = self.level.points(points)
-            rays = Rays(merged.points, merged.sweep_origins, merged.sweep_bounds, self.level.rotation)
+            known = np.isfinite(merged.sweep_origins).all(axis=1).any()  # else no ray is known (a cloud file)
+            rays = (
+                Rays(merged.points, merged.sweep_origins, merged.sweep_bounds, self.level.rotation) if known else None
+            )
             self._reports = self.tracker.process(level_points, ground, merged.stamp_s, ready, rays)
             self._reports_stamp_s = merged.stamp_s
         timer.lap("vehicles")

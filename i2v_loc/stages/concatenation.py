@@ -54,7 +54,9 @@ class ConcatenationResult:
     sweep_bounds: np.ndarray | None = (
         None  # (S + 1,) each used sweep's first row in ``points``, then N (``merge`` only)
     )
-    sweep_origins: np.ndarray | None = None  # (S, 3) each used sweep's sensor position, yard frame (``merge`` only)
+    sweep_origins: np.ndarray | None = (
+        None  # (S, 3) each used sweep's sensor position, yard frame; NaN: not known (``merge`` only)
+    )
 
 
 class Concatenation:
@@ -126,7 +128,10 @@ class Concatenation:
         )
         lag_s -= offsets
         bounds = np.cumsum([0] + [n for *_, n in kept_sweeps])
-        origins = np.array([self._to_yard[name][1] for name, *_ in kept_sweeps], dtype=float).reshape(-1, 3)
+        origins = np.array(
+            [self._to_yard[name][1] if scans[name].from_sensor else [np.nan] * 3 for name, *_ in kept_sweeps],
+            dtype=float,
+        ).reshape(-1, 3)
         names = [name for name, *_ in kept_sweeps]
         return ConcatenationResult(points, reference_s, names, faults, dropped, lag_s, bounds, origins)
 

@@ -1245,10 +1245,12 @@ def rays_through_box(points, origins, bounds, rotation, box, beyond_m):
     yard frame, turned by ``rotation`` into the box's frame) cross the upright box and end at least
     ``beyond_m`` past where they leave it, and how many end in it. ``box``: centre x, y, cos and
     sin of its yaw, half length, half width, bottom z, top z. The segment is clipped against the
-    box's three slabs."""
+    box's three slabs. Sweeps with a NaN origin are left out."""
     cx, cy, c, s, half_l, half_w, z_low, z_high = box[0], box[1], box[2], box[3], box[4], box[5], box[6], box[7]
     count = ended = 0
     for k in range(origins.shape[0]):
+        if not (np.isfinite(origins[k, 0]) and np.isfinite(origins[k, 1]) and np.isfinite(origins[k, 2])):
+            continue  # a sweep whose sensor position is not known tells nothing
         ox, oy, oz = _box_frame(origins[k, 0], origins[k, 1], origins[k, 2], rotation, cx, cy, c, s)
         for i in range(bounds[k], bounds[k + 1]):
             px, py, pz = _box_frame(points[i, 0], points[i, 1], points[i, 2], rotation, cx, cy, c, s)
