@@ -51,12 +51,8 @@ class ConcatenationResult:
     faults: dict[str, str] = field(default_factory=dict)  # sensor -> reason
     dropped: dict[str, int] = field(default_factory=dict)  # reason -> count (sweeps; points for nan_points)
     lag_s: np.ndarray | None = None  # (N,) reference time minus each point's capture time (``merge`` only)
-    sweep_bounds: np.ndarray | None = (
-        None  # (S + 1,) each used sweep's first row in ``points``, then N (``merge`` only)
-    )
-    sweep_origins: np.ndarray | None = (
-        None  # (S, 3) each used sweep's sensor position, yard frame; NaN: not known (``merge`` only)
-    )
+    sweep_bounds: np.ndarray | None = None  # (S + 1,) each used sweep's first row, then N (``merge`` only)
+    sweep_origins: np.ndarray | None = None  # (S, 3) their sensors' positions, yard frame, NaN if unknown (merge)
 
 
 class Concatenation:

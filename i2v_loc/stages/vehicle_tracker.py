@@ -604,8 +604,11 @@ class VehicleTracker:
         if self._rays is None:
             return False
         inset = SOLID_INSET_M
-        for (origin, yaw), box in zip(_unit_origins(m.vector, model), model.boxes):
-            centre = tuple(np.asarray(origin) + box.center_x_m * np.array([np.cos(yaw), np.sin(yaw)]))
+        hitch = m.hitch_rad or 0.0
+        for centre, yaw, box in zip(
+            model.box_centers(m.x_m, m.y_m, m.yaw_rad, hitch), (m.yaw_rad, m.yaw_rad + hitch), model.boxes
+        ):
+            centre = tuple(centre)
             half_l, half_w, floor, top = (
                 box.length_m / 2,
                 box.width_m / 2,
