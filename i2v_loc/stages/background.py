@@ -39,7 +39,10 @@ from i2v_loc.stages import kernels
 FORMAT_VERSION = 1
 OUTSIDE = np.uint16(60000)  # padding marker in ``dilated`` (above any neighbourhood count)
 _NO_COLUMNS = np.zeros(0, dtype=bool)
-_NO_CELLS = np.zeros(0, dtype=np.int64)
+# voxel indices as int32: the grid is capped at max_voxels (at most 2e8) cells; half the memory
+# traffic of int64 in the per-point pass
+CELL = np.int32
+_NO_CELLS = np.zeros(0, dtype=CELL)
 
 
 @dataclass
@@ -157,9 +160,9 @@ class BackgroundMap:
         learning = self.frames_seen % self.params.learn_every_frames == 0
         keep = self._protected_columns(protected, self.params.keep_margin_m) if self.ready else None
         protect = self._protected_columns(protected, self.params.protect_margin_m) if learning else None
-        learned = np.empty(n if learning else 0, dtype=np.int64)
+        learned = np.empty(n if learning else 0, dtype=CELL)
         if len(self._cells) < n:  # scratch kept between frames: fresh pages cost more than the pass
-            self._cells, self._columns = np.empty(2 * n, dtype=np.int64), np.empty(2 * n, dtype=np.int64)
+            self._cells, self._columns = np.empty(2 * n, dtype=CELL), np.empty(2 * n, dtype=CELL)
         n_learned = kernels.background_pass(
             points, self._shift, self._scale, self._upper, self._grid, self._free_bits, self.ready,
             _NO_COLUMNS if keep is None else keep, learning, _NO_COLUMNS if protect is None else protect,
@@ -181,7 +184,7 @@ class BackgroundMap:
         old = self.history.popleft()
         kernels.forget_counts(old, self.counts)  # first: the new sample's voxels then reach their final count
         threshold, forget = self._thresholds(self.params.window_frames)
-        flips = np.empty(len(index) + len(old), dtype=np.int64)
+        flips = np.empty(len(index) + len(old), dtype=CELL)
         n_flips = kernels.count_sample(index, self.counts, True, threshold, self.is_background, flips)
         n_flips = kernels.forgotten(old, self.counts, self.is_background, threshold, forget, flips, n_flips)
         kernels.flip_cells(flips[:n_flips], self.is_background, self.dilated, self._free_bits, self._offsets)
@@ -209,7 +212,7 @@ class BackgroundMap:
     def _rebuild(self) -> None:
         """Compare every voxel (a loaded map)."""
         state = (self.counts >= self.threshold) | (self.is_background & (self.counts > self.forget_threshold))
-        self._update(np.flatnonzero(state != self.is_background))
+        self._update(np.flatnonzero(state != self.is_background).astype(CELL))
 
     def _update(self, touched: np.ndarray) -> None:
         """Re-decide these voxels (repeats allowed) and move the dilated counts of those that change."""
@@ -273,12 +276,12 @@ class BackgroundMap:
             )
             if not same:
                 raise ValueError(f"{path}: background map of another grid (region or background.voxel_size_m changed)")
-            cells = self._reindex(data["background"].astype(np.int64), 1, self.pad)
+            cells = self._reindex(data["background"].astype(np.int64), 1, self.pad).astype(CELL)
         # a loaded map acts as a full window in which its voxels were always occupied
         window = self.params.window_frames
         self.counts[:] = 0
         self.counts[cells] = window
-        self.history = deque([cells.astype(np.int64)] * window)
+        self.history = deque([cells] * window)
         self._occupied = []
         self._pending = None
         self._rebuild()

@@ -36,21 +36,21 @@ def sweep_to_yard(points, offsets, rot, trans, min_r2, max_r2, out_points, out_o
     to ``out_points[start:]`` (their time offsets beside). Returns (points kept, non-finite points).
 
     The rotation is the fused multiply-add chain of the float32 matrix product it replaces
-    (x r0 rounded, then y r1 and z r2 each added with one rounding), so the points are bit-equal.
-    Every point is written at the next free row, which is then kept or not (no branch around the
-    writes; the rows written stay within the sweep's own)."""
+    (x r0 rounded, then y r1 and z r2 each added with one rounding: the hardware's float32 FMA), so
+    the points are bit-equal. Every point is written at the next free row, which is then kept or not
+    (no branch around the writes; the rows written stay within the sweep's own)."""
     k = start
     n_bad = 0
-    r00, r01, r02 = rot[0, 0], np.float64(rot[0, 1]), np.float64(rot[0, 2])
-    r10, r11, r12 = rot[1, 0], np.float64(rot[1, 1]), np.float64(rot[1, 2])
-    r20, r21, r22 = rot[2, 0], np.float64(rot[2, 1]), np.float64(rot[2, 2])
+    r00, r01, r02 = rot[0, 0], rot[0, 1], rot[0, 2]
+    r10, r11, r12 = rot[1, 0], rot[1, 1], rot[1, 2]
+    r20, r21, r22 = rot[2, 0], rot[2, 1], rot[2, 2]
     for i in range(points.shape[0]):
-        x, off = points[i, 0], offsets[i]
-        xd, yd, zd = np.float64(x), np.float64(points[i, 1]), np.float64(points[i, 2])
+        x, y, z, off = points[i, 0], points[i, 1], points[i, 2], offsets[i]
+        xd, yd, zd = np.float64(x), np.float64(y), np.float64(z)
         r2 = xd * xd + yd * yd + zd * zd  # not finite exactly when a coordinate is not (squares add up)
-        out_points[k, 0] = np.float32(zd * r02 + np.float64(np.float32(yd * r01 + np.float64(x * r00)))) + trans[0]
-        out_points[k, 1] = np.float32(zd * r12 + np.float64(np.float32(yd * r11 + np.float64(x * r10)))) + trans[1]
-        out_points[k, 2] = np.float32(zd * r22 + np.float64(np.float32(yd * r21 + np.float64(x * r20)))) + trans[2]
+        out_points[k, 0] = _fma32(z, r02, _fma32(y, r01, x * r00)) + trans[0]
+        out_points[k, 1] = _fma32(z, r12, _fma32(y, r11, x * r10)) + trans[1]
+        out_points[k, 2] = _fma32(z, r22, _fma32(y, r21, x * r20)) + trans[2]
         out_offsets[k] = off
         finite = np.isfinite(r2) and np.isfinite(off)
         k += finite and min_r2 <= r2 <= max_r2
@@ -764,6 +764,16 @@ def _fma(typingctx, a, b, c):
     return types.float64(types.float64, types.float64, types.float64), codegen
 
 
+@intrinsic
+def _fma32(typingctx, a, b, c):
+    """The float32 fused multiply-add (one rounding)."""
+
+    def codegen(context, builder, signature, args):
+        return builder.fma(*args)
+
+    return types.float32(types.float32, types.float32, types.float32), codegen
+
+
 # the rows of a unit's face table: front, rear, left, right as (local normal x, y)
 _FACE_NORMALS = ((1.0, 0.0), (-1.0, 0.0), (0.0, 1.0), (0.0, -1.0))
 
@@ -1452,14 +1462,14 @@ def warm_up() -> None:
         np.zeros(8, dtype=np.uint8),
         np.empty(3, dtype=np.bool_),
         np.empty(3, dtype=np.bool_),
-        np.empty(3, dtype=np.int64),
-        np.empty(3, dtype=np.int64),
-        np.empty(3, dtype=np.int64),
+        np.empty(3, dtype=np.int32),
+        np.empty(3, dtype=np.int32),
+        np.empty(3, dtype=np.int32),
     )
-    count_sample(np.zeros(2, dtype=np.int64), np.zeros(64, dtype=np.uint8), True, 1, flags, np.empty(2, dtype=np.int64))
-    one_cell = np.array([5], dtype=np.int64)
+    count_sample(np.zeros(2, dtype=np.int32), np.zeros(64, dtype=np.uint8), True, 1, flags, np.empty(2, dtype=np.int32))
+    one_cell = np.array([5], dtype=np.int32)
     forget_counts(one_cell, np.ones(64, np.uint8))
-    forgotten(one_cell, np.zeros(64, np.uint8), flags, 1, 0, np.empty(1, dtype=np.int64), 0)
+    forgotten(one_cell, np.zeros(64, np.uint8), flags, 1, 0, np.empty(1, dtype=np.int32), 0)
     bits = np.zeros(8, dtype=np.uint8)
     flip_cells(one_cell, flags, cells, bits, np.array([0]))
     flip_cells(one_cell, flags, cells, bits, np.array([0]))

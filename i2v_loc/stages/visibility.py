@@ -34,8 +34,8 @@ class Rays:
         box = np.array(
             [*center_xy, np.cos(yaw_rad), np.sin(yaw_rad), half_length_m, half_width_m, *z_range_m], dtype=float
         )
+        rotation = np.array(self.to_level, dtype=float)  # a copy: a read-only one is another specialisation
         through, ended = kernels.rays_through_box(
-            self.points, self.origins, self.bounds, np.ascontiguousarray(self.to_level, dtype=float), box,
-            float(beyond_m),
-        )  # fmt: skip
+            self.points, self.origins, self.bounds, rotation, box, float(beyond_m)
+        )
         return int(through), int(ended)
