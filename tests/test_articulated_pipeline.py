@@ -779,3 +779,21 @@ def test_a_side_running_on_through_the_gap_just_outside_the_cab_fills_it():
     xy = np.column_stack([x0 + c * local[:, 0] - s * local[:, 1], y0 + s * local[:, 0] + c * local[:, 1]])
     side = np.column_stack([xy, grid_z.ravel()])
     assert _gap_filled(side, m, model, 0.0) and not _gap_open(side, m, model, 0.0)
+
+
+def test_a_trailer_longer_than_every_catalogue_one_starts_with_the_cab_on_its_cab():
+    """A Volvo tractor with a 16 m trailer (the catalogue's longest is 13.68 m) standing, seen from
+    one side: the start fits the models also stretched to the seed's length, so the first fit puts
+    the cab on the cab; the catalogue's trailer centred on the seed put the cab on the trailer's
+    front (the gap filled by the trailer's side), and the vehicle did not start in 1.5 s."""
+    model = volvo()
+    l2 = model.trailer_axle_m * (16.0 - model.trailer.front_m) / (model.trailer.length_m - model.trailer.front_m)
+    long_trailer = replace(model, name="truth", trailer=replace(model.trailer, length_m=16.0), trailer_axle_m=l2)
+    tracker = VehicleTracker(PARAMS.articulated, PARAMS.vehicles)
+    vehicles = [(long_trailer, (-4.0, 5.0, 0.05, 0.05))]
+    side = SENSORS[:1]
+    for t, points, (state,) in drive(vehicles, 0.1 * PARAMS.articulated.start_frames + 0.05, 0.0, 0.0, side):
+        reports = tracker.process(points, flat, t, rays=seen(tracker, vehicles, [state], side))
+    assert len(reports) == 1 and reports[0].model.articulated
+    position, yaw, hitch = errors(reports[0], state)
+    assert position < 0.3 and abs(yaw) < 1.0 and abs(hitch) < 1.0

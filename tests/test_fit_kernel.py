@@ -229,7 +229,7 @@ def kernel_faces_of(v, xy, z, prior):
 def ref_fit(points, prior, params, iterations, start_scale_m):
     """The numpy loop ``kernels.irls`` replaced, and the covariance of ``kernels.fit_covariance``:
     (solution, covariance, residual of the last step)."""
-    sample = hinged_fit.thin(points, params.fit_max_points)
+    sample = hinged_fit.thin_by_unit(points, params.fit_max_points, prior)
     xy, z_rel = np.ascontiguousarray(sample[:, :2]), sample[:, 2] - prior.ground_z_m
     v0 = np.concatenate([prior.vector, prior.extra])
     scale = params.fit_loss_scale_m

@@ -170,3 +170,41 @@ def test_the_observed_directions_are_the_data_information_less_the_prior():
         want = (vectors[:, keep] / sigmas[:, None]) @ np.diag(values[keep]) @ (vectors[:, keep] / sigmas[:, None]).T
         seen = rows.T @ np.linalg.inv(noise - (rows * floor**2) @ rows.T) @ rows
         assert np.allclose(seen, want, rtol=1e-6, atol=1e-9 * np.abs(want).max())
+
+
+def test_a_few_cab_points_among_thousands_of_trailer_points_still_measure_the_cab():
+    """One sensor sees a cab's corner (40 points) behind a densely seen trailer (thousands): the
+    fit's sample keeps a share of the cab's points, so the cab's yaw is measured (all four pose
+    directions) and the hitch comes out right; an even stride over all points kept one or two."""
+    model, hitch = volvo(), np.radians(30.0)
+    cab_hidden = tuple((0, f) for f in ("front", "rear", "left", "right", "roof"))
+    trailer_hidden = tuple((1, f) for f in ("front", "rear", "left", "right", "roof"))
+    trailer = vehicle_points(model, *TRUTH, hitch, sensors=SENSORS, spacing=0.05, drop=cab_hidden)
+    cab = vehicle_points(model, *TRUTH, hitch, sensors=SENSORS, drop=trailer_hidden)
+    cab = cab[np.random.default_rng(3).choice(len(cab), 40, replace=False)]
+    points = np.vstack([trailer, cab])
+    points = points[np.lexsort((points[:, 1], points[:, 0]))]  # spatial order, as voxel centroids come
+    assert len(trailer) > 50 * len(cab)
+    dx, dy, dyaw, dhitch = PRIOR_OFFSET
+    prior = Prior(TRUTH[0] + dx, TRUTH[1] + dy, TRUTH[2] + dyaw, hitch + dhitch, model)
+    m = fit(points, prior, PARAMS.articulated, iterations=20)
+    assert np.count_nonzero(m.unit == 0) >= 15
+    assert m.observed[0].shape[0] == 4
+    assert abs(np.degrees(m.yaw_rad - TRUTH[2])) < 0.5 and abs(np.degrees(m.hitch_rad - hitch)) < 0.5
+
+
+def test_the_sample_keeps_each_unit_a_tenth_and_stays_within_the_budget():
+    from i2v_loc.stages.hinged_fit import thin_by_unit
+
+    model = volvo()
+    prior = Prior(*TRUTH, 0.0, model)
+    tractor_c, trailer_c = model.box_centers(*TRUTH, 0.0)
+    rng = np.random.default_rng(0)
+    on_cab = np.column_stack([tractor_c + rng.normal(0.0, 0.3, (30, 2)), np.ones(30)])
+    on_trailer = np.column_stack([trailer_c + rng.normal(0.0, 0.5, (3000, 2)), np.ones(3000)])
+    sample = thin_by_unit(np.vstack([on_trailer, on_cab]), 200, prior)
+    assert len(sample) == 200
+    assert (np.linalg.norm(sample[:, :2] - tractor_c, axis=1) < 1.5).sum() == 20  # a tenth of 200, not 2
+    many_cab = np.column_stack([tractor_c + rng.normal(0.0, 0.3, (1000, 2)), np.ones(1000)])  # a quarter
+    sample = thin_by_unit(np.vstack([on_trailer, many_cab]), 200, prior)
+    assert len(sample) == 200 and (np.linalg.norm(sample[:, :2] - tractor_c, axis=1) < 1.5).sum() == 50

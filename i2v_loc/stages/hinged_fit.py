@@ -36,6 +36,8 @@ FRONT, REAR, LEFT, RIGHT = 0, 1, 2, 3  # face numbers of a unit (the face table'
 TRAILER_LENGTH_RANGE_M = (2.0, 16.5)
 KINGPIN_RANGE_M = (-1.5, 1.5)
 _RANGES = np.array([*TRAILER_LENGTH_RANGE_M, *KINGPIN_RANGE_M])
+MIN_UNIT_SHARE = 0.1  # of the fit's thinned sample, for each unit that has as many points
+UNIT_SAMPLE_MARGIN_M = 0.5
 
 
 @dataclass(frozen=True)
@@ -123,6 +125,32 @@ def thin(points: np.ndarray, max_points: int) -> np.ndarray:
     return np.asarray(points, dtype=float)
 
 
+def thin_by_unit(points: np.ndarray, max_points: int, prior: Prior) -> np.ndarray:
+    """``thin``, unless the points in the prior's tractor box (grown by ``UNIT_SAMPLE_MARGIN_M``) or
+    the others would get less than ``MIN_UNIT_SHARE`` of the sample: then the two are thinned
+    apart, the smaller keeping that share (or all its points). One sensor that sees a cab behind
+    its trailer has a few dozen points on it among thousands, and an even stride kept 3 of them.
+    (Thinning the two apart always moved the fits of a car-sized tractor, whose box explains its
+    points less well: a Twizy's hitch RMSE went from 1.85 to 2.72 deg on held-out seeds.)"""
+    model = prior.model
+    if len(points) <= max_points or model.trailer is None:
+        return thin(points, max_points)
+    centre = model.box_centers(prior.x_m, prior.y_m, prior.yaw_rad, prior.hitch_rad)[0]
+    d = points[:, :2] - centre
+    c, s = math.cos(prior.yaw_rad), math.sin(prior.yaw_rad)
+    grow = UNIT_SAMPLE_MARGIN_M
+    on_tractor = (np.abs(c * d[:, 0] + s * d[:, 1]) <= model.tractor.length_m / 2 + grow) & (
+        np.abs(-s * d[:, 0] + c * d[:, 1]) <= model.tractor.width_m / 2 + grow
+    )
+    n_tractor = int(np.count_nonzero(on_tractor))
+    floor = int(MIN_UNIT_SHARE * max_points)
+    share = round(max_points * n_tractor / len(points))
+    if floor <= share <= max_points - floor:  # both units well represented: the even stride
+        return thin(points, max_points)
+    k_tractor = min(n_tractor, max(share, floor), max_points - min(len(points) - n_tractor, floor))
+    return np.vstack([thin(points[on_tractor], k_tractor), thin(points[~on_tractor], max_points - k_tractor)])
+
+
 def _geometry(v: np.ndarray, model: VehicleModel, trailer_slack_m: float) -> np.ndarray:
     """The kernel's description of the pose and the boxes (``kernels.nearest_faces``): tractor x, y,
     yaw, hitch, kingpin behind the axle, trailer slack, then per box front, length, width, floor, height."""
@@ -157,7 +185,7 @@ def fit(
     """The hinged model fitted to ``points`` (N, 3, yard frame) from ``prior`` in at most ``iterations``
     steps (default ``fit_iterations``), the loss scale starting at ``start_scale_m`` (default
     ``fit_start_scale_m``); None when fewer than ``fit_min_points`` remain after thinning."""
-    sample = thin(points, params.fit_max_points)
+    sample = thin_by_unit(points, params.fit_max_points, prior)
     if len(sample) < params.fit_min_points:
         return None
     xy, z_rel = np.ascontiguousarray(sample[:, :2]), sample[:, 2] - prior.ground_z_m

@@ -755,15 +755,19 @@ class VehicleTracker:
         out = []
         for model in self.catalogue.values():
             for sign in (1.0, -1.0):
+                starts = [(model, h) for h in START_HITCHES_DEG]
+                longer = _as_long_as(model, rect.length_m)
+                if longer is not model:  # a longer trailer centred would put the cab on its front
+                    starts.append((longer, 0.0))
                 coarse = [
                     fit(
                         sample,
-                        _placed(model, rect, sign, np.radians(h), ground_z_m),
+                        _placed(placed_model, rect, sign, np.radians(h), ground_z_m),
                         self.params,
                         COARSE_ITERATIONS,
                         START_SCALE_M,
                     )
-                    for h in START_HITCHES_DEG
+                    for placed_model, h in starts
                 ]
                 coarse = [m for m in coarse if m is not None]
                 if coarse:  # the best start hitch, refined, the trailer's length fitted too
@@ -969,6 +973,19 @@ def seed_groups(
         float(min_height_m), int(min_points), float(join_m), float(min_diagonal_m),
     )  # fmt: skip
     return [points[rows[a:b]] for a, b in zip(bounds[:-1].tolist(), bounds[1:].tolist())]
+
+
+def _as_long_as(model: VehicleModel, length_m: float) -> VehicleModel:
+    """The model with the longer trailer that makes it, straight, ``length_m`` long overall (up to
+    the longest trailer); never shorter: a cluster shorter than the model may be a part of it."""
+    if model.trailer is None:
+        return model
+    tractor_c, trailer_c = model.box_centers(0.0, 0.0, 0.0, 0.0)
+    overall = tractor_c[0] + model.tractor.length_m / 2 - (trailer_c[0] - model.trailer.length_m / 2)
+    if length_m <= overall:
+        return model
+    trailer_m = min(model.trailer.length_m + length_m - overall, MAX_TRAILER_LENGTH_M)
+    return _with_trailer_length(model, trailer_m)
 
 
 def _with_trailer_length(model: VehicleModel, length_m: float | None) -> VehicleModel:
