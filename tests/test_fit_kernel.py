@@ -355,3 +355,15 @@ def test_the_gate_gives_each_point_to_the_nearest_track_within_the_margin(hitch_
     for track in (-1, 0, 1):  # inside, beside and far from each
         assert np.count_nonzero(got == track) > 30
     assert np.count_nonzero((distances[0] == 0) & (distances[1] == 0)) > 0  # both inside: the first's
+
+
+def test_the_strided_pick_is_numpys_stride_over_each_part():
+    """``strided_pick`` against ``np.linspace(0, n - 1, k).astype(int)`` over the rows of each part
+    (the stride ``hinged_fit.thin`` takes), for random masks and counts, 0 and 1 included."""
+    rng = np.random.default_rng(0)
+    for _ in range(500):
+        mask = rng.random(int(rng.integers(1, 3000))) < rng.random()
+        parts = np.flatnonzero(mask), np.flatnonzero(~mask)
+        counts = [int(rng.integers(0, len(p) + 1)) for p in parts]
+        expected = np.concatenate([p[np.linspace(0, len(p) - 1, k).astype(np.int64)] for p, k in zip(parts, counts)])
+        np.testing.assert_array_equal(kernels.strided_pick(mask, *counts), expected)

@@ -136,19 +136,19 @@ def thin_by_unit(points: np.ndarray, max_points: int, prior: Prior) -> np.ndarra
     if len(points) <= max_points or model.trailer is None:
         return thin(points, max_points)
     centre = model.box_centers(prior.x_m, prior.y_m, prior.yaw_rad, prior.hitch_rad)[0]
-    d = points[:, :2] - centre
-    c, s = math.cos(prior.yaw_rad), math.sin(prior.yaw_rad)
     grow = UNIT_SAMPLE_MARGIN_M
-    on_tractor = (np.abs(c * d[:, 0] + s * d[:, 1]) <= model.tractor.length_m / 2 + grow) & (
-        np.abs(-s * d[:, 0] + c * d[:, 1]) <= model.tractor.width_m / 2 + grow
-    )
-    n_tractor = int(np.count_nonzero(on_tractor))
+    box = np.array(
+        [*centre, math.cos(prior.yaw_rad), math.sin(prior.yaw_rad), model.tractor.length_m / 2 + grow,
+         model.tractor.width_m / 2 + grow]
+    )  # fmt: skip
+    on_tractor = np.empty(len(points), dtype=bool)
+    n_tractor = kernels.in_upright_box(points, box, on_tractor)
     floor = int(MIN_UNIT_SHARE * max_points)
     share = round(max_points * n_tractor / len(points))
     if floor <= share <= max_points - floor:  # both units well represented: the even stride
         return thin(points, max_points)
     k_tractor = min(n_tractor, max(share, floor), max_points - min(len(points) - n_tractor, floor))
-    return np.vstack([thin(points[on_tractor], k_tractor), thin(points[~on_tractor], max_points - k_tractor)])
+    return np.asarray(points[kernels.strided_pick(on_tractor, k_tractor, max_points - k_tractor)], dtype=float)
 
 
 def _geometry(v: np.ndarray, model: VehicleModel, trailer_slack_m: float) -> np.ndarray:

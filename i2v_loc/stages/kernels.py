@@ -290,6 +290,45 @@ def box_mask(points, low, high, out):
 
 
 @njit(**_JIT)
+def in_upright_box(points, box, out):
+    """Points whose (x, y) lie in the upright box ``box`` (centre x, y, cos yaw, sin yaw, half
+    length, half width; bounds included), in ``out``. Returns how many."""
+    cx, cy, c, s, half_l, half_w = box[0], box[1], box[2], box[3], box[4], box[5]
+    n = 0
+    for i in range(points.shape[0]):
+        dx, dy = points[i, 0] - cx, points[i, 1] - cy
+        inside = abs(c * dx + s * dy) <= half_l and abs(c * dy - s * dx) <= half_w
+        out[i] = inside
+        n += inside
+    return n
+
+
+@njit(**_JIT)
+def strided_pick(mask, k_in, k_out):
+    """Row indices of an even stride of ``k_in`` rows where ``mask`` holds, then of ``k_out`` rows
+    where it does not (each as ``np.linspace(0, n - 1, k).astype(int)`` over its own rows)."""
+    n_in = 0
+    for i in range(mask.shape[0]):
+        n_in += mask[i]
+    counts = (n_in, mask.shape[0] - n_in)
+    wanted = (k_in, k_out)
+    out = np.empty(k_in + k_out, dtype=np.int64)
+    seen = np.zeros(2, dtype=np.int64)  # rows of each part passed so far
+    taken = np.zeros(2, dtype=np.int64)
+    for i in range(mask.shape[0]):
+        part = 0 if mask[i] else 1
+        k, n = wanted[part], counts[part]
+        j = taken[part]
+        if j < k:
+            target = (n - 1 if k > 1 else 0) if j == k - 1 else np.int64(j * ((n - 1) / (k - 1)))
+            if seen[part] == target:
+                out[(0 if part == 0 else k_in) + j] = i
+                taken[part] = j + 1
+        seen[part] += 1
+    return out
+
+
+@njit(**_JIT)
 def above_plane(points, take, normal, offset, threshold, out_index):
     """Indices of the taken points more than ``threshold`` above the plane. Returns (kept, taken)."""
     k = 0
@@ -1476,6 +1515,9 @@ def warm_up() -> None:
     update_cells(one_cell, np.zeros(64, np.uint8), flags, cells, bits, np.array([0]), 1, 0)
     box_columns(np.zeros((1, 6)), 0.1, 0.0, 0.0, 0.2, 4, 4, np.zeros(16, dtype=np.bool_))
     box_mask(p32, np.zeros(3, dtype=np.float32), np.ones(3, dtype=np.float32), np.empty(3, dtype=np.bool_))
+    strided_pick(np.array([True, False, True]), 1, 1)
+    for p in (p32, p64):  # level points are float32 on level ground, float64 rotated
+        in_upright_box(p, np.array([0.0, 0.0, 1.0, 0.0, 1.0, 1.0]), np.empty(3, dtype=np.bool_))
     above_plane(p32, take, np.array([0.0, 0.0, 1.0]), 0.0, 0.1, np.empty(3, dtype=np.int64))
     plane_scores(p64, np.array([[0.0, 0.0, 1.0]]), np.zeros(1), 0.1)
     row_mean(p64)
