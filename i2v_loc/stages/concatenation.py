@@ -15,6 +15,7 @@ stamp + its column time offset (``SensorScan.time_offset_s``).
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -123,7 +124,7 @@ class Concatenation:
             [n for *_, n in kept_sweeps],
         )
         lag_s -= offsets
-        bounds = np.cumsum([0] + [n for *_, n in kept_sweeps])
+        bounds = np.array(list(itertools.accumulate((n for *_, n in kept_sweeps), initial=0)))
         origins = np.array(
             [self._to_yard[name][1] if scans[name].from_sensor else [np.nan] * 3 for name, *_ in kept_sweeps],
             dtype=float,
