@@ -208,3 +208,29 @@ def test_the_sample_keeps_each_unit_a_tenth_and_stays_within_the_budget():
     many_cab = np.column_stack([tractor_c + rng.normal(0.0, 0.3, (1000, 2)), np.ones(1000)])  # a quarter
     sample = thin_by_unit(np.vstack([on_trailer, many_cab]), 200, prior)
     assert len(sample) == 200 and (np.linalg.norm(sample[:, :2] - tractor_c, axis=1) < 1.5).sum() == 50
+
+
+def test_a_hidden_cab_folded_over_its_trailer_gets_no_share_of_the_trailers_points():
+    """Folded at 60 degrees the MAN's cab box (grown by the sample's margin) overlaps its trailer:
+    with the cab hidden, the points in that box are the trailer's, and they are not given the
+    cab's tenth of the sample (20 of 200): about their even share stays (3)."""
+    import math
+
+    from i2v_loc.stages import kernels
+    from i2v_loc.stages.hinged_fit import UNIT_SAMPLE_MARGIN_M, thin_by_unit
+
+    model, hitch = VehicleModel.from_config("man_tgx", PARAMS.vehicles["man_tgx"]), np.radians(60.0)
+    cab_hidden = tuple((0, f) for f in ("front", "rear", "left", "right", "roof"))
+    points = vehicle_points(model, *TRUTH, hitch, sensors=SENSORS, spacing=0.05, drop=cab_hidden)
+    tractor_c, _ = model.box_centers(*TRUTH, hitch)
+    grow = UNIT_SAMPLE_MARGIN_M
+    cab_box = np.array(
+        [*tractor_c, math.cos(TRUTH[2]), math.sin(TRUTH[2]), model.tractor.length_m / 2 + grow,
+         model.tractor.width_m / 2 + grow]
+    )  # fmt: skip
+
+    def in_cab_box(p):
+        return kernels.in_upright_box(np.ascontiguousarray(p), cab_box, np.empty(len(p), dtype=bool))
+
+    assert in_cab_box(points) > 300  # the trailer's points reach into the cab's box
+    assert in_cab_box(thin_by_unit(points, 200, Prior(*TRUTH, hitch, model))) <= 6

@@ -135,14 +135,16 @@ def thin_by_unit(points: np.ndarray, max_points: int, prior: Prior) -> np.ndarra
     model = prior.model
     if len(points) <= max_points or model.trailer is None:
         return thin(points, max_points)
-    centre = model.box_centers(prior.x_m, prior.y_m, prior.yaw_rad, prior.hitch_rad)[0]
+    centres = model.box_centers(prior.x_m, prior.y_m, prior.yaw_rad, prior.hitch_rad)
     grow = UNIT_SAMPLE_MARGIN_M
-    box = np.array(
-        [*centre, math.cos(prior.yaw_rad), math.sin(prior.yaw_rad), model.tractor.length_m / 2 + grow,
-         model.tractor.width_m / 2 + grow]
-    )  # fmt: skip
-    on_tractor = np.empty(len(points), dtype=bool)
-    n_tractor = kernels.in_upright_box(points, box, on_tractor)
+    on_tractor, on_trailer = np.empty(len(points), dtype=bool), np.empty(len(points), dtype=bool)
+    for centre, yaw, box, inside in zip(
+        centres, (prior.yaw_rad, prior.yaw_rad + prior.hitch_rad), model.boxes, (on_tractor, on_trailer)
+    ):
+        rows = np.array([*centre, math.cos(yaw), math.sin(yaw), box.length_m / 2 + grow, box.width_m / 2 + grow])
+        kernels.in_upright_box(points, rows, inside)
+    on_tractor &= ~on_trailer  # folded, the boxes overlap: a hidden cab's box holds the trailer's points
+    n_tractor = int(np.count_nonzero(on_tractor))
     floor = int(MIN_UNIT_SHARE * max_points)
     share = round(max_points * n_tractor / len(points))
     if floor <= share <= max_points - floor:  # both units well represented: the even stride
