@@ -95,3 +95,17 @@ def test_a_turned_box_in_a_tilted_level_frame_counts_as_the_same_box_in_the_yard
     origins = SENSOR @ rz.T @ to_yard.T
     box = {**BOX, "yaw_rad": turn}
     assert rays(points, origins, to_level=to_level).through(**box)[0] == 17
+
+
+def test_the_level_frames_read_only_rotation_compiles_no_kernel_in_a_frame():
+    """On level ground the level frame's rotation is a read-only array: asking the rays with it
+    uses the specialisation the warm-up compiled (a read-only array is another numba type; the
+    first frame that asked compiled one)."""
+    from i2v_loc.stages import kernels
+    from i2v_loc.stages.level_frame import LEVEL
+
+    kernels.warm_up()
+    before = set(kernels.rays_through_box.signatures)
+    assert not LEVEL.flags.writeable
+    rays(row(0.0, 1.5, np.linspace(-3, 3, 5)), to_level=LEVEL).through(**BOX)
+    assert set(kernels.rays_through_box.signatures) == before
