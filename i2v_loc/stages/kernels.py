@@ -36,7 +36,7 @@ def sweep_to_yard(points, offsets, rot, trans, min_r2, max_r2, out_points, out_o
     to ``out_points[start:]`` (their time offsets beside). Returns (points kept, non-finite points).
 
     The rotation is the fused multiply-add chain of the float32 matrix product it replaces
-    (x r0 rounded, then y r1 and z r2 each added with one rounding: the hardware's float32 FMA), so
+    (x r0 rounded, then y r1 and z r2 each added with one rounding: the hardware's float32 FMA, ``_fma``), so
     the points are bit-equal. Every point is written at the next free row, which is then kept or not
     (no branch around the writes; the rows written stay within the sweep's own)."""
     k = start
@@ -48,9 +48,9 @@ def sweep_to_yard(points, offsets, rot, trans, min_r2, max_r2, out_points, out_o
         x, y, z, off = points[i, 0], points[i, 1], points[i, 2], offsets[i]
         xd, yd, zd = np.float64(x), np.float64(y), np.float64(z)
         r2 = xd * xd + yd * yd + zd * zd  # not finite exactly when a coordinate is not (squares add up)
-        out_points[k, 0] = _fma32(z, r02, _fma32(y, r01, x * r00)) + trans[0]
-        out_points[k, 1] = _fma32(z, r12, _fma32(y, r11, x * r10)) + trans[1]
-        out_points[k, 2] = _fma32(z, r22, _fma32(y, r21, x * r20)) + trans[2]
+        out_points[k, 0] = _fma(z, r02, _fma(y, r01, x * r00)) + trans[0]
+        out_points[k, 1] = _fma(z, r12, _fma(y, r11, x * r10)) + trans[1]
+        out_points[k, 2] = _fma(z, r22, _fma(y, r21, x * r20)) + trans[2]
         out_offsets[k] = off
         finite = np.isfinite(r2) and np.isfinite(off)
         k += finite and min_r2 <= r2 <= max_r2
@@ -795,22 +795,14 @@ def min_area_rect(xy):
 
 @intrinsic
 def _fma(typingctx, a, b, c):
-    """a * b + c with one rounding (LLVM's fma: the hardware instruction where there is one)."""
+    """a * b + c with one rounding (LLVM's fma: the hardware instruction where there is one), in
+    float32 when all three are float32, else in float64."""
+    kind = types.float32 if a == b == c == types.float32 else types.float64
 
     def codegen(context, builder, signature, args):
         return builder.fma(*args)
 
-    return types.float64(types.float64, types.float64, types.float64), codegen
-
-
-@intrinsic
-def _fma32(typingctx, a, b, c):
-    """The float32 fused multiply-add (one rounding)."""
-
-    def codegen(context, builder, signature, args):
-        return builder.fma(*args)
-
-    return types.float32(types.float32, types.float32, types.float32), codegen
+    return kind(kind, kind, kind), codegen
 
 
 # the rows of a unit's face table: front, rear, left, right as (local normal x, y)

@@ -754,11 +754,11 @@ class VehicleTracker:
         sample = thin(cluster, self.params.fit_max_points)
         out = []
         for model in self.catalogue.values():
+            starts = [(model, h) for h in START_HITCHES_DEG]
+            longer = _as_long_as(model, rect.length_m)
+            if longer is not model:  # a longer trailer centred would put the cab on its front
+                starts.append((longer, 0.0))
             for sign in (1.0, -1.0):
-                starts = [(model, h) for h in START_HITCHES_DEG]
-                longer = _as_long_as(model, rect.length_m)
-                if longer is not model:  # a longer trailer centred would put the cab on its front
-                    starts.append((longer, 0.0))
                 coarse = [
                     fit(
                         sample,
