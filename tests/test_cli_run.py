@@ -145,13 +145,14 @@ def test_calibrate_recovers_the_true_extrinsics(recording, tmp_path, capsys):
     lines = capsys.readouterr().out.splitlines()
     assert "fitness" in lines[0]
     figures = {line.split()[0]: (float(line.split()[1]), float(line.split()[2])) for line in lines[1:5]}
-    # fine figures: every sensor well above min_fitness 0.4 (measured 0.67-0.75), plane RMSE a few cm
-    assert all(fitness > 0.55 and rmse < 0.1 for fitness, rmse in figures.values())
+    # fine figures: every sensor well above min_fitness 0.3 (measured 0.52-0.86), plane RMSE a few cm
+    assert all(fitness > 0.45 and rmse < 0.06 for fitness, rmse in figures.values())
 
 
-def test_calibrate_refuses_a_guess_off_by_3_m_and_20_deg(recording, tmp_path, capsys):
-    """ICP from l4's guess moved 3 m and turned 20 deg lands about 1.5 m / 20 deg off: its fitness on the
-    structure (measured 0.25; correct results 0.45-0.87 on the samples) is below min_fitness 0.4."""
+def test_a_guess_off_by_3_m_and_20_deg_is_found_or_refused(recording, tmp_path, capsys):
+    """l4's guess moved 3 m and turned 20 deg: the calibration either finds l4 (measured: 7.7 cm,
+    0.56 deg, fitness 0.86) or refuses it (exit code 2, nothing written), never accepts l4 far off.
+    (l3, then registered before l4 against l1 and l2 alone, ends 18 cm off: docs/pipeline.md.)"""
     guess = yaml.safe_load((Path(recording) / "sensors_guess.yaml").read_text())
     l4 = next(s for s in guess["sensors"] if s["name"] == "l4")["extrinsics"]
     l4["x_m"] += 3.0
@@ -159,11 +160,16 @@ def test_calibrate_refuses_a_guess_off_by_3_m_and_20_deg(recording, tmp_path, ca
     wrong = tmp_path / "wrong_guess.yaml"
     wrong.write_text(yaml.safe_dump(guess))
     out = tmp_path / "calibrated.yaml"
-    assert main(["calibrate", str(recording), "--out", str(out), "--guess", str(wrong)]) == 2
+    code = main(["calibrate", str(recording), "--out", str(out), "--guess", str(wrong)])
     captured = capsys.readouterr()
-    assert "refused" in captured.err and "l4" in captured.err and not out.exists()
-    figures = {line.split()[0]: float(line.split()[1]) for line in captured.out.splitlines()[1:]}
-    assert figures["l4"] < 0.4 and figures["l2"] > 0.6  # l2 (registered before l4) is right and scores well
+    if code == 2:
+        assert "refused" in captured.err and "l4" in captured.err and not out.exists()
+        return
+    assert code == 0
+    truth = extrinsics_matrix(load_params(Path(recording) / "sensors.yaml").sensor("l4").extrinsics)
+    found = extrinsics_matrix(load_params(out).sensor("l4").extrinsics)
+    assert np.linalg.norm(found[:3, 3] - truth[:3, 3]) < 0.10
+    assert np.degrees(rotation_angle_rad(found[:3, :3], truth[:3, :3])) < 1.0
 
 
 def test_detect_reads_npy_and_kitti_bin_and_reports_errors(tmp_path, capsys):

@@ -32,7 +32,7 @@ def fake_calibration(monkeypatch):
     fitness = {"l3": 0.9}
 
     def fake(recording, params):
-        calls.append(params.calibration.frames)
+        calls.append(params.calibration.windows)
         results = []
         for sensor in params.sensors:
             true = TRUTH.sensor(sensor.name).extrinsics
@@ -74,8 +74,8 @@ def test_calibration_is_cached_and_its_errors_measured(fake_calibration, tmp_pat
     # the sample's guess is 30 cm off on each axis for l2..l4
     assert rows["l3"]["guess_error_cm"] == pytest.approx(100 * math.sqrt(3 * 0.3**2))
     # other calibration parameters are another calibration
-    cal.calibrate_recording(str(SAMPLE), {"calibration": {"frames": 3}}, tmp_path)
-    assert calls == [5, 3]
+    cal.calibrate_recording(str(SAMPLE), {"calibration": {"windows": 3}}, tmp_path)
+    assert calls == [30, 3]
 
 
 def test_tasks_run_with_the_calibrated_sensors_and_the_guess_clock_offsets(fake_calibration, tmp_path):

@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-CACHE_VERSION = 1
+CACHE_VERSION = 2
 
 CALIBRATED = "calibrated"
 REFUSED = "refused"  # fitness too low: evaluated with the guess
@@ -34,16 +34,22 @@ def default_cache_dir() -> Path:
     return Path(base) / "i2v-loc" / "calibration"
 
 
-def recording_sweeps(recording, sensors, frames: int) -> dict[str, list[np.ndarray]]:
-    """Per sensor, the points of ``frames`` sweeps spread evenly over the recording."""
-    n = min(frames, len(recording))
-    step = max(1, len(recording) // max(n, 1))
-    sweeps: dict[str, list[np.ndarray]] = {s.name: [] for s in sensors}
-    for index in range(0, step * n, step):
-        for name, scan in recording.frame(index).scans.items():
-            if name in sweeps:
-                sweeps[name].append(scan.points)
-    return sweeps
+def recording_windows(recording, sensors, windows: int, gap_frames: int) -> list[dict[str, list[np.ndarray]]]:
+    """``windows`` windows spread evenly over the recording; per window and sensor, the points of
+    three sweeps ``gap_frames`` apart (fewer when the recording is too short)."""
+    names = {s.name for s in sensors}
+    n = len(recording)
+    gap = min(gap_frames, max(0, (n - 1) // 2))
+    middles = np.unique(np.linspace(gap, n - 1 - gap, max(1, min(windows, n))).round().astype(int))
+    result = []
+    for middle in middles:
+        window: dict[str, list[np.ndarray]] = {name: [] for name in names}
+        for index in sorted({middle - gap, middle, middle + gap}):
+            for name, scan in recording.frame(int(index)).scans.items():
+                if name in window:
+                    window[name].append(scan.points)
+        result.append(window)
+    return result
 
 
 def extrinsics_error(estimate, truth) -> tuple[float, float]:
@@ -95,8 +101,9 @@ def run_calibration(recording, params) -> tuple[list, bool]:
     from ``params.sensors`` (the guess). ``ValueError`` when it cannot run at all."""
     from i2v_loc.stages.calibration import Calibrator
 
-    sweeps = recording_sweeps(recording, params.sensors, params.calibration.frames)
-    results = Calibrator(params.calibration).calibrate(params.sensors, sweeps)
+    section = params.calibration
+    windows = recording_windows(recording, params.sensors, section.windows, section.window_gap_frames)
+    results = Calibrator(section).calibrate(params.sensors, windows)
     refused = any(r.fitness < params.calibration.min_fitness for r in results)
     return results, refused
 

@@ -1,20 +1,29 @@
-"""Stage 1 (offline): refine each sensor's extrinsics by ICP against the reference sensor (paper 3.1).
+"""Stage 1 (offline): refine each sensor's extrinsics against the reference sensor (paper 3.1).
 
-Per sensor, ``frames`` sweeps of the scene are accumulated and only the static part is kept
-(voxels occupied in most of the frames: moving vehicles and pedestrians drop out). Clouds are put
-in the yard frame with the initial guess, voxel-downsampled, and registered with open3d's
-generalized ICP (or point-to-plane with normals from a >= 2 m radius: 1 m normals diverge on
-sparse 32-beam rings), coarse then fine. Sensors are registered one at a time against the union
-of the already calibrated ones, the best-overlapping first, so a sensor that does not see the
-reference enough is chained through its neighbours.
+The scene is sampled in ``windows`` short windows spread over the recording, each three sweeps
+``window_gap_frames`` apart. A window keeps what stood still in it (voxels occupied in all three
+sweeps): the ground, walls and poles, and a vehicle that stands or moves slowly. The long-term
+scene recurs in every window; a vehicle that stands or passes slowly in view constrains the
+sensors like one more wall, where they see it at the same time. Sensors are registered one at a
+time against the union of the already calibrated ones, the best-overlapping first, so a sensor
+that does not see the reference enough is chained through its neighbours.
 
-Quality figures: the ground fills most of every cloud and matches whatever the error in x, y and
-yaw, and two sensors' 32-beam rings never sample the same spots (a correct result leaves 0.1-0.4 m
-between neighbours, so open3d's fitness and RMSE at the correspondence distance say little). They
-are measured on the structure (points whose target normal is more than STRUCTURE_TILT_DEG from
-vertical: walls, containers) that overlaps the target (a neighbour within
-``max_correspondence_m``): fitness = share of it with a neighbour within ``fitness_distance_m``,
-RMSE = point-to-plane RMSE of those (the target's normals).
+The registration is one point-to-plane Gauss-Newton over all windows at once (Cauchy weights;
+correspondences only within a window; target normals from a >= 2 m radius: 1 m normals diverge
+on sparse 32-beam rings), coarse then fine. The ground (target normal within STRUCTURE_TILT_DEG
+of vertical) moves only z, roll and pitch, and the structure only x, y and yaw. Why: the ground
+fills most of every cloud, and a few millimetres of disagreement between two sensors' grounds
+(ring sampling, range noise) pushed the horizontal directions, which the ground does not
+constrain, along the few walls a sensor saw. Measured before (2026-11-26, open3d GICP of the
+accumulated static scene): sensors that saw the ground and one wall or pole slid 20-72 cm.
+
+Quality figures: the ground matches whatever the error in x, y and yaw, and two sensors' 32-beam
+rings never sample the same spots (a correct result leaves 0.1-0.4 m between neighbours, so the
+distance to the nearest neighbour says little). They are measured on the structure (points whose
+target normal is more than STRUCTURE_TILT_DEG from vertical) that overlaps the target (a
+neighbour within ``max_correspondence_m``): fitness = share of it within ``fitness_distance_m`` of
+the target's surface (point to plane), RMSE = point-to-plane RMSE of those. Measured on three
+recordings (the others at their true extrinsics): 0.33-0.91 at the truth, 0.07-0.23 at 25 cm off.
 """
 
 from __future__ import annotations
@@ -27,9 +36,14 @@ from i2v_loc.geometry import extrinsics_matrix, matrix_to_pose
 from i2v_loc.params import CalibrationParams, Extrinsics, SensorConfig
 from i2v_loc.stages.primitives import voxel_centroids, voxel_keys
 
-STATIC_FRACTION = 0.6  # a voxel occupied in at least this share of the frames is static scene
-STATIC_VOXEL_M = 0.3
+STILL_VOXEL_M = 0.2  # a voxel occupied in every sweep of a window stood still in it
 STRUCTURE_TILT_DEG = 60.0
+GROUND_DOF = [0, 1, 5]  # roll, pitch, z of the step (rotation vector, translation)
+STRUCTURE_DOF = [2, 3, 4]  # yaw, x, y
+CONVERGED = 1e-7  # largest change of the 4x4 step that ends a stage
+LEVER_M = 10.0  # a rotation's information is compared with a translation's as the motion at this distance
+WEAK_DIRECTION = 3e-3  # measured: a single wall gives its length 0.3-1.7e-3, a standing vehicle 8-30e-3
+PLANE_FLATNESS = 1e-3  # GICP's: a surface's covariance along its normal, relative to along it
 
 
 @dataclass
@@ -41,112 +55,199 @@ class SensorCalibration:
     target: str  # what it was registered against ("reference" or "l1+l4", ...)
 
 
-def static_points(sweeps: list[np.ndarray]) -> np.ndarray:
-    """Points of the voxels occupied in at least STATIC_FRACTION of the sweeps (sensor frame)."""
-    sweeps = [s[np.isfinite(s).all(axis=1)] for s in sweeps if len(s)]
-    if not sweeps:
+@dataclass
+class WindowCloud:
+    """One window's points in the yard frame, each with the local surface covariance of the sensor
+    that saw it (GICP's: the surface's spread, flattened to PLANE_FLATNESS along its normal)."""
+
+    points: np.ndarray
+    covariances: np.ndarray  # (n, 3, 3)
+    normals: np.ndarray
+
+    def __post_init__(self):
+        from scipy.spatial import cKDTree
+
+        self.tree = cKDTree(self.points if len(self.points) else np.zeros((1, 3)))
+
+    def moved(self, transform: np.ndarray) -> WindowCloud:
+        rotation = transform[:3, :3]
+        return WindowCloud(
+            transformed(self.points, transform), rotation @ self.covariances @ rotation.T, self.normals @ rotation.T
+        )
+
+    def joined(self, other: WindowCloud) -> WindowCloud:
+        return WindowCloud(
+            np.vstack([self.points, other.points]),
+            np.concatenate([self.covariances, other.covariances]),
+            np.vstack([self.normals, other.normals]),
+        )
+
+    def match(self, points: np.ndarray, max_distance_m: float):
+        """(source rows, target rows, distances) of the points with a point of this cloud within reach."""
+        distance, nearest = self.tree.query(points, distance_upper_bound=max_distance_m)
+        rows = np.flatnonzero(np.isfinite(distance))
+        return rows, nearest[rows], distance[rows]
+
+
+def still_points(sweeps: list[np.ndarray]) -> np.ndarray:
+    """The middle sweep's points in voxels occupied in every sweep of the window (sensor frame)."""
+    sweeps = [s[np.isfinite(s).all(axis=1)].astype(np.float64) for s in sweeps]
+    if not sweeps or any(len(s) == 0 for s in sweeps):
         return np.zeros((0, 3))
-    if len(sweeps) == 1:
-        return sweeps[0].astype(np.float64)
-    cloud = np.vstack(sweeps).astype(np.float64)
-    frame_of = np.repeat(np.arange(len(sweeps)), [len(s) for s in sweeps])
-    keys = voxel_keys(cloud, STATIC_VOXEL_M)
-    pairs = np.unique(np.column_stack([keys, frame_of]), axis=0)  # (voxel, frame) occupied
-    voxels, frames_seen = np.unique(pairs[:, 0], return_counts=True)
-    static = voxels[frames_seen >= STATIC_FRACTION * len(sweeps)]
-    return cloud[np.isin(keys, static)]
+    keys = voxel_keys(np.vstack(sweeps), STILL_VOXEL_M)
+    bounds = np.cumsum([0] + [len(s) for s in sweeps])
+    per_sweep = [keys[a:b] for a, b in zip(bounds[:-1], bounds[1:])]
+    middle = len(sweeps) // 2
+    keep = np.ones(len(sweeps[middle]), dtype=bool)
+    for other in per_sweep:
+        keep &= np.isin(per_sweep[middle], other)
+    return sweeps[middle][keep]
 
 
 class Calibrator:
     def __init__(self, params: CalibrationParams):
         self.params = params
 
-    def calibrate(self, sensors: list[SensorConfig], sweeps: dict[str, list[np.ndarray]]) -> list[SensorCalibration]:
-        import open3d as o3d
-
-        o3d.utility.set_verbosity_level(o3d.utility.VerbosityLevel.Error)
+    def calibrate(
+        self, sensors: list[SensorConfig], windows: list[dict[str, list[np.ndarray]]]
+    ) -> list[SensorCalibration]:
+        """Per sensor, its calibrated extrinsics; ``windows`` holds per window each sensor's sweeps."""
         names = [s.name for s in sensors]
         ref = self.params.reference_sensor or names[0]
         if ref not in names:
             raise ValueError(f"reference sensor {ref!r} is not among the sensors {', '.join(names)}")
         guess = {s.name: extrinsics_matrix(s.extrinsics) for s in sensors}
-        clouds = {name: self._yard_cloud(static_points(sweeps.get(name, [])), guess[name]) for name in names}
-        done = {ref: guess[ref]}
+        clouds = {
+            name: [self._cloud(self._still_points(w.get(name, []), guess[name])) for w in windows] for name in names
+        }
         results = [SensorCalibration(ref, sensors[names.index(ref)].extrinsics, 1.0, 0.0, "reference")]
-        target = clouds[ref]
+        targets, done = clouds[ref], [ref]
         while len(done) < len(names):
-            todo = [n for n in names if n not in done]
-            overlaps = {n: self._overlap(clouds[n], target) for n in todo}
-            name = max(todo, key=overlaps.get)
-            correction, fitness, rmse = self._register(clouds[name], target)
-            done[name] = correction @ guess[name]
-            clouds[name] = clouds[name].transform(correction)
-            target = target + clouds[name]
-            x, y, z, roll, pitch, yaw = matrix_to_pose(done[name])
-            results.append(
-                SensorCalibration(
-                    name,
-                    Extrinsics(x_m=x, y_m=y, z_m=z, roll_deg=roll, pitch_deg=pitch, yaw_deg=yaw),
-                    fitness,
-                    rmse,
-                    "+".join(n for n in done if n != name),
-                )
-            )
+            name = max((n for n in names if n not in done), key=lambda n: self._overlap(clouds[n], targets))
+            correction = self._register(clouds[name], targets, center=guess[name][:3, 3])
+            clouds[name] = [cloud.moved(correction) for cloud in clouds[name]]
+            x, y, z, roll, pitch, yaw = matrix_to_pose(correction @ guess[name])
+            extrinsics = Extrinsics(x_m=x, y_m=y, z_m=z, roll_deg=roll, pitch_deg=pitch, yaw_deg=yaw)
+            quality = self.quality([cloud.points for cloud in clouds[name]], targets)
+            results.append(SensorCalibration(name, extrinsics, *quality, "+".join(done)))
+            targets = [target.joined(cloud) for target, cloud in zip(targets, clouds[name])]
+            done.append(name)
         return results
 
     # ----------------------------------------------------------------- internals
 
-    def _yard_cloud(self, points_sensor: np.ndarray, to_yard: np.ndarray):
+    def _still_points(self, sweeps: list[np.ndarray], to_yard: np.ndarray) -> np.ndarray:
+        points = transformed(still_points(sweeps), to_yard)
+        return voxel_centroids(points, self.params.voxel_size_m, float64=True)[0] if len(points) else points
+
+    def _cloud(self, points: np.ndarray) -> WindowCloud:
         import open3d as o3d
 
-        points = points_sensor @ to_yard[:3, :3].T + to_yard[:3, 3]
-        points, _ = voxel_centroids(points, self.params.voxel_size_m)
+        if len(points) < 3:
+            empty = np.zeros((0, 3))
+            return WindowCloud(empty, np.zeros((0, 3, 3)), empty)
         cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points))
-        cloud.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=self.params.normal_radius_m, max_nn=50))
-        return cloud
+        cloud.estimate_covariances(o3d.geometry.KDTreeSearchParamHybrid(radius=self.params.normal_radius_m, max_nn=50))
+        _, axes = np.linalg.eigh(np.asarray(cloud.covariances))  # ascending: the normal first
+        covariances = np.einsum("nij,j,nkj->nik", axes, [PLANE_FLATNESS, 1.0, 1.0], axes)
+        return WindowCloud(points, covariances, axes[:, :, 0])
 
-    def _overlap(self, source, target) -> int:
+    def _overlap(self, clouds: list[WindowCloud], targets: list[WindowCloud]) -> int:
+        reach = self.params.max_correspondence_m
+        return sum(len(t.match(c.points, reach)[0]) for c, t in zip(clouds, targets) if len(c.points) and len(t.points))
 
-        if len(source.points) == 0 or len(target.points) == 0:
-            return 0
-        distances = np.asarray(source.compute_point_cloud_distance(target))
-        return int((distances < self.params.max_correspondence_m).sum()) if len(distances) else 0
-
-    def _register(self, source, target) -> tuple[np.ndarray, float, float]:
-        import open3d as o3d
-
-        reg = o3d.pipelines.registration
-        if len(source.points) < 3 or len(target.points) < 3:
-            return np.eye(4), 0.0, float("inf")
-        if self.params.method == "gicp":
-            estimation = reg.TransformationEstimationForGeneralizedICP()
-            run = reg.registration_generalized_icp
-        else:
-            estimation = reg.TransformationEstimationPointToPlane()
-            run = reg.registration_icp
+    def _register(self, sources: list[WindowCloud], targets: list[WindowCloud], center: np.ndarray) -> np.ndarray:
+        """The correction (4x4, yard frame) that moves the sensor's windows onto the targets."""
         transform = np.eye(4)
-        criteria = reg.ICPConvergenceCriteria(max_iteration=self.params.max_iterations)
-        for max_corr in (self.params.max_correspondence_m, self.params.max_correspondence_m / 4):
-            result = run(source, target, max_corr, transform, estimation, criteria)
-            transform = result.transformation
-        return np.asarray(transform), *self.quality(source, target, np.asarray(transform))
+        for reach in (self.params.max_correspondence_m, self.params.max_correspondence_m / 4):
+            for _ in range(self.params.max_iterations):
+                step = rigid_step(self._gauss_newton_step(sources, targets, transform, center, reach), center)
+                transform = step @ transform
+                if np.abs(step - np.eye(4)).max() < CONVERGED:
+                    break
+        return transform
 
-    def quality(self, source, target, transform: np.ndarray) -> tuple[float, float]:
-        """(fitness, point-to-plane RMSE in m) of the registered source's structure (module docstring)."""
-        from scipy.spatial import cKDTree
+    def _gauss_newton_step(self, sources, targets, transform, center, reach) -> np.ndarray:
+        """One Cauchy-weighted plane-to-plane step (rotation vector about ``center``, translation);
+        the ground moves only roll, pitch and z, the structure only yaw, x and y."""
+        hessian, gradient = np.zeros((6, 6)), np.zeros(6)
+        rotation = transform[:3, :3]
+        scale = (reach / 3.0) ** 2 / (2.0 * PLANE_FLATNESS)  # a normal offset of reach / 3 weighs half
+        for source, target in zip(sources, targets):
+            if not len(source.points) or not len(target.points):
+                continue
+            moved = transformed(source.points, transform)
+            rows, nearest, _ = target.match(moved, reach)
+            moved, residual = moved[rows], moved[rows] - target.points[nearest]
+            combined = target.covariances[nearest] + rotation @ source.covariances[rows] @ rotation.T
+            information = np.linalg.inv(combined)
+            jacobian = np.zeros((len(rows), 3, 6))
+            jacobian[:, :, :3] = -skew(moved - center)
+            jacobian[:, :, 3:] = np.eye(3)
+            structure = np.abs(target.normals[nearest, 2]) < np.cos(np.radians(STRUCTURE_TILT_DEG))
+            jacobian[:, :, GROUND_DOF] *= ~structure[:, None, None]
+            jacobian[:, :, STRUCTURE_DOF] *= structure[:, None, None]
+            distance2 = np.einsum("ni,nij,nj->n", residual, information, residual)
+            weight = 1.0 / (1.0 + distance2 / scale)
+            weighted = np.einsum("nij,njk,n->nik", information, jacobian, weight)
+            hessian += np.einsum("nji,njk->ik", jacobian, weighted)
+            gradient += np.einsum("nji,nj->i", weighted, residual)
+        return constrained_step(hessian, gradient)
 
-        points = np.asarray(source.points) @ transform[:3, :3].T + transform[:3, 3]
-        target_points, normals = np.asarray(target.points), np.asarray(target.normals)
-        if len(points) == 0 or len(target_points) == 0:
+    def quality(self, points: list[np.ndarray], targets: list[WindowCloud]) -> tuple[float, float]:
+        """(fitness, point-to-plane RMSE in m) of the registered windows' structure (module docstring)."""
+        overlapping, residuals = 0, []
+        for window, target in zip(points, targets):
+            if not len(window) or not len(target.points):
+                continue
+            rows, nearest, _ = target.match(window, self.params.max_correspondence_m)
+            normals = target.normals[nearest]
+            structure = np.abs(normals[:, 2]) < np.cos(np.radians(STRUCTURE_TILT_DEG))
+            overlapping += int(structure.sum())
+            offsets = window[rows[structure]] - target.points[nearest[structure]]
+            residual = np.einsum("ij,ij->i", offsets, normals[structure])
+            residuals.append(residual[np.abs(residual) < self.params.fitness_distance_m])
+        inliers = np.concatenate(residuals) if residuals else np.zeros(0)
+        if not overlapping or not len(inliers):
             return 0.0, float("inf")
-        distance, nearest = cKDTree(target_points).query(points, distance_upper_bound=self.params.max_correspondence_m)
-        overlap = np.isfinite(distance)
-        nearest = np.where(overlap, nearest, 0)
-        overlap &= np.abs(normals[nearest, 2]) < np.cos(np.radians(STRUCTURE_TILT_DEG))
-        if not overlap.any():
-            return 0.0, float("inf")
-        inlier = overlap & (distance < self.params.fitness_distance_m)
-        if not inlier.any():
-            return 0.0, float("inf")
-        residual = np.einsum("ij,ij->i", points[inlier] - target_points[nearest[inlier]], normals[nearest[inlier]])
-        return float(inlier.sum() / overlap.sum()), float(np.sqrt(np.mean(residual**2)))
+        return float(len(inliers) / overlapping), float(np.sqrt(np.mean(inliers**2)))
+
+
+def constrained_step(hessian: np.ndarray, gradient: np.ndarray) -> np.ndarray:
+    """The Gauss-Newton step, per block (ground, structure), along the directions the points
+    constrain: a direction whose information is below WEAK_DIRECTION of the block's strongest
+    (rotations counted as the motion at LEVER_M) keeps the current value. Why: along a single
+    wall only the GICP covariances' in-plane terms and the wall's ends speak; followed, they slid
+    the sensor tens of centimetres."""
+    scale = np.array([LEVER_M] * 3 + [1.0] * 3)
+    hessian, gradient = hessian / np.outer(scale, scale), gradient / scale
+    step = np.zeros(6)
+    for block in (GROUND_DOF, STRUCTURE_DOF):
+        values, vectors = np.linalg.eigh(hessian[np.ix_(block, block)])
+        strong = values > WEAK_DIRECTION * max(values.max(), 1e-12)
+        vectors = vectors[:, strong]
+        step[block] = -vectors @ ((vectors.T @ gradient[block]) / values[strong])
+    return step / scale
+
+
+def skew(vectors: np.ndarray) -> np.ndarray:
+    """(n, 3, 3) cross-product matrices: skew(a) @ b = a x b."""
+    result = np.zeros((len(vectors), 3, 3))
+    result[:, 0, 1], result[:, 0, 2] = -vectors[:, 2], vectors[:, 1]
+    result[:, 1, 0], result[:, 1, 2] = vectors[:, 2], -vectors[:, 0]
+    result[:, 2, 0], result[:, 2, 1] = -vectors[:, 1], vectors[:, 0]
+    return result
+
+
+def transformed(points: np.ndarray, transform: np.ndarray) -> np.ndarray:
+    return points @ transform[:3, :3].T + transform[:3, 3]
+
+
+def rigid_step(delta: np.ndarray, center: np.ndarray) -> np.ndarray:
+    """4x4 of a small motion: rotation vector ``delta[:3]`` about ``center``, then ``delta[3:]``."""
+    from scipy.spatial.transform import Rotation
+
+    step = np.eye(4)
+    step[:3, :3] = Rotation.from_rotvec(delta[:3]).as_matrix()
+    step[:3, 3] = center + delta[3:] - step[:3, :3] @ center
+    return step
