@@ -262,6 +262,12 @@ class CalibrationParams(Section):
         le=1.0,
         description="Results below this fitness are refused (measured: 0.33-0.91 at the true extrinsics, 0.07-0.23 at 25 cm off)",
     )
+    min_constraint_points: float = Field(
+        100.0,
+        ge=0.0,
+        le=1e6,
+        description="Warn when a sensor's weakest horizontal direction is constrained by fewer overlapping structure points (measured: 5-12 on sensors 10-26 cm off, >= 376 within 2 cm)",
+    )
     min_overlap_points: int = Field(
         500, ge=10, le=MAX_POINTS_PER_FRAME, description="Overlap needed to register two sensors directly"
     )

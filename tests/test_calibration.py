@@ -73,11 +73,15 @@ def test_a_standing_vehicle_fixes_the_direction_along_the_only_wall():
     error_cm, error_deg = extrinsics_error(b.extrinsics, TRUE_B)
     assert error_cm < 2.0 and error_deg < 0.1, (error_cm, error_deg)
     assert b.fitness >= CalibrationParams().min_fitness and b.target == "a"
+    assert b.constraint_points > CalibrationParams().min_constraint_points
 
 
 def test_without_the_vehicle_the_ground_does_not_move_the_sensor_along_the_wall():
-    """Nothing constrains x: the guess's 0.4 m stays (no drift); y, yaw, z, roll, pitch are fixed."""
-    b = _calibrate(with_vehicle=False)["b"].extrinsics
+    """Nothing constrains x: the guess's 0.4 m stays (no drift), and the result says it is weak;
+    y, yaw, z, roll and pitch are fixed."""
+    result = _calibrate(with_vehicle=False)["b"]
+    assert result.constraint_points < CalibrationParams().min_constraint_points
+    b = result.extrinsics
     assert b.x_m - TRUE_B.x_m == pytest.approx(0.4, abs=0.03)
     assert abs(b.y_m - TRUE_B.y_m) < 0.02 and abs(b.z_m - TRUE_B.z_m) < 0.02
     assert abs(b.yaw_deg - TRUE_B.yaw_deg) < 0.1

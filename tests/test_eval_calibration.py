@@ -30,6 +30,7 @@ def fake_calibration(monkeypatch):
     """The ICP replaced by a counter returning the truth with l2 off by (3, -4) cm and 1.5 deg."""
     calls = []
     fitness = {"l3": 0.9}
+    constraint = {}  # weakest horizontal direction in points, per sensor (none: unconstrained figure)
 
     def fake(recording, params):
         calls.append(params.calibration.windows)
@@ -37,10 +38,12 @@ def fake_calibration(monkeypatch):
         for sensor in params.sensors:
             true = TRUTH.sensor(sensor.name).extrinsics
             ext = _perturbed(true, 0.03, -0.04, 1.5) if sensor.name == "l2" else true
-            results.append(SensorCalibration(sensor.name, ext, fitness.get(sensor.name, 0.9), 0.05, "reference"))
+            quality = (fitness.get(sensor.name, 0.9), 0.05, "reference", constraint.get(sensor.name, 1000.0))
+            results.append(SensorCalibration(sensor.name, ext, *quality))
         return results, any(r.fitness < params.calibration.min_fitness for r in results)
 
     monkeypatch.setattr(cal, "run_calibration", fake)
+    fake.constraint = constraint
     return calls, fitness
 
 
@@ -102,16 +105,21 @@ def test_a_refused_calibration_evaluates_with_the_guess_and_says_so(fake_calibra
     rows = {r["sensor"]: r for r in result["per_sensor"]}
     assert rows["l2"]["error_cm"] == pytest.approx(rows["l2"]["guess_error_cm"])  # the guess is what is used
     assert rows["l2"]["calibrated_error_cm"] == pytest.approx(5.0)
-    summary = {
-        "recordings": ["volvo_fh_u_turn"],
-        "methods": ["default"],
-        "subsets": ["all"],
-        "primary_subset": "all",
-        "results": {"default": {"all": _empty_groups()}},
-        "calibration": {str(SAMPLE): result},
-    }
-    text = render_markdown(summary, [])
+    text = _report(result)
     assert "WARNING — volvo_fh_u_turn: CALIBRATION REFUSED" in text and "**REFUSED**" in text
+
+
+def test_a_weakly_constrained_sensor_is_calibrated_with_a_warning(fake_calibration, tmp_path):
+    constraint = cal.run_calibration.constraint
+    constraint["l2"] = 7.0
+    result = cal.calibrate_recording(str(SAMPLE), {}, tmp_path)
+    assert result["status"] == cal.CALIBRATED and "l2 (7)" in result["warning"] and "l3" not in result["warning"]
+    assert {r["sensor"]: r["constraint_points"] for r in result["per_sensor"]}["l2"] == 7.0
+    assert cal.calibrate_recording(str(SAMPLE), {}, tmp_path)["warning"] == result["warning"]  # cached with it
+    text = _report(result)
+    assert "WARNING — volvo_fh_u_turn: weakly constrained calibration for l2 (7)" in text
+    constraint["l2"] = 1000.0
+    assert cal.calibrate_recording(str(SAMPLE), {"calibration": {"windows": 4}}, tmp_path)["warning"] is None
 
 
 def test_true_extrinsics_skip_the_calibration(fake_calibration, tmp_path):
@@ -127,6 +135,19 @@ def test_the_real_calibration_of_the_sample_is_within_centimetres(tmp_path):
     for row in result["per_sensor"]:  # measured: 0.4-0.7 cm, <= 0.02 deg; the guess is 52 cm / 3.5 deg off
         assert row["error_cm"] < 2.0 and row["error_deg"] < 0.1, row
     assert max(r["guess_error_cm"] for r in result["per_sensor"]) > 50.0
+
+
+def _report(calibration: dict) -> str:
+    """The report of an evaluation with no frames and this calibration of the sample."""
+    summary = {
+        "recordings": ["volvo_fh_u_turn"],
+        "methods": ["default"],
+        "subsets": ["all"],
+        "primary_subset": "all",
+        "results": {"default": {"all": _empty_groups()}},
+        "calibration": {str(SAMPLE): calibration},
+    }
+    return render_markdown(summary, [])
 
 
 def _empty_groups() -> dict:

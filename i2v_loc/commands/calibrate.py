@@ -22,7 +22,11 @@ def register(sub) -> None:
 
 
 def run(args) -> int:
-    from i2v_loc.evaluation.calibration import run_calibration, sensor_errors
+    import sys
+
+    import numpy as np
+
+    from i2v_loc.evaluation.calibration import run_calibration, sensor_errors, weak_warning
     from i2v_loc.formats import open_recording
     from i2v_loc.params import dump_yaml, load_params
     from i2v_loc.recording import RecordingError
@@ -43,9 +47,13 @@ def run(args) -> int:
     by_name = {r.name: r.extrinsics for r in results}
     sensors = [s.model_copy(update={"extrinsics": by_name[s.name]}) for s in params.sensors]
     errors = {row["sensor"]: row for row in sensor_errors(sensors, truth)}
-    print(f"{'sensor':8} {'fitness':>8} {'rmse_m':>8}  against" + ("   error_cm  error_deg" if truth else ""))
+    print(
+        f"{'sensor':8} {'fitness':>8} {'rmse_m':>8} {'weakest':>8}  against"
+        + ("   error_cm  error_deg" if truth else "")
+    )
     for r in results:
-        line = f"{r.name:8} {r.fitness:8.3f} {r.inlier_rmse_m:8.4f}  {r.target:10}"
+        weakest = f"{r.constraint_points:8.0f}" if np.isfinite(r.constraint_points) else f"{'-':>8}"
+        line = f"{r.name:8} {r.fitness:8.3f} {r.inlier_rmse_m:8.4f} {weakest}  {r.target:10}"
         if errors[r.name]["error_cm"] is not None:
             line += f" {errors[r.name]['error_cm']:8.2f} {errors[r.name]['error_deg']:10.3f}"
         print(line)
@@ -56,6 +64,9 @@ def run(args) -> int:
             f"calibration refused: fitness below min_fitness {params.calibration.min_fitness} for {names}; "
             f"{args.out} not written"
         )
+    warning = weak_warning(results, params.calibration.min_constraint_points)
+    if warning:
+        print(f"WARNING: {warning}", file=sys.stderr)
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(dump_yaml(params.model_copy(update={"sensors": sensors}), ["sensors"]))

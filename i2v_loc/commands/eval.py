@@ -80,6 +80,8 @@ def calibrate(recordings: list[Path], patch: dict, args) -> dict[str, dict]:
     for c in calibrations.values():
         if c["status"] in LOUD:
             print(f"WARNING {c['recording']}: {c['message']}", file=sys.stderr)
+        if c.get("warning"):
+            print(f"WARNING {c['recording']}: {c['warning']}", file=sys.stderr)
     return calibrations
 
 

@@ -96,6 +96,20 @@ def cache_key(recording, calibration_params) -> str:
     return hashlib.sha256(json.dumps(content, sort_keys=True).encode()).hexdigest()
 
 
+def weak_warning(results, min_points: float) -> str | None:
+    """The warning for sensors whose weakest horizontal direction has fewer than ``min_points``
+    points of information (``SensorCalibration.constraint_points``), or None."""
+    weak = [r for r in results if r.constraint_points < min_points]
+    if not weak:
+        return None
+    names = ", ".join(f"{r.name} ({r.constraint_points:.0f})" for r in weak)
+    return (
+        f"weakly constrained calibration for {names} (fewer than {min_points:.0f} points of overlapping "
+        "structure in one horizontal direction): the error along it can reach tens of centimetres; "
+        "a vehicle standing where these sensors and their neighbours see it would constrain it"
+    )
+
+
 def run_calibration(recording, params) -> tuple[list, bool]:
     """(SensorCalibration per sensor, refused) of the project's calibration on ``recording``
     from ``params.sensors`` (the guess). ``ValueError`` when it cannot run at all."""
@@ -151,6 +165,7 @@ def calibrate_recording(recording_path: str, patch: dict, cache_dir: str | Path 
             fitness=r.fitness,
             inlier_rmse_m=r.inlier_rmse_m,
             target=r.target,
+            constraint_points=r.constraint_points if np.isfinite(r.constraint_points) else None,
             calibrated_error_cm=cal_row["error_cm"],
             calibrated_error_deg=cal_row["error_deg"],
             guess_error_cm=guess_row["error_cm"],
@@ -168,6 +183,7 @@ def calibrate_recording(recording_path: str, patch: dict, cache_dir: str | Path 
         result = _status(
             name, CALIBRATED, "calibrated from sensors_guess.yaml", [s.model_dump(mode="json") for s in used], rows
         )
+    result["warning"] = weak_warning(results, guess.calibration.min_constraint_points)
     cache.mkdir(parents=True, exist_ok=True)
     tmp = file.with_suffix(f".{os.getpid()}.tmp")
     tmp.write_text(json.dumps(result, indent=1))

@@ -234,6 +234,8 @@ def _extrinsics_banner(calibration: dict) -> list[str]:
     for c in entries:
         if c["status"] in LOUD:
             lines += [f"> **WARNING — {c['recording']}: {c['message']}**", ""]
+        if c.get("warning"):
+            lines += [f"> **WARNING — {c['recording']}: {c['warning']}**", ""]
     return lines
 
 
@@ -287,20 +289,22 @@ def _calibration_table(calibration: dict) -> list[str]:
         "",
         "Used = the extrinsics the evaluation ran with (the calibrated ones, or the guess when refused).",
         "",
-        "| Recording | Status | Sensor | Fitness | Used: error [cm] / [deg] | Calibrated [cm] / [deg] "
+        "Weakest = information of the sensor's weakest horizontal direction, in overlapping structure points.",
+        "",
+        "| Recording | Status | Sensor | Fitness | Weakest | Used: error [cm] / [deg] | Calibrated [cm] / [deg] "
         "| Guess [cm] / [deg] | Clock offset error [ms] |",
-        "|---|---|---|---|---|---|---|---|",
+        "|---|---|---|---|---|---|---|---|---|",
     ]
     for c in entries:
         status = c["status"] + (" (cached)" if c.get("cached") else "")
         if c["status"] in LOUD:
             status = f"**{c['status'].upper()}**"
         if not c["per_sensor"]:
-            lines.append(f"| {c['recording']} | {status} | – | – | – | – | – | – |")
+            lines.append(f"| {c['recording']} | {status} | – | – | – | – | – | – | – |")
         for row in c["per_sensor"]:
             lines.append(
                 f"| {c['recording']} | {status} | {row['sensor']} | {_f(row.get('fitness'), 3)} "
-                f"| {_pair(row.get('error_cm'), row.get('error_deg'))} "
+                f"| {_f(row.get('constraint_points'), 0)} | {_pair(row.get('error_cm'), row.get('error_deg'))} "
                 f"| {_pair(row.get('calibrated_error_cm'), row.get('calibrated_error_deg'))} "
                 f"| {_pair(row.get('guess_error_cm'), row.get('guess_error_deg'))} | {_f(row.get('clock_error_ms'), 2)} |"
             )
