@@ -4,13 +4,14 @@ from __future__ import annotations
 
 import itertools
 import json
+import os
 
 import numpy as np
 import pytest
 from conftest import SAMPLES
 
 from i2v_loc.cli import main
-from i2v_loc.commands.bench import _scaled_scan, _scaled_sensors, open3d_recipe, summarize
+from i2v_loc.commands.bench import _scaled_scan, _scaled_sensors, busy_host_warning, open3d_recipe, summarize
 from i2v_loc.params import load_params
 from i2v_loc.pipelines import build_pipeline
 from i2v_loc.recording import Recording
@@ -48,6 +49,16 @@ def test_bench_reports_the_stages_of_the_pipeline_in_its_order(method, tmp_path,
         "process_start_to_first_frame_s",
     }
     assert "total" in capsys.readouterr().out
+    assert report["host"]["cores"] == os.cpu_count() and report["host"]["load_1min_end"] == pytest.approx(
+        os.getloadavg()[0], abs=2.0
+    )
+
+
+def test_a_busy_host_is_named_in_the_report():
+    assert busy_host_warning({"cores": 2, "load_1min_end": 1.4}, 1) is None
+    assert busy_host_warning({"cores": 2, "load_1min_end": None}, 1) is None
+    warning = busy_host_warning({"cores": 2, "load_1min_end": 3.2}, 1)
+    assert "busy" in warning and "3.2 on 2 cores" in warning
 
 
 def test_bench_refuses_a_folder_that_is_not_a_recording(tmp_path, capsys):

@@ -166,6 +166,7 @@ def bench_recording(recording, params, method: str, args, source: str) -> dict:
     frames = list(recording.frames())
     if len(frames) <= (args.warmup or MIN_WARMUP_FRAMES):
         raise UserError(f"{rec_path} has {len(frames)} frames; need more than the warm-up")
+    load_at_start = host_load()
     timed, warm, merged_points = time_pipeline(params, method, frames, args.warmup, args.repeat)
     if not timed:
         raise UserError(f"{rec_path}: every frame was warm-up (the background map never became ready); give --warmup")
@@ -195,9 +196,31 @@ def bench_recording(recording, params, method: str, args, source: str) -> dict:
             report["open3d_frames"] = len(o3d_ms)
             report["open3d_ms_p50"] = float(np.percentile(o3d_ms, 50))
             report["speedup_vs_open3d"] = report["open3d_ms_p50"] / figures["total"]["p50"]
+    report["host"] = {"cores": os.cpu_count(), "load_1min_start": load_at_start, "load_1min_end": host_load()}
     if args.scaling != "none":
         report["scaling"] = bench_scaling(params, method, frames, SCALING[args.scaling])
     return report
+
+
+def host_load() -> float | None:
+    """The host's 1-minute load average (None where the system does not give it)."""
+    try:
+        return float(os.getloadavg()[0])
+    except (AttributeError, OSError):
+        return None
+
+
+def busy_host_warning(host: dict, threads: int) -> str | None:
+    """A warning when the timed runs did not have their threads' cores to themselves: the 1-minute
+    load at the end (the bench's own threads included) above the cores (the issue's figures are
+    one free core's)."""
+    load, cores = host.get("load_1min_end"), host.get("cores")
+    if load is None or not cores or load <= cores:
+        return None
+    return (
+        f"the host was busy (1-minute load {load:.1f} on {cores} cores, {threads} of them for the bench): "
+        "these times are not those of a free core"
+    )
 
 
 def time_pipeline(params, method: str, frames: list, warmup: int | None, repeat: int):
@@ -522,6 +545,16 @@ def print_report(report: dict, out) -> None:
             f"speed-up {report['speedup_vs_open3d']:.1f}x",
             file=out,
         )
+    host = report.get("host", {})
+    if host.get("load_1min_end") is not None:
+        print(
+            f"host: {host['cores']} cores, 1-minute load {host['load_1min_start']:.2f} at the start, "
+            f"{host['load_1min_end']:.2f} after the timed runs",
+            file=out,
+        )
+    warning = busy_host_warning(host, report["threads"])
+    if warning:
+        print(f"WARNING: {warning}", file=out)
     print(
         f"memory: peak RSS {report['peak_rss_mib']:.0f} MiB (recording in memory), "
         f"pipeline peak {report['pipeline_peak_traced_mib']:.1f} MiB traced",
