@@ -142,8 +142,12 @@ def test_calibrate_recovers_the_true_extrinsics(recording, tmp_path, capsys):
         assert np.degrees(rotation_angle_rad(est[:3, :3], truth[s.name][:3, :3])) <= 0.2
     # the guess really was off (so the test measures the refinement)
     assert max(np.linalg.norm(guess[n][:3, 3] - truth[n][:3, 3]) for n in truth) > 0.2
-    lines = capsys.readouterr().out.splitlines()
+    captured = capsys.readouterr()
+    lines = captured.out.splitlines()
     assert "fitness" in lines[0]
+    # progress on stderr: each sensor as it is registered, against the ones before it
+    registered = [line.split()[0] for line in captured.err.splitlines() if "registered against" in line]
+    assert sorted(registered) == sorted(n for n in truth if n != "l1") and "l2 registered against l1" in captured.err
     figures = {line.split()[0]: (float(line.split()[1]), float(line.split()[2])) for line in lines[1:5]}
     # fine figures: every sensor well above min_fitness 0.3 (measured 0.52-0.86), plane RMSE a few cm
     assert all(fitness > 0.45 and rmse < 0.06 for fitness, rmse in figures.values())

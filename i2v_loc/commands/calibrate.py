@@ -39,8 +39,13 @@ def run(args) -> int:
     guess_file = Path(args.guess) if args.guess else recording.sensors_guess_file
     params = load_params(guess_file, *args.params)
     _set_threads(args.threads)
+    print(f"calibrating {len(params.sensors)} sensors from {guess_file} ...", file=sys.stderr)
+
+    def progress(result) -> None:
+        print(f"  {result.name} registered against {result.target}", file=sys.stderr)
+
     try:
-        results, _ = run_calibration(recording, params)
+        results, _ = run_calibration(recording, params, progress)
     except ValueError as err:
         raise UserError(str(err)) from err
     truth = load_params(recording.sensors_file).sensors if recording.sensors_file.is_file() else []

@@ -110,14 +110,15 @@ def weak_warning(results, min_points: float) -> str | None:
     )
 
 
-def run_calibration(recording, params) -> tuple[list, bool]:
+def run_calibration(recording, params, progress=None) -> tuple[list, bool]:
     """(SensorCalibration per sensor, refused) of the project's calibration on ``recording``
-    from ``params.sensors`` (the guess). ``ValueError`` when it cannot run at all."""
+    from ``params.sensors`` (the guess). ``ValueError`` when it cannot run at all. ``progress``:
+    called with each ``SensorCalibration`` as it is done."""
     from i2v_loc.stages.calibration import Calibrator
 
     section = params.calibration
     windows = recording_windows(recording, params.sensors, section.windows, section.window_gap_frames)
-    results = Calibrator(section).calibrate(params.sensors, windows)
+    results = Calibrator(section).calibrate(params.sensors, windows, progress)
     refused = any(r.fitness < params.calibration.min_fitness for r in results)
     return results, refused
 

@@ -114,9 +114,10 @@ class Calibrator:
         self.params = params
 
     def calibrate(
-        self, sensors: list[SensorConfig], windows: list[dict[str, list[np.ndarray]]]
+        self, sensors: list[SensorConfig], windows: list[dict[str, list[np.ndarray]]], progress=None
     ) -> list[SensorCalibration]:
-        """Per sensor, its calibrated extrinsics; ``windows`` holds per window each sensor's sweeps."""
+        """Per sensor, its calibrated extrinsics; ``windows`` holds per window each sensor's sweeps.
+        ``progress``: called with each sensor's ``SensorCalibration`` as it is done."""
         names = [s.name for s in sensors]
         ref = self.params.reference_sensor or names[0]
         if ref not in names:
@@ -135,6 +136,8 @@ class Calibrator:
             extrinsics = Extrinsics(x_m=x, y_m=y, z_m=z, roll_deg=roll, pitch_deg=pitch, yaw_deg=yaw)
             quality = self.quality([cloud.points for cloud in clouds[name]], targets)
             results.append(SensorCalibration(name, extrinsics, *quality, "+".join(done), constraint))
+            if progress is not None:
+                progress(results[-1])
             targets = [target.joined(cloud) for target, cloud in zip(targets, clouds[name])]
             done.append(name)
         return results
