@@ -26,7 +26,7 @@ the target's surface (point to plane), RMSE = point-to-plane RMSE of those. Meas
 recordings (the others at their true extrinsics): 0.33-0.91 at the truth, 0.07-0.23 at 25 cm off.
 Fitness cannot see a sensor whose overlap leaves a direction unconstrained (it fits well whatever
 its position along it), so each result also gives the information of its weakest horizontal
-direction in points (``constraint_points``): measured 5-12 on three sensors that ended 10-26 cm
+direction in points (``constraint_points``): measured 5-31 on four sensors that ended 10-42 cm
 off, 376 and more on all that ended within 2 cm; below ``min_constraint_points`` it is a warning.
 """
 
