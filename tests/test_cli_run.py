@@ -154,9 +154,9 @@ def test_calibrate_recovers_the_true_extrinsics(recording, tmp_path, capsys):
 
 
 def test_a_guess_off_by_3_m_and_20_deg_is_found_or_refused(recording, tmp_path, capsys):
-    """l4's guess moved 3 m and turned 20 deg: the calibration either finds l4 (measured: 7.7 cm,
-    0.56 deg, fitness 0.86) or refuses it (exit code 2, nothing written), never accepts l4 far off.
-    (l3, then registered before l4 against l1 and l2 alone, ends 18 cm off: docs/pipeline.md.)"""
+    """l4's guess moved 3 m and turned 20 deg: the calibration either finds l4 (measured: 0.7 cm,
+    0.08 deg, fitness 0.86; l3, then registered before l4 against l1 and l2 alone, 1.9 cm with a
+    weak-direction warning) or refuses it (exit code 2, nothing written), never accepts l4 far off."""
     guess = yaml.safe_load((Path(recording) / "sensors_guess.yaml").read_text())
     l4 = next(s for s in guess["sensors"] if s["name"] == "l4")["extrinsics"]
     l4["x_m"] += 3.0
