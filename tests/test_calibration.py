@@ -7,9 +7,9 @@ from __future__ import annotations
 import numpy as np
 
 from i2v_loc.evaluation.calibration import extrinsics_error
-from i2v_loc.geometry import extrinsics_matrix
+from i2v_loc.geometry import extrinsics_matrix, transform_points
 from i2v_loc.params import CalibrationParams, Extrinsics, SensorConfig
-from i2v_loc.stages.calibration import Calibrator, rigid_step, still_points, transformed
+from i2v_loc.stages.calibration import Calibrator, rigid_step, still_points
 
 REFERENCE = SensorConfig(name="a", extrinsics=Extrinsics(x_m=-10.0, y_m=0.0, z_m=5.0, yaw_deg=0.0))
 TRUE_B = Extrinsics(x_m=10.0, y_m=0.0, z_m=5.0, roll_deg=0.5, pitch_deg=-0.3, yaw_deg=90.0)
@@ -56,7 +56,9 @@ def _windows(with_vehicle: bool, seed: int = 0):
         window = {}
         for name, (scene, vehicle) in spots.items():
             points = np.vstack([scene, vehicle]) if with_vehicle and index in VEHICLE_WINDOWS else scene
-            window[name] = [transformed(points, to_sensor[name]) + rng.normal(0, 0.002, points.shape) for _ in range(3)]
+            window[name] = [
+                transform_points(to_sensor[name], points) + rng.normal(0, 0.002, points.shape) for _ in range(3)
+            ]
         windows.append(window)
     return windows
 
@@ -95,7 +97,7 @@ def test_fitness_refuses_a_sensor_25_cm_off():
     targets = [calibrator._cloud(p) for p in points["a"]]
     at_truth, rmse = calibrator.quality(points["b"], targets)
     off = rigid_step(np.array([0, 0, 0, 0.18, 0.18, 0]), truth["b"][:3, 3])
-    at_25_cm, _ = calibrator.quality([transformed(p, off) for p in points["b"]], targets)
+    at_25_cm, _ = calibrator.quality([transform_points(off, p) for p in points["b"]], targets)
     assert at_truth > 0.9 and rmse < 0.01
     assert at_25_cm < params.min_fitness
 

@@ -8,9 +8,9 @@ sensors like one more wall, where they see it at the same time. Sensors are regi
 time against the union of the already calibrated ones, the best-overlapping first, so a sensor
 that does not see the reference enough is chained through its neighbours.
 
-The registration is one point-to-plane Gauss-Newton over all windows at once (Cauchy weights;
-correspondences only within a window; target normals from a >= 2 m radius: 1 m normals diverge
-on sparse 32-beam rings), coarse then fine. The ground (target normal within STRUCTURE_TILT_DEG
+The registration is one plane-to-plane (GICP) Gauss-Newton over all windows at once (Cauchy
+weights; correspondences only within a window; each point's surface covariance from a >= 2 m
+radius: 1 m normals diverge on sparse 32-beam rings), coarse then fine. The ground (target normal within STRUCTURE_TILT_DEG
 of vertical) moves only z, roll and pitch, and the structure only x, y and yaw. Why: the ground
 fills most of every cloud, and a few millimetres of disagreement between two sensors' grounds
 (ring sampling, range noise) pushed the horizontal directions, which the ground does not
@@ -33,11 +33,12 @@ that ended within 2 cm; below ``min_constraint_points`` it is a warning.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
 
-from i2v_loc.geometry import extrinsics_matrix, matrix_to_pose
+from i2v_loc.geometry import extrinsics_matrix, matrix_to_pose, transform_points
 from i2v_loc.params import CalibrationParams, Extrinsics, SensorConfig
 from i2v_loc.stages.primitives import voxel_centroids, voxel_keys
 
@@ -47,6 +48,7 @@ GROUND_DOF = [0, 1, 5]  # roll, pitch, z of the step (rotation vector, translati
 STRUCTURE_DOF = [2, 3, 4]  # yaw, x, y
 CONVERGED = 1e-7  # largest change of the 4x4 step that ends a stage
 LEVER_M = 10.0  # a rotation's information is compared with a translation's as the motion at this distance
+LEVER_SCALE = np.array([LEVER_M] * 3 + [1.0] * 3)  # of a step (rotation vector, translation)
 SINGULAR = 1e-12  # a direction with no information at all (no structure in view) keeps its value
 PLANE_FLATNESS = 1e-3  # GICP's: a surface's covariance along its normal, relative to along it
 
@@ -70,15 +72,19 @@ class WindowCloud:
     covariances: np.ndarray  # (n, 3, 3)
     normals: np.ndarray
 
-    def __post_init__(self):
+    @functools.cached_property
+    def tree(self):
+        """The search tree, built when first matched against (a sensor's own clouds never are)."""
         from scipy.spatial import cKDTree
 
-        self.tree = cKDTree(self.points if len(self.points) else np.zeros((1, 3)))
+        return cKDTree(self.points if len(self.points) else np.zeros((1, 3)))
 
     def moved(self, transform: np.ndarray) -> WindowCloud:
         rotation = transform[:3, :3]
         return WindowCloud(
-            transformed(self.points, transform), rotation @ self.covariances @ rotation.T, self.normals @ rotation.T
+            transform_points(transform, self.points),
+            rotation @ self.covariances @ rotation.T,
+            self.normals @ rotation.T,
         )
 
     def joined(self, other: WindowCloud) -> WindowCloud:
@@ -89,10 +95,15 @@ class WindowCloud:
         )
 
     def match(self, points: np.ndarray, max_distance_m: float):
-        """(source rows, target rows, distances) of the points with a point of this cloud within reach."""
+        """(source rows, target rows) of the points with a point of this cloud within reach."""
         distance, nearest = self.tree.query(points, distance_upper_bound=max_distance_m)
         rows = np.flatnonzero(np.isfinite(distance))
-        return rows, nearest[rows], distance[rows]
+        return rows, nearest[rows]
+
+
+def is_structure(normals: np.ndarray) -> np.ndarray:
+    """Whether each normal is more than STRUCTURE_TILT_DEG from vertical (a wall, a vehicle's side)."""
+    return np.abs(normals[:, 2]) < np.cos(np.radians(STRUCTURE_TILT_DEG))
 
 
 def still_points(sweeps: list[np.ndarray]) -> np.ndarray:
@@ -105,7 +116,7 @@ def still_points(sweeps: list[np.ndarray]) -> np.ndarray:
     per_sweep = [keys[a:b] for a, b in zip(bounds[:-1], bounds[1:])]
     middle = len(sweeps) // 2
     keep = np.ones(len(sweeps[middle]), dtype=bool)
-    for other in per_sweep:
+    for other in per_sweep[:middle] + per_sweep[middle + 1 :]:
         keep &= np.isin(per_sweep[middle], other)
     return sweeps[middle][keep]
 
@@ -146,7 +157,7 @@ class Calibrator:
     # ----------------------------------------------------------------- internals
 
     def _still_points(self, sweeps: list[np.ndarray], to_yard: np.ndarray) -> np.ndarray:
-        points = transformed(still_points(sweeps), to_yard)
+        points = transform_points(to_yard, still_points(sweeps))
         return voxel_centroids(points, self.params.voxel_size_m, float64=True)[0] if len(points) else points
 
     def _cloud(self, points: np.ndarray) -> WindowCloud:
@@ -188,15 +199,15 @@ class Calibrator:
         for source, target in zip(sources, targets):
             if not len(source.points) or not len(target.points):
                 continue
-            moved = transformed(source.points, transform)
-            rows, nearest, _ = target.match(moved, reach)
+            moved = transform_points(transform, source.points)
+            rows, nearest = target.match(moved, reach)
             moved, residual = moved[rows], moved[rows] - target.points[nearest]
             combined = target.covariances[nearest] + rotation @ source.covariances[rows] @ rotation.T
             information = np.linalg.inv(combined)
             jacobian = np.zeros((len(rows), 3, 6))
             jacobian[:, :, :3] = -skew(moved - center)
             jacobian[:, :, 3:] = np.eye(3)
-            structure = np.abs(target.normals[nearest, 2]) < np.cos(np.radians(STRUCTURE_TILT_DEG))
+            structure = is_structure(target.normals[nearest])
             jacobian[:, :, GROUND_DOF] *= ~structure[:, None, None]
             jacobian[:, :, STRUCTURE_DOF] *= structure[:, None, None]
             distance2 = np.einsum("ni,nij,nj->n", residual, information, residual)
@@ -212,9 +223,9 @@ class Calibrator:
         for window, target in zip(points, targets):
             if not len(window) or not len(target.points):
                 continue
-            rows, nearest, _ = target.match(window, self.params.max_correspondence_m)
+            rows, nearest = target.match(window, self.params.max_correspondence_m)
             normals = target.normals[nearest]
-            structure = np.abs(normals[:, 2]) < np.cos(np.radians(STRUCTURE_TILT_DEG))
+            structure = is_structure(normals)
             overlapping += int(structure.sum())
             offsets = window[rows[structure]] - target.points[nearest[structure]]
             residual = np.einsum("ij,ij->i", offsets, normals[structure])
@@ -227,8 +238,7 @@ class Calibrator:
 
 def _scaled(hessian: np.ndarray) -> np.ndarray:
     """The Hessian with rotations counted as the motion at LEVER_M."""
-    scale = np.array([LEVER_M] * 3 + [1.0] * 3)
-    return hessian / np.outer(scale, scale)
+    return hessian / np.outer(LEVER_SCALE, LEVER_SCALE)
 
 
 def weakest_horizontal_points(hessian: np.ndarray) -> float:
@@ -243,15 +253,14 @@ def constrained_step(hessian: np.ndarray, gradient: np.ndarray) -> np.ndarray:
     constrain at all (rotations counted as the motion at LEVER_M). Weakly constrained directions
     are followed: tried keeping their value below 0.3 % of the block's strongest, the sloped
     docking's l2 on three draws ended 26-42 cm off (its guess's error) against 6-26 cm followed."""
-    scale = np.array([LEVER_M] * 3 + [1.0] * 3)
-    hessian, gradient = _scaled(hessian), gradient / scale
+    hessian, gradient = _scaled(hessian), gradient / LEVER_SCALE
     step = np.zeros(6)
     for block in (GROUND_DOF, STRUCTURE_DOF):
         values, vectors = np.linalg.eigh(hessian[np.ix_(block, block)])
         strong = values > SINGULAR * max(values.max(), 1e-300)
         vectors = vectors[:, strong]
         step[block] = -vectors @ ((vectors.T @ gradient[block]) / values[strong])
-    return step / scale
+    return step / LEVER_SCALE
 
 
 def skew(vectors: np.ndarray) -> np.ndarray:
@@ -261,10 +270,6 @@ def skew(vectors: np.ndarray) -> np.ndarray:
     result[:, 1, 0], result[:, 1, 2] = vectors[:, 2], -vectors[:, 0]
     result[:, 2, 0], result[:, 2, 1] = -vectors[:, 1], vectors[:, 0]
     return result
-
-
-def transformed(points: np.ndarray, transform: np.ndarray) -> np.ndarray:
-    return points @ transform[:3, :3].T + transform[:3, 3]
 
 
 def rigid_step(delta: np.ndarray, center: np.ndarray) -> np.ndarray:
