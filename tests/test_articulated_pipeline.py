@@ -7,7 +7,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from hinged_points import cast_rays, unhidden, vehicle_points, world_boxes
+from hinged_points import WorldBox, cast_rays, unhidden, vehicle_points, world_boxes
 
 from i2v_loc.frame import Frame, SensorScan
 from i2v_loc.params import Extrinsics, Params, SensorConfig, apply_patch
@@ -16,11 +16,14 @@ from i2v_loc.pipelines.articulated import ArticulatedPipeline
 from i2v_loc.pipelines.paper import PaperPipeline
 from i2v_loc.sim.kinematics import Articulation, step
 from i2v_loc.stages.hinged_fit import FRONT, REAR, Measurement, Prior, fit
-from i2v_loc.stages.vehicle_model import VehicleModel
+from i2v_loc.stages.vehicle_model import Box, VehicleModel
 from i2v_loc.stages.vehicle_tracker import (
     SEED_RETRY_FRAMES,
+    SETTLED_SLACK_M,
     Seed,
     VehicleTracker,
+    _detached,
+    _Extent,
     _face_span,
     _gap_filled,
     _gap_open,
@@ -153,6 +156,45 @@ def test_unknown_trailer_length_converges():
             assert reports[0].model.name == "unknown"
             hitch_err.append(errors(reports[0], truth)[2])
     assert len(hitch_err) >= 15 and np.sqrt(np.mean(np.square(hitch_err))) < 0.5
+
+
+def _long_trailer(length_m: float) -> VehicleModel:
+    model = volvo()
+    l2 = model.trailer_axle_m * (length_m - model.trailer.front_m) / (model.trailer.length_m - model.trailer.front_m)
+    return replace(model, name="truth", trailer=replace(model.trailer, length_m=length_m), trailer_axle_m=l2)
+
+
+def test_a_trailer_seen_from_one_side_ends_where_rays_pass_behind_it():
+    """Standing, seen from one side, its rear face never shows: the rays that pass just behind the
+    trailer's last points onto the ground say it ends there (10.5 m, the catalogue's nearest is
+    13.68 m). A pole hiding its last 3 m makes a shadow, not an end: no ray crosses the hidden part."""
+    truth = _long_trailer(10.5)
+    sensor = [(2.0, -15.0, 4.5)]
+    x, y = 2.0, 3.0  # the tractor's rear axle: the trailer's rear face looks away from the sensor
+    boxes = world_boxes(truth, x, y, 0.0)
+    rear_xy = truth.kingpin_xy(x, y, 0.0) + [truth.trailer.rear_m, 0.0]
+    # a column between the sensor whose shadow on the trailer's side runs from 3 m ahead of its end to 0.5 m past it
+    side_y, pole_y = y - truth.trailer.width_m / 2, -8.0
+    scale = (pole_y - sensor[0][1]) / (side_y - sensor[0][1])
+    ahead, past = (sensor[0][0] + (rear_xy[0] + d - sensor[0][0]) * scale for d in (3.0, -0.5))
+    pole = WorldBox(
+        np.array([(ahead + past) / 2, pole_y]), 0.0, Box((ahead - past) / 2, ahead - past, 0.5, 0.0, 6.0), 2
+    )
+    for others, ends in (([], True), ([pole], False)):
+        rays = cast_rays(boxes + others, sensor)
+        points = vehicle_points(truth, x, y, 0.0, sensors=sensor, spacing=0.15, others=others)
+        tracker = VehicleTracker(PARAMS.articulated, PARAMS.vehicles)
+        for k in range(3):  # started
+            tracker.process(points, flat, 0.1 * k, rays=rays)
+        (track,) = tracker.tracks
+        # as if its start had taken the catalogue's length (a start seeing less of it does)
+        track.model = track.model.with_boxes(track.model.tractor, replace(track.model.trailer, length_m=13.68))
+        track.trailer_length = _Extent(13.68, PARAMS.articulated.dimension_window)
+        for k in range(3, 13):
+            tracker.process(points, flat, 0.1 * k, rays=rays)
+        length = track.model.trailer.length_m
+        assert (abs(length - 10.5) < 0.3) == ends, length
+        assert ends or length > 10.5 - 3.0 + 0.5  # not the shadow's edge
 
 
 def test_a_tractor_with_another_kingpin_is_learned_in_the_turn():
@@ -633,6 +675,51 @@ def test_an_open_gap_is_two_units_and_a_side_running_through_it_is_not():
     assert not _gap_open(filled, m, model, 0.0)
 
 
+def test_a_trailer_claims_behind_it_only_what_runs_on_from_its_body():
+    """A trailer whose length is not known yet reaches back by its slack; an object 5 m behind
+    its body (uncovered as it drives off) is released and the slack ends at the body; a body
+    running on 2 m past the model's rear in 0.5 m steps is kept."""
+    model = volvo()
+    prior = Prior(0.0, 5.0, 0.0, 0.0, model, 0.0, 10.0)
+    body = vehicle_points(model, 0.0, 5.0, 0.0, sensors=SENSORS, spacing=0.15)
+    rear_x = model.kingpin_xy(0.0, 5.0, 0.0)[0] + model.trailer.rear_m
+    fence = np.column_stack([np.full(30, rear_x - 5.0), np.linspace(4.0, 6.0, 30), np.full(30, 1.5)])
+    points = np.vstack([body, fence])
+    owner = np.zeros(len(points), dtype=np.int64)
+    cut = _detached(points, owner, 0, prior)
+    assert np.all(owner[len(body) :] == -1) and np.all(owner[: len(body)] == 0)
+    assert cut.trailer_slack_m == pytest.approx(SETTLED_SLACK_M, abs=0.05)
+    longer = np.column_stack([rear_x - np.arange(0.5, 2.01, 0.5), np.full(4, 5.0), np.full(4, 2.0)])
+    points = np.vstack([body, longer, fence])
+    owner = np.zeros(len(points), dtype=np.int64)
+    cut = _detached(points, owner, 0, prior)
+    assert np.all(owner[: len(body) + 4] == 0) and np.all(owner[len(body) + 4 :] == -1)
+    assert cut.trailer_slack_m == pytest.approx(2.0 + SETTLED_SLACK_M, abs=0.01)
+
+
+def _seed_that_moved(points: np.ndarray, along_x_m: float) -> Seed:
+    """A seed first seen as ``points`` moved ``along_x_m`` back, now at ``points``."""
+    centre = points[:, :2].mean(axis=0)
+    shift = np.array([along_x_m, 0.0])
+    first = points - [*shift, 0.0]
+    return Seed(centre, centre - shift, first_points=first, points=points)
+
+
+def test_a_seed_moved_when_it_left_a_place_not_when_it_grew():
+    """A vehicle that drove on left the place of its first points; a standing container uncovered
+    by a passing truck grew where it was hidden, its centre travelled as far, and what it showed
+    first is still where it was."""
+    box = vehicle_points(VehicleModel.rigid("rigid", 12.0, 2.5, 2.6), 0.0, 5.0, 0.0, sensors=SENSORS[:1], spacing=0.2)
+    travel = PARAMS.articulated.start_travel_m
+    assert _seed_that_moved(box, travel + 0.2).moved(travel)
+    uncovered = box[box[:, 0] > box[:, 0].min() + 2 * (travel + 0.2)]  # its rear part hidden at first
+    grown = Seed(box[:, :2].mean(axis=0), uncovered[:, :2].mean(axis=0), first_points=uncovered, points=box)
+    assert grown.travel_m >= travel
+    assert not grown.moved(travel)
+    assert not _seed_that_moved(box, travel - 0.2).moved(travel)  # not far enough
+    assert replace(grown, moving=True).moved(travel)
+
+
 def test_two_units_are_judged_on_the_cheapest_supported_fit():
     """A moving seed seen from one side: a fit the wrong way round (its cab on the trailer's end,
     unsupported) shows no gap, though it costs less; the right one shows the open gap between cab
@@ -644,7 +731,7 @@ def test_two_units_are_judged_on_the_cheapest_supported_fit():
     wrong = replace(fit(points, Prior(*back, 0.05 + np.pi, 0.0, model), PARAMS.articulated, iterations=20), cost=0.0)
     assert not _supported(wrong, model, 0.0) and not _gap_open(points, wrong, model, 0.0)
     tracker = VehicleTracker(PARAMS.articulated, PARAMS.vehicles)
-    moving = Seed(np.array([2.0, 5.0]), np.array([0.0, 5.0]))
+    moving = _seed_that_moved(points, 2.0)
     assert tracker._two_units([(model, -1.0, wrong), (model, 1.0, right)], points, moving, 0.0) == (model, right)
     assert tracker._two_units([(model, -1.0, wrong)], points, moving, 0.0) is None
     standing = Seed(np.array([0.0, 5.0]), np.array([0.0, 5.0]))
@@ -656,7 +743,8 @@ def test_a_moving_seed_that_fitted_one_box_is_fitted_again_before_the_map_is_rea
     ``SEED_RETRY_FRAMES``, once the map is ready (it may start rigid) at once."""
     tracker = VehicleTracker(PARAMS.articulated, PARAMS.vehicles)
     travel = PARAMS.articulated.start_travel_m
-    moved = Seed(np.array([travel + 0.1, 5.0]), np.array([0.0, 5.0]), frames=10, rigid=True, failed_frame=5)
+    box = vehicle_points(VehicleModel.rigid("rigid", 8.0, 2.5, 3.0), 0.0, 5.0, 0.0, sensors=SENSORS[:1], spacing=0.2)
+    moved = replace(_seed_that_moved(box, travel + 0.1), frames=10, rigid=True, failed_frame=5)
     standing = Seed(np.array([0.0, 5.0]), np.array([0.0, 5.0]), frames=10, rigid=True, failed_frame=5)
     assert tracker._may_fit(moved) and not tracker._may_fit(standing)
     assert moved.retry_due(rigid_allowed=True) and not moved.retry_due(rigid_allowed=False)
@@ -716,7 +804,7 @@ def test_a_reach_that_stays_put_while_moving_is_the_trailers_end():
     """Seen from one side the rear face never shows: the trailer's points reaching 10.5 m behind
     its front frame after moving frame is its length (the prior, 13.68 m, was the catalogue's); a
     reach that moves along the trailer (a shadow's edge) is not, nor are too few frames."""
-    from i2v_loc.stages.vehicle_tracker import STILL_END_FRAMES, _Extent
+    from i2v_loc.stages.vehicle_tracker import STILL_END_FRAMES
 
     rng = np.random.default_rng(3)
     still = _Extent(13.68, 50)

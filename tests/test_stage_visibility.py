@@ -44,8 +44,21 @@ def test_rays_that_cross_the_box_and_end_beyond_it_are_counted():
     assert rays(points).through(**BOX)[0] == 17 == sampled_through(points, SENSOR[0])
 
 
+def test_the_crossing_rays_reach_along_the_box_is_the_most_forward_inside_it():
+    # returns at y = 5 for x <= 0.2 only: a ray meets the near face (y = -1) at 9/15 of its x and
+    # leaves by the far face (y = 1) at 11/15; the ray to x = 0.2 is inside it up to x = 0.2 * 11/15
+    xs = np.linspace(-3, 0.2, 33)
+    through, _, front = rays(row(5.0, 1.0, xs)).through(**BOX)
+    assert through == int(np.sum(np.abs(xs * 9 / 15) <= 0.5 + 1e-9))
+    assert front == pytest.approx(0.2 * 11 / 15, abs=1e-5)
+    assert rays(row(0.0, 1.0)).through(**BOX)[2] == -np.inf  # no ray crossed
+
+
 def test_rays_ending_in_the_box_on_its_far_side_or_short_of_it_are_not():
-    assert rays(row(0.0, 1.0)).through(**BOX) == (0, 11)  # a surface inside: the 11 returns with |x| <= 0.5 end in it
+    assert rays(row(0.0, 1.0)).through(**BOX)[:2] == (
+        0,
+        11,
+    )  # a surface inside: the 11 returns with |x| <= 0.5 end in it
     assert rays(row(-3.0, 1.0)).through(**BOX)[0] == 0  # something in front hid the box
     assert rays(row(5.0, 5.5)).through(**BOX)[0] == 0  # passing above it
     # a side 0.1 m beyond the far face: only rays leaving by a side face early enough count
@@ -58,7 +71,7 @@ def test_random_rays_are_counted_as_by_sampling_the_segments():
     origin = np.array([3.0, -12.0, 4.0])
     points = np.column_stack([rng.uniform(-4, 4, 400), rng.uniform(-3, 6, 400), rng.uniform(0, 3, 400)])
     box = {**BOX, "yaw_rad": 0.4}
-    got, ended = rays(points.astype(np.float32), [origin]).through(**box)
+    got, ended, _ = rays(points.astype(np.float32), [origin]).through(**box)
     assert got == sampled_through(points.astype(np.float32), origin, box) and got > 20
     c, s = np.cos(0.4), np.sin(0.4)
     along, across = c * points[:, 0] + s * points[:, 1], -s * points[:, 0] + c * points[:, 1]
@@ -69,7 +82,10 @@ def test_random_rays_are_counted_as_by_sampling_the_segments():
 def test_a_sweep_whose_sensor_position_is_not_known_tells_nothing():
     points = np.vstack([row(5.0, 1.0), row(0.0, 1.0)])
     unknown = rays(points, [[np.nan] * 3, SENSOR[0]], [0, 61, 122])
-    assert unknown.through(**BOX) == (0, 11)  # the first sweep's 17 crossings are not known; the second's 11 end inside
+    assert unknown.through(**BOX)[:2] == (
+        0,
+        11,
+    )  # the first sweep's 17 crossings are not known; the second's 11 end inside
 
 
 def test_each_sweep_has_its_own_origin():

@@ -1286,9 +1286,11 @@ def rays_through_box(points, origins, bounds, rotation, box, beyond_m):
     yard frame, turned by ``rotation`` into the box's frame) cross the upright box and end at least
     ``beyond_m`` past where they leave it, and how many end in it. ``box``: centre x, y, cos and
     sin of its yaw, half length, half width, bottom z, top z. The segment is clipped against the
-    box's three slabs. Sweeps with a NaN origin are left out."""
+    box's three slabs. Sweeps with a NaN origin are left out. Also returns the largest x along the
+    box's length (its frame, centre 0) at which a counted ray is inside it (-inf for none)."""
     cx, cy, c, s, half_l, half_w, z_low, z_high = box[0], box[1], box[2], box[3], box[4], box[5], box[6], box[7]
     count = ended = 0
+    front = -np.inf
     for k in range(origins.shape[0]):
         if not (np.isfinite(origins[k, 0]) and np.isfinite(origins[k, 1]) and np.isfinite(origins[k, 2])):
             continue  # a sweep whose sensor position is not known tells nothing
@@ -1301,8 +1303,10 @@ def rays_through_box(points, origins, bounds, rotation, box, beyond_m):
             enter, leave = _slab(enter, leave, oz, dz, z_low, z_high)
             crossed = enter < leave and (1.0 - leave) * math.sqrt(dx * dx + dy * dy + dz * dz) >= beyond_m
             count += crossed
+            if crossed:
+                front = max(front, ox + max(enter * dx, leave * dx))
             ended += abs(px) <= half_l and abs(py) <= half_w and z_low <= pz <= z_high
-    return count, ended
+    return count, ended, front
 
 
 @njit(**_INLINE)

@@ -18,6 +18,7 @@ from dataclasses import dataclass, field, replace
 from itertools import count
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 from i2v_loc.params import ArticulatedParams, VehicleConfig
 from i2v_loc.stages import kernels
@@ -60,6 +61,10 @@ SETTLED_SLACK_M = 0.5
 STILL_END_FRAMES = 20  # moving frames whose reach must agree before it is taken as the unit's end
 STILL_END_SPREAD_M = 0.5  # a shadow's edge moves by metres over these frames; the thinned points' hindmost by 0.3 m
 STILL_END_MIN_SPEED_M_S = 0.5
+END_SEEN_OFFSET_M = 0.3  # past the hindmost point: a side's points are up to a column's spacing apart
+END_SEEN_LENGTH_M = 2.0
+END_SEEN_MIN_RAYS = 2
+END_SEEN_REACH_M = 1.0
 FACE_SEEN_SPAN = 0.6  # an end face is seen when its points span this share of the unit's width
 END_BAND_M = 0.4
 MAX_BODY_GAP_M = 1.0
@@ -67,6 +72,9 @@ WALL_BESIDE_M = (0.35, 0.8)  # a face with points this far out past a trailer's 
 UNIT_SUPPORT = 0.5
 RECHECK_MIN_SPEED_M_S = 0.5  # a rigid track is fitted again as every model while it moves this fast
 RECHECK_FRAMES = 20  # a moving rigid track is fitted as every model every this many frames (the fits cost ~0.1 s)
+VACATED_M = 0.5  # a first point this far from all of a seed's points now: its place was left
+VACATED_MIN_SHARE = 0.1
+SEED_FIRST_POINTS = 200
 SEED_RETRY_FRAMES = 20  # a seed that was no vehicle is fitted again after this many frames
 SHAPE_CHANGE_M = 0.5  # if its extent or centre moved this much
 SHAPE_POINTS_CHANGE = 0.3  # or its point count changed by this share
@@ -120,6 +128,8 @@ class Seed:
     failed: _Shape | None = None  # its shape when it was last fitted and was no vehicle
     failed_frame: int = 0  # its frame count then
     moving: bool = False  # known to move (a tracked vehicle's probe), however short its travel
+    first_points: np.ndarray = field(default_factory=lambda: np.empty((0, 3)))  # thinned, when first seen
+    points: np.ndarray = field(default_factory=lambda: np.empty((0, 3)))  # this frame's
 
     def retry_due(self, rigid_allowed: bool) -> bool:
         """A rigid seed that may start as one (it moved, the map is ready) at once; any other after
@@ -129,6 +139,19 @@ class Seed:
     @property
     def travel_m(self) -> float:
         return float(np.hypot(*(self.center_xy - self.first_xy)))
+
+    def moved(self, travel_m: float) -> bool:
+        """Known to move, or its centre travelled ``travel_m`` and it left a place behind: at least
+        ``VACATED_MIN_SHARE`` of its first points are ``VACATED_M`` from all of its points now. A
+        standing container that a passing truck uncovers grows where it was hidden, and its centre
+        travels as far (one started as a Twizy, 9 false vehicle-s on held-out seeds); what it
+        showed first stays where it was."""
+        if self.moving:
+            return True
+        if self.travel_m < travel_m or len(self.first_points) == 0 or len(self.points) == 0:
+            return False
+        distance, _ = cKDTree(self.points[:, :2]).query(self.first_points[:, :2], distance_upper_bound=VACATED_M)
+        return float(np.mean(np.isinf(distance))) >= VACATED_MIN_SHARE
 
 
 class _Window(deque):
@@ -269,6 +292,7 @@ class VehicleTracker:
         self._rays = rays
         priors = [self._prior(t, stamp_s, ground) for t in self.tracks]
         owner = self._claim(points, priors)
+        priors = [_detached(points, owner, i, prior) for i, prior in enumerate(priors)]
         reports = []
         for i, (track, prior) in enumerate(zip(self.tracks, priors)):
             reports.append(self._step(track, prior, points[owner == i], stamp_s))
@@ -430,6 +454,7 @@ class VehicleTracker:
         cut = np.flatnonzero(ends)
         keep = cut[0] + 1 if len(cut) else len(qb)
         qb, zb = qb[:keep], zb[:keep]
+        sides = [((m.unit == 1) & (m.face == face))[band][order][:keep] for face in (LEFT, RIGHT)]
         rear = float(qb[-1, 0])
         at_end = qb[:, 0] <= rear + END_BAND_M
         end = qb[at_end]
@@ -439,10 +464,46 @@ class VehicleTracker:
             length = trailer.front_m - median(middle[:, 0])
             if length >= TRAILER_LENGTH_RANGE_M[0]:
                 track.trailer_length.add(length)
+        elif not track.trailer_length.settled:
+            end = self._seen_end(track, m, [qb[side, 0] for side in sides if side.any()], width_m)
+            if end is not None:
+                track.trailer_length.add(trailer.front_m - end)
         bound = min(trailer.front_m - rear - END_BAND_M, MAX_TRAILER_LENGTH_M)
         track.trailer_length.add_bound(bound)
         if abs(track.filter.speed_m_s) >= STILL_END_MIN_SPEED_M_S:
             track.trailer_length.add_reach(min(trailer.front_m - rear, MAX_TRAILER_LENGTH_M))
+
+    def _seen_end(self, track: _Track, m: Measurement, sides: list[np.ndarray], width_m: float) -> float | None:
+        """Where the trailer ends, though its rear face is not seen (from one side it never is): the
+        first of its sides' hindmost points (``sides``: each seen side's points along the trailer's
+        frame) behind which the rays show no body (``_seen_empty_behind``). A dock's shelter right
+        beside one side reaches on past the end; the other side's end is taken then."""
+        ends = sorted((float(x.min()) for x in sides), reverse=True)
+        return next((end for end in ends if self._seen_empty_behind(track, m, end, width_m)), None)
+
+    def _seen_empty_behind(self, track: _Track, m: Measurement, end_m: float, width_m: float) -> bool:
+        """Whether at least ``END_SEEN_MIN_RAYS`` rays crossed the trailer's body behind ``end_m`` (its
+        frame; a slab ``END_SEEN_LENGTH_M`` long from ``END_SEEN_OFFSET_M`` behind it, ``SOLID_INSET_M``
+        inside its sides, floor and roof), one of them within ``END_SEEN_REACH_M`` of the slab's front,
+        and none ended in it: the body ends there. A shadow's edge is no end: the trailer hidden behind
+        it stops the rays that would cross (those passing further back show only that it ends before
+        them); a return in the slab is a surface there (its own rear face, a dock)."""
+        if self._rays is None:
+            return False
+        model, inset = track.model, SOLID_INSET_M
+        yaw = m.yaw_rad + m.hitch_rad
+        middle = end_m - END_SEEN_OFFSET_M - END_SEEN_LENGTH_M / 2
+        centre = model.kingpin_xy(m.x_m, m.y_m, m.yaw_rad) + middle * np.array([np.cos(yaw), np.sin(yaw)])
+        floor, top = track.ground_z_m + model.trailer.floor_m, track.ground_z_m + model.trailer.top_m
+        crossed, ended, front = self._rays.through(
+            tuple(centre),
+            yaw,
+            END_SEEN_LENGTH_M / 2,
+            width_m / 2 - inset,
+            (floor + inset, top - inset),
+            GAP_SEEN_BEYOND_M,
+        )
+        return crossed >= END_SEEN_MIN_RAYS and ended == 0 and front >= END_SEEN_LENGTH_M / 2 - END_SEEN_REACH_M
 
     def _trailer_axle(self, track: _Track) -> float:
         """L2 scaled with the trailer's length behind the kingpin (the catalogue's proportion)."""
@@ -491,8 +552,9 @@ class VehicleTracker:
             ):
                 seed.center_xy, seed.frames, seed.seen = center, seed.frames + 1, True
             else:
-                seed = Seed(center, center)
+                seed = Seed(center, center, first_points=thin(cluster, SEED_FIRST_POINTS))
                 self.seeds.append(seed)
+            seed.points = cluster
             shape = _Shape(len(cluster), rect.length_m, rect.width_m, center, rigid_allowed)
             if (
                 seed.frames >= self.params.start_frames
@@ -527,7 +589,7 @@ class VehicleTracker:
         ready too: driving straight, a tractor and trailer seen from one side fit one box, and their
         hinge shows as an open gap only in motion (``_two_units``); ``_candidate`` starts it then
         only as articulated."""
-        return not seed.rigid or seed.travel_m >= self.params.start_travel_m
+        return not seed.rigid or seed.moved(self.params.start_travel_m)
 
     def _may_start(self, seed: Seed, rigid_allowed: bool) -> bool:
         """A rigid seed once the background is learned and it moved."""
@@ -615,10 +677,10 @@ class VehicleTracker:
                 ground_z_m + box.floor_m,
                 ground_z_m + box.top_m,
             )
-            through, _ = self._rays.through(
+            through, _, _ = self._rays.through(
                 centre, yaw, half_l - inset, half_w - inset, (floor + inset, top - inset), GAP_SEEN_BEYOND_M
             )
-            _, ended = self._rays.through(
+            _, ended, _ = self._rays.through(
                 centre, yaw, half_l + inset, half_w + inset, (floor - inset, top + inset), GAP_SEEN_BEYOND_M
             )
             if through > SEEN_THROUGH_RATIO * ended:
@@ -637,8 +699,7 @@ class VehicleTracker:
         joined it was fitted again and started bent, 28.8 false vehicle-s on held-out seeds.)"""
         if model.trailer is None or abs(m.hitch_rad) > GAP_TEST_MAX_HITCH_RAD:
             return True
-        moved = seed.moving or seed.travel_m >= self.params.start_travel_m
-        return moved or self._gap_seen_empty(m, model, ground_z_m)
+        return seed.moved(self.params.start_travel_m) or self._gap_seen_empty(m, model, ground_z_m)
 
     def _tall_enough(self, cluster: np.ndarray, ground_z_m: float) -> bool:
         """As tall as some catalogue vehicle's higher unit, less ``LOW_SEED_SLACK_M`` (a Twizy is
@@ -669,7 +730,7 @@ class VehicleTracker:
         start, length = _gap_middle(model)
         centre = np.array([m.x_m, m.y_m]) + (start + length / 2) * np.array([np.cos(m.yaw_rad), np.sin(m.yaw_rad)])
         low, high = _gap_band(model)
-        seen, _ = self._rays.through(
+        seen, _, _ = self._rays.through(
             tuple(centre), m.yaw_rad, length / 2, model.tractor.width_m / 2,
             (ground_z_m + low, ground_z_m + high), GAP_SEEN_BEYOND_M,
         )  # fmt: skip
@@ -816,6 +877,26 @@ class VehicleTracker:
                 heading = [np.array([np.cos(h[2].yaw_rad), np.sin(h[2].yaw_rad)]) @ travel for h in pool[:2]]
                 chosen = pool[int(np.argmax(heading))]
         return chosen[0], chosen[2]
+
+
+def _detached(points: np.ndarray, owner: np.ndarray, i: int, prior: Prior) -> Prior:
+    """``prior`` with its trailer's slack cut where its claimed points behind the model's rear face
+    stop running on without a gap longer than ``MAX_BODY_GAP_M``; the points beyond are released
+    (``owner`` -1). A trailer is one body: an object the moving trailer has just uncovered metres
+    behind it (a fence, a parked car) is not its unseen rear, and it pulled the fit's sides (a
+    Volvo driving straight past a pole read a 3 degree hitch for 5 s)."""
+    if prior.model.trailer is None or prior.trailer_slack_m <= SETTLED_SLACK_M:
+        return prior
+    mine = np.flatnonzero(owner == i)
+    (q,) = unit_frames(points[mine], prior.vector, prior.model)[1:]
+    behind = prior.model.trailer.rear_m - q[:, 0]
+    order = np.sort(behind[behind > 0.0])
+    chain = np.concatenate([[0.0], order])
+    gaps = np.flatnonzero(np.diff(chain) > MAX_BODY_GAP_M)
+    reach = float(chain[gaps[0]] if len(gaps) else chain[-1])
+    slack = min(reach + SETTLED_SLACK_M, prior.trailer_slack_m)
+    owner[mine[behind > slack]] = -1
+    return replace(prior, trailer_slack_m=slack)
 
 
 def _face_span(m: Measurement, model: VehicleModel, unit: int, face: int) -> float:

@@ -27,15 +27,16 @@ class Rays:
     def through(
         self, center_xy: tuple[float, float], yaw_rad: float, half_length_m: float, half_width_m: float,
         z_range_m: tuple[float, float], beyond_m: float,
-    ) -> tuple[int, int]:  # fmt: skip
+    ) -> tuple[int, int, float]:  # fmt: skip
         """How many rays cross the upright box (level frame: centre, yaw of its length, half sizes,
-        bottom and top) and end at least ``beyond_m`` past the point where they leave it, and how
-        many end in it."""
+        bottom and top) and end at least ``beyond_m`` past the point where they leave it, how many
+        end in it, and how far ahead of the box's centre along its length the crossing rays reach
+        inside it (-inf for none)."""
         box = np.array(
             [*center_xy, np.cos(yaw_rad), np.sin(yaw_rad), half_length_m, half_width_m, *z_range_m], dtype=float
         )
         rotation = np.array(self.to_level, dtype=float)  # a copy: a read-only one is another specialisation
-        through, ended = kernels.rays_through_box(
+        through, ended, front = kernels.rays_through_box(
             self.points, self.origins, self.bounds, rotation, box, float(beyond_m)
         )
-        return int(through), int(ended)
+        return int(through), int(ended), float(front)
