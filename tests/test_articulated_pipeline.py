@@ -7,7 +7,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from hinged_points import WorldBox, cast_rays, unhidden, vehicle_points, world_boxes
+from hinged_points import FACES, WorldBox, cast_rays, unhidden, vehicle_points, world_boxes
 
 from i2v_loc.frame import Frame, SensorScan
 from i2v_loc.params import Extrinsics, Params, SensorConfig, apply_patch
@@ -22,6 +22,7 @@ from i2v_loc.stages.vehicle_tracker import (
     SETTLED_SLACK_M,
     Seed,
     VehicleTracker,
+    _around_kingpin,
     _detached,
     _Extent,
     _face_span,
@@ -130,6 +131,54 @@ def test_reversing_vehicle_keeps_its_heading():
     assert last is not None and last.state.speed_m_s < -1.0
 
 
+def test_a_lost_tractor_is_found_again_around_its_kingpin():
+    """The cab was hidden behind its trailer (the last fit saw none of it) and the prediction ran
+    80 deg off around the kingpin (its hitch uncertain: 5 deg): once the cab shows, its points are claimed around the kingpin and
+    the tractor is found at its true hitch (-40 deg); the trailer stays where it was. With the cab
+    still hidden, nothing is found and the prediction is kept."""
+    from i2v_loc.stages.kinematic_filter import HITCH, YAW
+
+    model, hitch = volvo(), np.radians(-40.0)
+    for shown in (True, False):
+        tracker = VehicleTracker(PARAMS.articulated, PARAMS.vehicles)
+        points = vehicle_points(model, 0.0, 4.0, 0.3, hitch, sensors=SENSORS, seed=1)
+        for k in range(4):
+            tracker.process(points, flat, 0.1 * k, rays=cast_rays(world_boxes(model, 0.0, 4.0, 0.3, hitch), SENSORS))
+        (track,) = tracker.tracks
+        ukf = track.filter.ukf
+        kingpin = model.kingpin_xy(ukf.x[0], ukf.x[1], ukf.x[YAW])
+        ukf.x[YAW] += np.radians(80.0)  # the trailer's yaw (yaw + hitch) kept, the tractor swung round its kingpin
+        ukf.x[HITCH] -= np.radians(80.0)
+        ukf.x[:2] = kingpin + model.kingpin_behind_axle_m * np.array([np.cos(ukf.x[YAW]), np.sin(ukf.x[YAW])])
+        ukf.P[HITCH, HITCH] = np.radians(5.0) ** 2
+        track.last = replace(track.last, unit=np.where(track.last.unit == 0, -1, track.last.unit))  # no cab seen
+        drop = () if shown else tuple((0, face) for face in FACES)
+        points = vehicle_points(model, 0.0, 4.0, 0.3, hitch, sensors=SENSORS, drop=drop, seed=2)
+        (report,) = tracker.process(points, flat, 0.4)
+        error = angle_deg(report.state.hitch_rad - hitch)
+        assert (abs(error) < 1.0) == shown, error
+        assert shown or abs(error + 80.0) < 5.0
+
+
+def test_the_search_sample_takes_half_around_the_kingpin_and_never_more_than_there_are():
+    """``max_points`` rows, each once: half near the kingpin when both parts have enough; when the
+    trailer has few points the cab's region gives the rest, and the other way round."""
+    model = volvo()
+    prior = Prior(0.0, 4.0, 0.3, np.radians(-30.0), model)
+    kingpin = model.kingpin_xy(0.0, 4.0, 0.3)
+    rng = np.random.default_rng(5)
+    trailer_pts = vehicle_points(
+        model, 0.0, 4.0, 0.3, np.radians(-30.0), sensors=SENSORS, drop=tuple((0, f) for f in FACES)
+    )
+    cab_pts = np.column_stack([kingpin + rng.normal(0.0, 0.2, (700, 2)) + [2.0, 2.5], np.full(700, 2.0)])
+    for trailer_share in (len(trailer_pts), 63):
+        points = np.vstack([cab_pts, trailer_pts[:trailer_share]])
+        sample = _around_kingpin(points, prior, 200)
+        assert len(sample) == 200 and len(np.unique(sample, axis=0)) == 200
+        from_cab = (sample[:, None, :] == cab_pts[None, :, :]).all(axis=2).any(axis=1)
+        assert from_cab.sum() == (100 if trailer_share > 100 else 200 - trailer_share)
+
+
 def test_vehicle_at_standstill_keeps_its_yaw():
     tracker = VehicleTracker(PARAMS.articulated, PARAMS.vehicles)
     yaws = []
@@ -195,6 +244,24 @@ def test_a_trailer_seen_from_one_side_ends_where_rays_pass_behind_it():
         length = track.model.trailer.length_m
         assert (abs(length - 10.5) < 0.3) == ends, length
         assert ends or length > 10.5 - 3.0 + 0.5  # not the shadow's edge
+
+
+def test_a_shorter_cab_is_learned_from_its_front_and_rear_faces():
+    """This tractor's cab is 2.25 m long, the catalogue's Volvo FH 2.55 m (its front is where the
+    catalogue's is): once its rear face shows beside the trailer in the turn, the cab's length is
+    learned within 5 cm and its box's centre is where the cab is."""
+    truth = volvo().with_boxes(replace(volvo().tractor, length_m=2.25), volvo().trailer)
+    tracker = VehicleTracker(PARAMS.articulated, PARAMS.vehicles)
+    steer = lambda t: float(np.clip(0.4 * (t - 2.0), 0.0, 0.5))  # noqa: E731
+    centre_errors = []
+    for t, points, (s,) in drive([(truth, (-12.0, 4.0, 0.0, 0.0))], 8.0, 2.5, steer):
+        reports = tracker.process(points, flat, t)
+        if reports and t >= 7.0:
+            r = reports[0].state
+            estimated = reports[0].model.box_centers(r.x_m, r.y_m, r.yaw_rad, r.hitch_rad)[0]
+            centre_errors.append(np.hypot(*(estimated - truth.box_centers(s[0], s[1], s[2], s[3] - s[2])[0])))
+    assert abs(tracker.tracks[0].model.tractor.length_m - 2.25) < 0.05
+    assert len(centre_errors) == 10 and max(centre_errors) < 0.05
 
 
 def test_a_tractor_with_another_kingpin_is_learned_in_the_turn():

@@ -348,7 +348,7 @@ def test_the_gate_gives_each_point_to_the_nearest_track_within_the_margin(hitch_
     points = np.column_stack([rng.uniform(-25, 25, (4000, 2)), rng.uniform(0, 4, 4000)]).astype(np.float32)
     tracker = VehicleTracker(PARAMS.articulated, PARAMS.vehicles)
     margin = PARAMS.articulated.gate_margin_m
-    got = tracker._claim(points, priors)
+    got = tracker._claim(points, priors, [False, False])
     distances = np.array([ref_box_distance(points.astype(float), prior) for prior in priors])
     want = np.where(distances.min(axis=0) <= margin, np.argmin(distances, axis=0), -1)
     assert np.array_equal(got, want)

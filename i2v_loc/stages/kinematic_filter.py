@@ -127,7 +127,9 @@ class KinematicFilter:
         self.rejected = 0  # measurements outside the innovation gate
         self._in_a_row = 0
 
-    def _reset(self, z: np.ndarray, r: np.ndarray) -> None:
+    def restart(self, z: np.ndarray, r: np.ndarray) -> None:
+        """The pose and hitch restart from the fit ``z`` (covariance ``r``); speed and curvature are
+        kept, their variance reset."""
         n = len(z)
         idx = [X, Y, YAW, HITCH][:n]
         self.ukf.x[idx] = z
@@ -177,7 +179,7 @@ class KinematicFilter:
             self.rejected += 1
             self._in_a_row += 1
             if self._in_a_row >= self.params.reset_after_rejections:
-                self._reset(z, r)
+                self.restart(z, r)
             return False
         self._in_a_row = 0
         self.ukf.x[YAW], self.ukf.x[HITCH] = wrap_rad(self.ukf.x[YAW]), wrap_rad(self.ukf.x[HITCH])

@@ -34,7 +34,8 @@ START_ITERATIONS = 20
 START_SIGMAS = np.array([0.3, 0.3, np.radians(3.0), np.radians(5.0)])  # added to the first fit's covariance
 START_SCALE_M = 0.8  # first loss scale of the start fits (a placed model is off by up to metres)
 DIRECTION_COST_RATIO = 0.8  # one end's fit must cost this much less than the other's to decide the direction
-RIGID_COST_RATIO = 0.7  # an articulated model must cost this much less than one rigid box
+RIGID_COST_RATIO = 0.7
+TRACTOR_LOST_SIGMA_DEG = 1.0  # tracked, the hitch's is 0.2-0.4 deg; the cab hidden behind its trailer, 1-5 deg  # an articulated model must cost this much less than one rigid box
 MAX_TRAILER_LENGTH_M = TRAILER_LENGTH_RANGE_M[1]
 REAR_FACE_MIN_POINTS = 3
 SIDE_MIN_POINTS = 5
@@ -243,6 +244,7 @@ class _Track:
     catalogue_name: str
     trailer_length: _Extent | None
     widths: list[_Extent]
+    cab_length: _Extent | None  # an articulated tractor's, from its front and rear faces
     missed: int = 0
     last: Measurement | None = None
     first_xy: np.ndarray = field(default_factory=lambda: np.zeros(2))
@@ -291,11 +293,12 @@ class VehicleTracker:
         ``rays``: the frame's sensor rays, which show whether a seed's gap was seen empty."""
         self._rays = rays
         priors = [self._prior(t, stamp_s, ground) for t in self.tracks]
-        owner = self._claim(points, priors)
+        lost = [self._tractor_lost(t) for t in self.tracks]
+        owner = self._claim(points, priors, lost)
         priors = [_detached(points, owner, i, prior) for i, prior in enumerate(priors)]
         reports = []
         for i, (track, prior) in enumerate(zip(self.tracks, priors)):
-            reports.append(self._step(track, prior, points[owner == i], stamp_s))
+            reports.append(self._step(track, prior, points[owner == i], stamp_s, lost[i]))
         self.tracks = [t for t in self.tracks if t.missed < self.params.leave_frames]
         reports = [r for r in reports if any(t.id == r.id for t in self.tracks)]
         reports += self._start(points[owner < 0], ground, stamp_s, rigid_allowed=background_ready)
@@ -312,21 +315,34 @@ class VehicleTracker:
             )
         return Prior(s.x_m, s.y_m, s.yaw_rad, s.hitch_rad, track.model, float(ground(s.x_m, s.y_m)), slack)
 
-    def _claim(self, points: np.ndarray, priors: list[Prior]) -> np.ndarray:
-        """Index of the track whose predicted boxes (grown by the gate margin) are nearest each point; -1 none."""
+    def _claim(self, points: np.ndarray, priors: list[Prior], lost: list[bool]) -> np.ndarray:
+        """Index of the track whose predicted boxes (grown by the gate margin) are nearest each point; -1 none.
+        A lost tractor (``_tractor_lost``) may be at any of the start hitches around its kingpin."""
         if not priors:
             return np.full(len(points), -1, dtype=np.int64)
-        boxes = [prior_boxes(prior) for prior in priors]
+        boxes = [
+            np.vstack([prior_boxes(prior)] + [prior_boxes(p)[:1] for p in _tractor_around(prior)])
+            if gone
+            else prior_boxes(prior)
+            for prior, gone in zip(priors, lost)
+        ]
         track_of_box = np.repeat(np.arange(len(priors)), [len(b) for b in boxes])
         return kernels.claim_points(
             points, np.vstack(boxes), track_of_box, len(priors), float(self.params.gate_margin_m)
         )
 
-    def _step(self, track: _Track, prior: Prior, points: np.ndarray, stamp_s: float) -> VehicleReport:
+    def _step(self, track: _Track, prior: Prior, points: np.ndarray, stamp_s: float, lost: bool) -> VehicleReport:
         track.ground_z_m = prior.ground_z_m
         m = fit(points, prior, self.params) if len(points) else None
+        found = self._reacquired(points, prior, m) if m is not None and lost else None
         measured = False
-        if m is not None:
+        if found is not None:  # the pose restarts from it (the prediction's sigma points are elsewhere)
+            track.filter.restart(found.vector, found.covariance)
+            m, measured = found, True
+            prior = replace(
+                prior, x_m=m.x_m, y_m=m.y_m, yaw_rad=m.yaw_rad, hitch_rad=m.hitch_rad
+            )  # what is learned from
+        elif m is not None:
             measured = track.filter.update(m.vector, m.covariance, m.observed)
             self.rejected += not measured
         if measured:
@@ -341,6 +357,46 @@ class VehicleTracker:
             track.missed += 1
         return track.report(measured)
 
+    def _tractor_lost(self, track: _Track) -> bool:
+        """The last fit explained fewer than ``SIDE_MIN_POINTS`` points by the cab and the hitch's
+        standard deviation exceeds ``TRACTOR_LOST_SIGMA_DEG``: the cab has not been seen for a while
+        (hidden behind its trailer), and the prediction may have run far off."""
+        return (
+            track.model.articulated
+            and track.last is not None
+            and np.count_nonzero(track.last.unit == 0) < SIDE_MIN_POINTS
+            and track.filter.state.hitch_std_rad > np.radians(TRACTOR_LOST_SIGMA_DEG)
+        )
+
+    def _reacquired(self, points: np.ndarray, prior: Prior, m: Measurement) -> Measurement | None:
+        """The trailer where the prior has it and the tractor at each start hitch around its kingpin,
+        the best fit refined, if it costs less than ``DIRECTION_COST_RATIO`` times the prior's own
+        fit, both units are supported and it is not folded beyond ``start_max_hitch_deg`` (a Twizy's
+        cab at its dock fitted best jack-knifed onto the dock): the cab is back in sight where the prediction did not
+        look for it. All are fitted to one sample, half of it from within a tractor's reach of the
+        kingpin and off the trailer (their costs are compared). Reversing with the cab hidden from
+        its one LiDAR, a MAN's prediction ran 80 deg off while the trailer was tracked, and its fits
+        stayed there once the cab showed again."""
+        model = prior.model
+        sample = _around_kingpin(points, prior, self.params.fit_max_points)
+        here = fit(sample, prior, self.params)
+        coarse = [fit(sample, start, self.params, COARSE_ITERATIONS, START_SCALE_M) for start in _tractor_around(prior)]
+        best = min((c for c in coarse if c is not None), key=lambda c: c.cost, default=None)
+        if here is None or best is None:
+            return None
+        start = replace(prior, x_m=best.x_m, y_m=best.y_m, yaw_rad=best.yaw_rad, hitch_rad=best.hitch_rad)
+        found = fit(sample, start, self.params)
+        if (
+            found is None
+            or found.cost >= DIRECTION_COST_RATIO * here.cost
+            or not _supported(found, model, prior.ground_z_m)
+            or not self._unfolded(found)
+        ):
+            return None
+        # the pose from all the points, as every frame's fit takes them
+        pose = dict(x_m=found.x_m, y_m=found.y_m, yaw_rad=found.yaw_rad, hitch_rad=found.hitch_rad)
+        return fit(points, replace(prior, **pose), self.params)
+
     # ----------------------------------------------------------------- dimensions
 
     def _learn(self, track: _Track, m: Measurement) -> None:
@@ -354,6 +410,9 @@ class VehicleTracker:
             if min(len(left), len(right)) >= SIDE_MIN_POINTS:  # both sides seen: the width between them
                 track.widths[u].add(median(left) - median(right))
             new_boxes.append(replace(box, width_m=track.widths[u].estimate))
+        if track.cab_length is not None:
+            self._learn_cab_length(track, m, local[0])
+            new_boxes[0] = replace(new_boxes[0], length_m=track.cab_length.estimate)
         if model.trailer is not None and track.trailer_length is not None:
             self._learn_trailer_length(track, m, local[1], new_boxes[1].width_m)
             new_boxes[1] = replace(new_boxes[1], length_m=track.trailer_length.estimate)
@@ -380,6 +439,15 @@ class VehicleTracker:
         again = fit(m.points, start, self.params)
         if again is not None:
             track.filter.move_pose(again.vector - m.vector)
+
+    def _learn_cab_length(self, track: _Track, m: Measurement, q: np.ndarray) -> None:
+        """The cab's length: between the middles of its front and rear faces' points, when at least
+        ``SIDE_MIN_POINTS`` lie on each (its front pins it in the fit; an unknown tractor's cab 0.27 m
+        shorter than the MAN's put its box centre 0.13 m off)."""
+        cab = m.unit == 0
+        front, rear = q[cab & (m.face == FRONT), 0], q[cab & (m.face == REAR), 0]
+        if min(len(front), len(rear)) >= SIDE_MIN_POINTS:
+            track.cab_length.add(median(front) - median(rear))
 
     def _learn_kingpin(self, track: _Track, prior: Prior, points: np.ndarray) -> None:
         """The kingpin's offset shows only at a hitch angle (straight, it trades with the trailer's
@@ -415,11 +483,16 @@ class VehicleTracker:
 
     def _retype(self, track: _Track, name: str) -> None:
         """The learned sizes match another catalogue vehicle better than the start's: take its
-        figures the points do not measure (tractor front and length, floors, heights, kingpin (learned
-        again from its axle), trailer front), keep the measured widths and trailer length."""
+        figures the points do not measure (tractor front, floors, heights, kingpin (learned again from
+        its axle), trailer front), keep the measured widths and lengths."""
         prior = self.catalogue[name]
         model = track.model
-        tractor = replace(prior.tractor, width_m=model.tractor.width_m)
+        cab = track.cab_length
+        if cab is not None and cab.median is None:  # not measured yet: the new type's
+            cab.prior = prior.tractor.length_m
+        tractor = replace(
+            prior.tractor, width_m=model.tractor.width_m, length_m=cab.estimate if cab else prior.tractor.length_m
+        )
         trailer = replace(prior.trailer, width_m=model.trailer.width_m, length_m=model.trailer.length_m)
         track.model = replace(prior.with_boxes(tractor, trailer), trailer_axle_m=model.trailer_axle_m)
         track.catalogue_name = name
@@ -764,6 +837,7 @@ class VehicleTracker:
         )
         window = self.params.dimension_window
         widths = [_Extent(box.width_m, window) for box in model.boxes]
+        cab = _Extent(model.tractor.length_m, window) if model.articulated else None
         length = kingpin = front = reach = None
         if model.trailer is not None:
             length = _Extent(model.trailer.length_m, window)
@@ -777,6 +851,7 @@ class VehicleTracker:
             model.name,
             length,
             widths,
+            cab,
             0,
             m,
             np.array(m.vector[:2]),
@@ -836,6 +911,8 @@ class VehicleTracker:
                     sized = _with_trailer_length(model, m.trailer_length_m)
                     prior = Prior(m.x_m, m.y_m, m.yaw_rad, m.hitch_rad, sized, ground_z_m, 0.0, True)
                     m = fit(sample, prior, self.params, START_ITERATIONS, START_SCALE_M)
+                    if not _supported(m, _with_trailer_length(model, m.trailer_length_m), ground_z_m):
+                        m = self._refit_with_cab(cluster, m, model, ground_z_m)
                     out.append((_with_trailer_length(model, m.trailer_length_m), sign, m))
         height = float(cluster[:, 2].max() - ground_z_m)
         if not (may_be_rigid and RIGID_MIN_WIDTH_M <= rect.width_m and height <= MAX_VEHICLE_HEIGHT_M):
@@ -853,6 +930,17 @@ class VehicleTracker:
             if m is not None:
                 out.append((rigid, sign, m))
         return out
+
+    def _refit_with_cab(
+        self, cluster: np.ndarray, m: Measurement, model: VehicleModel, ground_z_m: float
+    ) -> Measurement:
+        """``m`` refined again on a sample of ``cluster`` that keeps the points in its tractor's box
+        (``thin_by_unit``): the even sample of a reversing MAN whose cab hides behind its trailer
+        kept 3 of its 60 cab points, and the fit at the right hitch was not supported for 80 frames."""
+        sized = _with_trailer_length(model, m.trailer_length_m)
+        prior = Prior(m.x_m, m.y_m, m.yaw_rad, m.hitch_rad, sized, ground_z_m, 0.0, True)
+        again = fit(cluster, prior, self.params, START_ITERATIONS, START_SCALE_M)
+        return m if again is None else again
 
     def _choose(self, hypotheses, seed: Seed) -> tuple[VehicleModel, Measurement] | None:
         """The best-explaining model; between its two directions the cheaper fit, or the direction of
@@ -877,6 +965,39 @@ class VehicleTracker:
                 heading = [np.array([np.cos(h[2].yaw_rad), np.sin(h[2].yaw_rad)]) @ travel for h in pool[:2]]
                 chosen = pool[int(np.argmax(heading))]
         return chosen[0], chosen[2]
+
+
+def _tractor_around(prior: Prior) -> list[Prior]:
+    """``prior`` with its trailer where it is and its tractor at each of the start hitches."""
+    model = prior.model
+    trailer_yaw = prior.yaw_rad + prior.hitch_rad
+    kingpin = model.kingpin_xy(prior.x_m, prior.y_m, prior.yaw_rad)
+    out = []
+    for hitch in np.radians(START_HITCHES_DEG):
+        yaw = trailer_yaw - hitch
+        x, y = kingpin + model.kingpin_behind_axle_m * np.array([np.cos(yaw), np.sin(yaw)])
+        out.append(replace(prior, x_m=float(x), y_m=float(y), yaw_rad=float(yaw), hitch_rad=float(hitch)))
+    return out
+
+
+def _around_kingpin(points: np.ndarray, prior: Prior, max_points: int) -> np.ndarray:
+    """``max_points`` of ``points`` (all if fewer), half of them from those within a tractor's reach
+    of the kingpin and outside the trailer's box, where the cab may be (all of those if fewer, more
+    if the others are fewer)."""
+    if len(points) <= max_points:
+        return np.asarray(points, dtype=float)
+    model = prior.model
+    kingpin = model.kingpin_xy(prior.x_m, prior.y_m, prior.yaw_rad)
+    reach = model.tractor.front_m - model.kingpin_behind_axle_m + END_BAND_M
+    (q,) = unit_frames(points, prior.vector, model)[1:]
+    trailer = model.trailer
+    grown = END_BAND_M  # its faces' points lie on both sides of them
+    on_trailer = (q[:, 0] <= trailer.front_m + grown) & (q[:, 0] >= trailer.rear_m - grown)
+    on_trailer &= np.abs(q[:, 1]) <= trailer.width_m / 2 + grown
+    near = (np.hypot(*(points[:, :2] - kingpin).T) <= reach) & ~on_trailer
+    n_near = int(np.count_nonzero(near))
+    k_near = min(n_near, max(max_points // 2, max_points - (len(points) - n_near)))
+    return np.asarray(points[kernels.strided_pick(near, k_near, max_points - k_near)], dtype=float)
 
 
 def _detached(points: np.ndarray, owner: np.ndarray, i: int, prior: Prior) -> Prior:
