@@ -268,9 +268,6 @@ class CalibrationParams(Section):
         le=1e6,
         description="Warn when a sensor's weakest horizontal direction is constrained by fewer overlapping structure points (measured: 5-31 on sensors 10-42 cm off, >= 376 within 2 cm)",
     )
-    min_overlap_points: int = Field(
-        500, ge=10, le=MAX_POINTS_PER_FRAME, description="Overlap needed to register two sensors directly"
-    )
 
 
 class ConcatenationParams(Section):
