@@ -28,6 +28,7 @@ from i2v_loc.stages.vehicle_tracker import (
     _face_span,
     _gap_filled,
     _gap_open,
+    _release_wall_behind,
     _shift_along_m,
     _supported,
 )
@@ -762,6 +763,33 @@ def test_a_trailer_claims_behind_it_only_what_runs_on_from_its_body():
     cut = _detached(points, owner, 0, prior)
     assert np.all(owner[: len(body) + 4] == 0) and np.all(owner[len(body) + 4 :] == -1)
     assert cut.trailer_slack_m == pytest.approx(2.0 + SETTLED_SLACK_M, abs=0.01)
+
+
+def test_a_wall_behind_the_trailer_is_released_and_its_body_kept():
+    """A dock's wall 0.3 m behind a Volvo's trailer, claimed within the gate where it runs 1 m out
+    past both sides (or past one only), is released, its part behind the trailer too; the
+    trailer's own points stay; without a wall, or with a dock's shelter running along one side
+    past the rear, nothing is released."""
+    model = volvo()
+    yaw = 0.3
+    prior = Prior(0.0, 4.0, yaw, 0.0, model)
+    body = vehicle_points(model, 0.0, 4.0, yaw, sensors=SENSORS, spacing=0.15, drop=((1, "rear"),))
+    rear = model.kingpin_xy(0.0, 4.0, yaw) + (model.trailer.rear_m - 0.3) * np.array([np.cos(yaw), np.sin(yaw)])
+    across = np.array([-np.sin(yaw), np.cos(yaw)])
+    for reach in ((-2.25, 2.25), (-0.5, 2.25)):  # both sides, one side
+        offsets = np.linspace(*reach, 40)
+        wall = np.column_stack([rear + offsets[:, None] * across, np.full(40, 2.0)])
+        points = np.vstack([body, wall])
+        owner = np.zeros(len(points), dtype=np.int64)
+        _release_wall_behind(points, owner, 0, prior)
+        assert np.all(owner[len(body) :] == -1) and np.all(owner[: len(body)] == 0)
+    along = np.array([np.cos(yaw), np.sin(yaw)])
+    beside = rear + 0.3 * along + (model.trailer.width_m / 2 + 0.5) * across  # a dock's shelter along one side
+    shelter = np.column_stack([beside + np.linspace(-0.6, 0.6, 20)[:, None] * along, np.full(20, 2.0)])
+    for points in (body, np.vstack([body, shelter])):  # no wall: nothing released
+        owner = np.zeros(len(points), dtype=np.int64)
+        _release_wall_behind(points, owner, 0, prior)
+        assert np.all(owner == 0)
 
 
 def _seed_that_moved(points: np.ndarray, along_x_m: float) -> Seed:

@@ -48,6 +48,8 @@ KINGPIN_MIN_HITCH_RAD = np.radians(20.0)  # the kingpin's offset shows only at a
 KINGPIN_SETTLED = 50  # observations of the kingpin's offset: learned
 REACH_MAX_HITCH_RAD = np.radians(5.0)  # nearly straight: the trailer's front reach ahead of the rear axle shows
 GAP_TEST_MAX_HITCH_RAD = np.radians(10.0)  # beyond, a trailer's front corner swings into the gap
+WALL_MIN_POINTS = 5
+WALL_MIN_ACROSS_M = 0.2
 GAP_FILL_RATIO = 0.5
 GAP_MIN_POINTS = 5
 GAP_OPEN_RATIO = 0.1  # a moving seed with so few points in its gap is two units, however well one box fits
@@ -296,6 +298,8 @@ class VehicleTracker:
         lost = [self._tractor_lost(t) for t in self.tracks]
         owner = self._claim(points, priors, lost)
         priors = [_detached(points, owner, i, prior) for i, prior in enumerate(priors)]
+        for i, prior in enumerate(priors):
+            _release_wall_behind(points, owner, i, prior)
         reports = []
         for i, (track, prior) in enumerate(zip(self.tracks, priors)):
             reports.append(self._step(track, prior, points[owner == i], stamp_s, lost[i]))
@@ -998,6 +1002,41 @@ def _around_kingpin(points: np.ndarray, prior: Prior, max_points: int) -> np.nda
     n_near = int(np.count_nonzero(near))
     k_near = min(n_near, max(max_points // 2, max_points - (len(points) - n_near)))
     return np.asarray(points[kernels.strided_pick(near, k_near, max_points - k_near)], dtype=float)
+
+
+def _release_wall_behind(points: np.ndarray, owner: np.ndarray, i: int, prior: Prior) -> None:
+    """Release (``owner`` -1) the claimed points of a wall behind the trailer: a face at its rear
+    (``END_BAND_M`` ahead of it or any way behind) with at least ``WALL_MIN_POINTS`` points
+    ``WALL_BESIDE_M[0]`` or more out past its sides, spreading across the trailer (at least
+    ``WALL_MIN_ACROSS_M``, twice as far as along it: a dock's shelter beside a trailer's rear runs
+    along it), runs on past them; a trailer's body does not.
+    The wall's points, along the line through those beside it (across the trailer where they lie
+    on one side only), go, with any of the trailer's own rear face within ``END_BAND_M / 2`` of it.
+    A dock's wall right behind a Twizy's or a Volvo's trailer was explained by turning the trailer
+    6-10 deg."""
+    model = prior.model
+    if model.trailer is None:
+        return
+    mine = np.flatnonzero(owner == i)
+    (q,) = unit_frames(points[mine], prior.vector, model)[1:]
+    half = model.trailer.width_m / 2
+    at_rear = q[:, 0] <= model.trailer.rear_m + END_BAND_M
+    beside = at_rear & (np.abs(q[:, 1]) >= half + WALL_BESIDE_M[0])
+    if np.count_nonzero(beside) < WALL_MIN_POINTS:
+        return
+    wall = q[beside]
+    across, along = np.ptp(np.abs(wall[:, 1])), np.ptp(wall[:, 0])
+    if across < WALL_MIN_ACROSS_M or across < 2 * along:  # a face along the side (a dock's shelter), not across
+        return
+    left, right = wall[:, 1] > 0, wall[:, 1] < 0
+    if left.any() and right.any():  # the line through both sides' middles
+        x0, y0 = median(wall[left, 0]), median(wall[left, 1])
+        x1, y1 = median(wall[right, 0]), median(wall[right, 1])
+        slope = (x1 - x0) / (y1 - y0)
+    else:
+        x0, y0, slope = median(wall[:, 0]), 0.0, 0.0
+    on_wall = at_rear & (np.abs(q[:, 0] - (x0 + slope * (q[:, 1] - y0))) <= END_BAND_M / 2)
+    owner[mine[on_wall]] = -1
 
 
 def _detached(points: np.ndarray, owner: np.ndarray, i: int, prior: Prior) -> Prior:
