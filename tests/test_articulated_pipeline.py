@@ -23,12 +23,11 @@ from i2v_loc.stages.vehicle_tracker import (
     Seed,
     VehicleTracker,
     _around_kingpin,
-    _detached,
     _Extent,
     _face_span,
     _gap_filled,
     _gap_open,
-    _release_wall_behind,
+    _own_body,
     _shift_along_m,
     _supported,
 )
@@ -754,13 +753,13 @@ def test_a_trailer_claims_behind_it_only_what_runs_on_from_its_body():
     fence = np.column_stack([np.full(30, rear_x - 5.0), np.linspace(4.0, 6.0, 30), np.full(30, 1.5)])
     points = np.vstack([body, fence])
     owner = np.zeros(len(points), dtype=np.int64)
-    cut = _detached(points, owner, 0, prior)
+    cut = _own_body(points, owner, 0, prior)
     assert np.all(owner[len(body) :] == -1) and np.all(owner[: len(body)] == 0)
     assert cut.trailer_slack_m == pytest.approx(SETTLED_SLACK_M, abs=0.05)
     longer = np.column_stack([rear_x - np.arange(0.5, 2.01, 0.5), np.full(4, 5.0), np.full(4, 2.0)])
     points = np.vstack([body, longer, fence])
     owner = np.zeros(len(points), dtype=np.int64)
-    cut = _detached(points, owner, 0, prior)
+    cut = _own_body(points, owner, 0, prior)
     assert np.all(owner[: len(body) + 4] == 0) and np.all(owner[len(body) + 4 :] == -1)
     assert cut.trailer_slack_m == pytest.approx(2.0 + SETTLED_SLACK_M, abs=0.01)
 
@@ -781,14 +780,14 @@ def test_a_wall_behind_the_trailer_is_released_and_its_body_kept():
         wall = np.column_stack([rear + offsets[:, None] * across, np.full(40, 2.0)])
         points = np.vstack([body, wall])
         owner = np.zeros(len(points), dtype=np.int64)
-        _release_wall_behind(points, owner, 0, prior)
+        _own_body(points, owner, 0, prior)
         assert np.all(owner[len(body) :] == -1) and np.all(owner[: len(body)] == 0)
     along = np.array([np.cos(yaw), np.sin(yaw)])
     beside = rear + 0.3 * along + (model.trailer.width_m / 2 + 0.5) * across  # a dock's shelter along one side
     shelter = np.column_stack([beside + np.linspace(-0.6, 0.6, 20)[:, None] * along, np.full(20, 2.0)])
     for points in (body, np.vstack([body, shelter])):  # no wall: nothing released
         owner = np.zeros(len(points), dtype=np.int64)
-        _release_wall_behind(points, owner, 0, prior)
+        _own_body(points, owner, 0, prior)
         assert np.all(owner == 0)
 
 

@@ -34,8 +34,8 @@ START_ITERATIONS = 20
 START_SIGMAS = np.array([0.3, 0.3, np.radians(3.0), np.radians(5.0)])  # added to the first fit's covariance
 START_SCALE_M = 0.8  # first loss scale of the start fits (a placed model is off by up to metres)
 DIRECTION_COST_RATIO = 0.8  # one end's fit must cost this much less than the other's to decide the direction
-RIGID_COST_RATIO = 0.7
-TRACTOR_LOST_SIGMA_DEG = 1.0  # tracked, the hitch's is 0.2-0.4 deg; the cab hidden behind its trailer, 1-5 deg  # an articulated model must cost this much less than one rigid box
+RIGID_COST_RATIO = 0.7  # an articulated model must cost this much less than one rigid box
+TRACTOR_LOST_SIGMA_DEG = 1.0  # tracked, the hitch's is 0.2-0.4 deg; the cab hidden behind its trailer, 1-5 deg
 MAX_TRAILER_LENGTH_M = TRAILER_LENGTH_RANGE_M[1]
 REAR_FACE_MIN_POINTS = 3
 SIDE_MIN_POINTS = 5
@@ -297,9 +297,7 @@ class VehicleTracker:
         priors = [self._prior(t, stamp_s, ground) for t in self.tracks]
         lost = [self._tractor_lost(t) for t in self.tracks]
         owner = self._claim(points, priors, lost)
-        priors = [_detached(points, owner, i, prior) for i, prior in enumerate(priors)]
-        for i, prior in enumerate(priors):
-            _release_wall_behind(points, owner, i, prior)
+        priors = [_own_body(points, owner, i, prior) for i, prior in enumerate(priors)]
         reports = []
         for i, (track, prior) in enumerate(zip(self.tracks, priors)):
             reports.append(self._step(track, prior, points[owner == i], stamp_s, lost[i]))
@@ -343,9 +341,7 @@ class VehicleTracker:
         if found is not None:  # the pose restarts from it (the prediction's sigma points are elsewhere)
             track.filter.restart(found.vector, found.covariance)
             m, measured = found, True
-            prior = replace(
-                prior, x_m=m.x_m, y_m=m.y_m, yaw_rad=m.yaw_rad, hitch_rad=m.hitch_rad
-            )  # what is learned from
+            prior = _at_pose(prior, m)  # what is learned from
         elif m is not None:
             measured = track.filter.update(m.vector, m.covariance, m.observed)
             self.rejected += not measured
@@ -388,8 +384,7 @@ class VehicleTracker:
         best = min((c for c in coarse if c is not None), key=lambda c: c.cost, default=None)
         if here is None or best is None:
             return None
-        start = replace(prior, x_m=best.x_m, y_m=best.y_m, yaw_rad=best.yaw_rad, hitch_rad=best.hitch_rad)
-        found = fit(sample, start, self.params)
+        found = fit(sample, _at_pose(prior, best), self.params)
         if (
             found is None
             or found.cost >= DIRECTION_COST_RATIO * here.cost
@@ -397,9 +392,7 @@ class VehicleTracker:
             or not self._unfolded(found)
         ):
             return None
-        # the pose from all the points, as every frame's fit takes them
-        pose = dict(x_m=found.x_m, y_m=found.y_m, yaw_rad=found.yaw_rad, hitch_rad=found.hitch_rad)
-        return fit(points, replace(prior, **pose), self.params)
+        return fit(points, _at_pose(prior, found), self.params)  # from all the points, as every frame's fit
 
     # ----------------------------------------------------------------- dimensions
 
@@ -439,8 +432,7 @@ class VehicleTracker:
         reference point was moved by ``_retype`` itself."""
         if track.catalogue_name != name or _shift_along_m(before, track.model) <= MODEL_FOLLOW_MIN_M:
             return
-        start = replace(prior, x_m=m.x_m, y_m=m.y_m, yaw_rad=m.yaw_rad, hitch_rad=m.hitch_rad or 0.0, model=track.model)
-        again = fit(m.points, start, self.params)
+        again = fit(m.points, replace(_at_pose(prior, m), model=track.model), self.params)
         if again is not None:
             track.filter.move_pose(again.vector - m.vector)
 
@@ -912,11 +904,16 @@ class VehicleTracker:
                 coarse = [m for m in coarse if m is not None]
                 if coarse:  # the best start hitch, refined, the trailer's length fitted too
                     m = min(coarse, key=lambda m: m.cost)
-                    sized = _with_trailer_length(model, m.trailer_length_m)
-                    prior = Prior(m.x_m, m.y_m, m.yaw_rad, m.hitch_rad, sized, ground_z_m, 0.0, True)
-                    m = fit(sample, prior, self.params, START_ITERATIONS, START_SCALE_M)
+                    m = fit(sample, _sized_start(m, model, ground_z_m), self.params, START_ITERATIONS, START_SCALE_M)
                     if not _supported(m, _with_trailer_length(model, m.trailer_length_m), ground_z_m):
-                        m = self._refit_with_cab(cluster, m, model, ground_z_m)
+                        # once more on a sample that keeps its tractor's points (thin_by_unit): the
+                        # even sample of a reversing MAN whose cab hid behind its trailer kept 3 of
+                        # its 60 cab points, and the fit at the right hitch was not supported for
+                        # 80 frames
+                        again = fit(
+                            cluster, _sized_start(m, model, ground_z_m), self.params, START_ITERATIONS, START_SCALE_M
+                        )
+                        m = m if again is None else again
                     out.append((_with_trailer_length(model, m.trailer_length_m), sign, m))
         height = float(cluster[:, 2].max() - ground_z_m)
         if not (may_be_rigid and RIGID_MIN_WIDTH_M <= rect.width_m and height <= MAX_VEHICLE_HEIGHT_M):
@@ -934,17 +931,6 @@ class VehicleTracker:
             if m is not None:
                 out.append((rigid, sign, m))
         return out
-
-    def _refit_with_cab(
-        self, cluster: np.ndarray, m: Measurement, model: VehicleModel, ground_z_m: float
-    ) -> Measurement:
-        """``m`` refined again on a sample of ``cluster`` that keeps the points in its tractor's box
-        (``thin_by_unit``): the even sample of a reversing MAN whose cab hides behind its trailer
-        kept 3 of its 60 cab points, and the fit at the right hitch was not supported for 80 frames."""
-        sized = _with_trailer_length(model, m.trailer_length_m)
-        prior = Prior(m.x_m, m.y_m, m.yaw_rad, m.hitch_rad, sized, ground_z_m, 0.0, True)
-        again = fit(cluster, prior, self.params, START_ITERATIONS, START_SCALE_M)
-        return m if again is None else again
 
     def _choose(self, hypotheses, seed: Seed) -> tuple[VehicleModel, Measurement] | None:
         """The best-explaining model; between its two directions the cheaper fit, or the direction of
@@ -1004,30 +990,53 @@ def _around_kingpin(points: np.ndarray, prior: Prior, max_points: int) -> np.nda
     return np.asarray(points[kernels.strided_pick(near, k_near, max_points - k_near)], dtype=float)
 
 
-def _release_wall_behind(points: np.ndarray, owner: np.ndarray, i: int, prior: Prior) -> None:
-    """Release (``owner`` -1) the claimed points of a wall behind the trailer: a face at its rear
-    (``END_BAND_M`` ahead of it or any way behind) with at least ``WALL_MIN_POINTS`` points
+def _at_pose(prior: Prior, m: Measurement) -> Prior:
+    """``prior`` moved to the pose of the fit ``m``."""
+    return replace(prior, x_m=m.x_m, y_m=m.y_m, yaw_rad=m.yaw_rad, hitch_rad=m.hitch_rad or 0.0)
+
+
+def _sized_start(m: Measurement, model: VehicleModel, ground_z_m: float) -> Prior:
+    """A start fit's refinement from ``m``: ``model`` with the trailer's length ``m`` fitted, the
+    length fitted again."""
+    sized = _with_trailer_length(model, m.trailer_length_m)
+    return Prior(m.x_m, m.y_m, m.yaw_rad, m.hitch_rad, sized, ground_z_m, 0.0, True)
+
+
+def _own_body(points: np.ndarray, owner: np.ndarray, i: int, prior: Prior) -> Prior:
+    """``prior`` with the claimed points of track ``i`` (``owner``) that are no part of its trailer's
+    body released (-1): those behind a gap (``_beyond_gap``, which also cuts the prior's slack) and a
+    wall behind it (``_wall_behind``) among the rest."""
+    if prior.model.trailer is None:
+        return prior
+    mine = np.flatnonzero(owner == i)
+    (q,) = unit_frames(points[mine], prior.vector, prior.model)[1:]
+    prior, beyond = _beyond_gap(q, prior)
+    kept = np.flatnonzero(~beyond)
+    owner[mine[beyond]] = -1
+    owner[mine[kept[_wall_behind(q[kept], prior.model)]]] = -1
+    return prior
+
+
+def _wall_behind(q: np.ndarray, model: VehicleModel) -> np.ndarray:
+    """Which of a trailer's claimed points (``q``: its frame, xy) are a wall behind it: a face at its
+    rear (``END_BAND_M`` ahead of it or any way behind) with at least ``WALL_MIN_POINTS`` points
     ``WALL_BESIDE_M[0]`` or more out past its sides, spreading across the trailer (at least
     ``WALL_MIN_ACROSS_M``, twice as far as along it: a dock's shelter beside a trailer's rear runs
     along it), runs on past them; a trailer's body does not.
-    The wall's points, along the line through those beside it (across the trailer where they lie
-    on one side only), go, with any of the trailer's own rear face within ``END_BAND_M / 2`` of it.
+    The wall's points lie along the line through those beside it (across the trailer where they lie
+    on one side only), with any of the trailer's own rear face within ``END_BAND_M / 2`` of it.
     A dock's wall 0.2 m behind a Volvo's trailer, seen from the front, was explained by turning the
     trailer 10 deg."""
-    model = prior.model
-    if model.trailer is None:
-        return
-    mine = np.flatnonzero(owner == i)
-    (q,) = unit_frames(points[mine], prior.vector, model)[1:]
+    none = np.zeros(len(q), dtype=bool)
     half = model.trailer.width_m / 2
     at_rear = q[:, 0] <= model.trailer.rear_m + END_BAND_M
     beside = at_rear & (np.abs(q[:, 1]) >= half + WALL_BESIDE_M[0])
     if np.count_nonzero(beside) < WALL_MIN_POINTS:
-        return
+        return none
     wall = q[beside]
     across, along = np.ptp(np.abs(wall[:, 1])), np.ptp(wall[:, 0])
     if across < WALL_MIN_ACROSS_M or across < 2 * along:  # a face along the side (a dock's shelter), not across
-        return
+        return none
     left, right = wall[:, 1] > 0, wall[:, 1] < 0
     if left.any() and right.any():  # the line through both sides' middles
         x0, y0 = median(wall[left, 0]), median(wall[left, 1])
@@ -1035,28 +1044,23 @@ def _release_wall_behind(points: np.ndarray, owner: np.ndarray, i: int, prior: P
         slope = (x1 - x0) / (y1 - y0)
     else:
         x0, y0, slope = median(wall[:, 0]), 0.0, 0.0
-    on_wall = at_rear & (np.abs(q[:, 0] - (x0 + slope * (q[:, 1] - y0))) <= END_BAND_M / 2)
-    owner[mine[on_wall]] = -1
+    return at_rear & (np.abs(q[:, 0] - (x0 + slope * (q[:, 1] - y0))) <= END_BAND_M / 2)
 
 
-def _detached(points: np.ndarray, owner: np.ndarray, i: int, prior: Prior) -> Prior:
-    """``prior`` with its trailer's slack cut where its claimed points behind the model's rear face
-    stop running on without a gap longer than ``MAX_BODY_GAP_M``; the points beyond are released
-    (``owner`` -1). A trailer is one body: an object the moving trailer has just uncovered metres
-    behind it (a fence, a parked car) is not its unseen rear, and it pulled the fit's sides (a
-    Volvo driving off from a fence 5-7 m behind it read a 3 degree hitch for 5 s)."""
-    if prior.model.trailer is None or prior.trailer_slack_m <= SETTLED_SLACK_M:
-        return prior
-    mine = np.flatnonzero(owner == i)
-    (q,) = unit_frames(points[mine], prior.vector, prior.model)[1:]
+def _beyond_gap(q: np.ndarray, prior: Prior) -> tuple[Prior, np.ndarray]:
+    """(``prior`` with its trailer's slack cut where its claimed points (``q``: the trailer's frame,
+    xy) behind the model's rear face stop running on without a gap longer than ``MAX_BODY_GAP_M``,
+    which of them lie beyond). A trailer is one body: an object the moving trailer has just
+    uncovered metres behind it (a fence, a parked car) is not its unseen rear, and it pulled the
+    fit's sides (a Volvo driving off from a fence 5-7 m behind it read a 3 degree hitch for 5 s)."""
+    if prior.trailer_slack_m <= SETTLED_SLACK_M:
+        return prior, np.zeros(len(q), dtype=bool)
     behind = prior.model.trailer.rear_m - q[:, 0]
-    order = np.sort(behind[behind > 0.0])
-    chain = np.concatenate([[0.0], order])
+    chain = np.concatenate([[0.0], np.sort(behind[behind > 0.0])])
     gaps = np.flatnonzero(np.diff(chain) > MAX_BODY_GAP_M)
     reach = float(chain[gaps[0]] if len(gaps) else chain[-1])
     slack = min(reach + SETTLED_SLACK_M, prior.trailer_slack_m)
-    owner[mine[behind > slack]] = -1
-    return replace(prior, trailer_slack_m=slack)
+    return replace(prior, trailer_slack_m=slack), behind > slack
 
 
 def _face_span(m: Measurement, model: VehicleModel, unit: int, face: int) -> float:
