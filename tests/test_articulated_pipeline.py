@@ -207,6 +207,30 @@ def test_unknown_trailer_length_converges():
     assert len(hitch_err) >= 15 and np.sqrt(np.mean(np.square(hitch_err))) < 0.5
 
 
+def test_a_track_is_reported_with_the_length_its_start_frame_shows():
+    """A start fit with the 13.68 m trailer of the catalogue's MAN on a 10.5 m one whose rear face is
+    in sight (3 m inside its box, nearer its sides than its rear: the fit's free length stays): the
+    first report has the length the frame shows, and its trailer where it is (it was reported for
+    a frame with its centre 1.5 m back)."""
+    man = VehicleModel.from_config("man_tgx", PARAMS.vehicles["man_tgx"])
+    truth = replace(man, name="truth", trailer=replace(man.trailer, length_m=10.5))
+    sensors = ((-30.0, 3.0, 4.0), *SENSORS)  # one behind it
+    boxes = world_boxes(truth, 0.0, 3.0, 0.0, 0.0)
+    points = vehicle_points(truth, 0.0, 3.0, 0.0, sensors=sensors, spacing=0.15)
+    tracker = VehicleTracker(PARAMS.articulated, PARAMS.vehicles)
+    tracker._rays = cast_rays(boxes, sensors)
+    m = fit(points, Prior(0.0, 3.0, 0.0, 0.0, man, 0.0), PARAMS.articulated)
+    track = tracker._track(1, man, m, 0.0, 0.0, 0.0)
+    tracker._learn_at_start(track, points, m)
+    report = track.report(True)
+    assert report.model.trailer.length_m == pytest.approx(10.5, abs=0.3)
+    centre = report.model.box_centers(report.state.x_m, report.state.y_m, report.state.yaw_rad, report.state.hitch_rad)[
+        1
+    ]
+    true_centre = truth.box_centers(0.0, 3.0, 0.0, 0.0)[1]
+    assert np.hypot(*(centre - true_centre)) < 0.15
+
+
 def _long_trailer(length_m: float) -> VehicleModel:
     model = volvo()
     l2 = model.trailer_axle_m * (length_m - model.trailer.front_m) / (model.trailer.length_m - model.trailer.front_m)

@@ -692,7 +692,25 @@ class VehicleTracker:
         if chosen is None:
             return None
         model, m = chosen
-        return self._track(next(self._ids), model, m, ground_z_m, stamp_s, 0.0)
+        track = self._track(next(self._ids), model, m, ground_z_m, stamp_s, 0.0)
+        self._learn_at_start(track, cluster, m)
+        return track
+
+    def _learn_at_start(self, track: _Track, cluster: np.ndarray, m: Measurement) -> None:
+        """The start frame's sizes learned before the first report, the pose fitted again with them
+        if they changed: an unknown 10.5 m trailer whose rear face the start saw was reported for a
+        frame with the 13.68 m of the model it started as, its centre 1.5 m back."""
+        if not self.params.learn_dimensions:
+            return
+        before = track.model
+        self._learn(track, m)
+        if track.model == before:
+            return
+        prior = Prior(m.x_m, m.y_m, m.yaw_rad, m.hitch_rad or 0.0, track.model, track.ground_z_m)
+        again = fit(cluster, prior, self.params, START_ITERATIONS)
+        if again is not None:
+            track.filter.restart(again.vector, again.covariance + np.diag(START_SIGMAS[: len(again.vector)] ** 2))
+            track.last = again
 
     def _candidate(
         self, cluster: np.ndarray, rect: Rect, seed: Seed, ground_z_m: float, rigid_allowed: bool
@@ -874,6 +892,7 @@ class VehicleTracker:
         model, m = chosen
         new = self._track(track.id, model, m, track.ground_z_m, stamp_s, s.speed_m_s)
         new.first_xy = track.first_xy
+        self._learn_at_start(new, points, m)
         self.tracks[self.tracks.index(track)] = new
         return new
 
