@@ -998,7 +998,7 @@ def _around_kingpin(points: np.ndarray, prior: Prior, max_points: int) -> np.nda
     model = prior.model
     kingpin = model.kingpin_xy(prior.x_m, prior.y_m, prior.yaw_rad)
     reach = model.tractor.front_m - model.kingpin_behind_axle_m + END_BAND_M
-    (q,) = unit_frames(points, prior.vector, model)[1:]
+    q = trailer_frame(points, prior.vector, model)
     trailer = model.trailer
     grown = END_BAND_M  # its faces' points lie on both sides of them
     on_trailer = (q[:, 0] <= trailer.front_m + grown) & (q[:, 0] >= trailer.rear_m - grown)
@@ -1028,7 +1028,7 @@ def _own_body(points: np.ndarray, owner: np.ndarray, i: int, prior: Prior) -> Pr
     if prior.model.trailer is None:
         return prior
     mine = np.flatnonzero(owner == i)
-    (q,) = unit_frames(points[mine], prior.vector, prior.model)[1:]
+    q = trailer_frame(points[mine], prior.vector, prior.model)
     prior, beyond = _beyond_gap(q, prior)
     kept = np.flatnonzero(~beyond)
     owner[mine[beyond]] = -1
@@ -1284,12 +1284,18 @@ def _unit_origins(v: np.ndarray, model: VehicleModel) -> list[tuple[np.ndarray, 
 
 def unit_frames(points: np.ndarray, v: np.ndarray, model: VehicleModel) -> list[np.ndarray]:
     """(N, 2) coordinates of the points in each unit's frame (tractor: rear axle; trailer: kingpin)."""
-    out = []
-    for origin, yaw in _unit_origins(v, model):
-        c, s = np.cos(yaw), np.sin(yaw)
-        d = points[:, :2] - origin
-        out.append(np.column_stack([c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1]]))
-    return out
+    return [_in_frame(points, origin, yaw) for origin, yaw in _unit_origins(v, model)]
+
+
+def trailer_frame(points: np.ndarray, v: np.ndarray, model: VehicleModel) -> np.ndarray:
+    """``unit_frames``' trailer frame alone."""
+    return _in_frame(points, *_unit_origins(v, model)[1])
+
+
+def _in_frame(points: np.ndarray, origin: np.ndarray, yaw: float) -> np.ndarray:
+    c, s = np.cos(yaw), np.sin(yaw)
+    d = points[:, :2] - origin
+    return np.column_stack([c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1]])
 
 
 def prior_boxes(prior: Prior) -> np.ndarray:
