@@ -777,13 +777,13 @@ def test_a_trailer_claims_behind_it_only_what_runs_on_from_its_body():
     fence = np.column_stack([np.full(30, rear_x - 5.0), np.linspace(4.0, 6.0, 30), np.full(30, 1.5)])
     points = np.vstack([body, fence])
     owner = np.zeros(len(points), dtype=np.int64)
-    cut = _own_body(points, owner, 0, prior)
-    assert np.all(owner[len(body) :] == -1) and np.all(owner[: len(body)] == 0)
+    cut, walled = _own_body(points, owner, 0, prior)
+    assert np.all(owner[len(body) :] == -1) and np.all(owner[: len(body)] == 0) and not walled
     assert cut.trailer_slack_m == pytest.approx(SETTLED_SLACK_M, abs=0.05)
     longer = np.column_stack([rear_x - np.arange(0.5, 2.01, 0.5), np.full(4, 5.0), np.full(4, 2.0)])
     points = np.vstack([body, longer, fence])
     owner = np.zeros(len(points), dtype=np.int64)
-    cut = _own_body(points, owner, 0, prior)
+    cut, _ = _own_body(points, owner, 0, prior)
     assert np.all(owner[: len(body) + 4] == 0) and np.all(owner[len(body) + 4 :] == -1)
     assert cut.trailer_slack_m == pytest.approx(2.0 + SETTLED_SLACK_M, abs=0.01)
 
@@ -804,15 +804,38 @@ def test_a_wall_behind_the_trailer_is_released_and_its_body_kept():
         wall = np.column_stack([rear + offsets[:, None] * across, np.full(40, 2.0)])
         points = np.vstack([body, wall])
         owner = np.zeros(len(points), dtype=np.int64)
-        _own_body(points, owner, 0, prior)
+        assert not _own_body(points, owner, 0, prior)[1]  # a wall behind the body, not across it
         assert np.all(owner[len(body) :] == -1) and np.all(owner[: len(body)] == 0)
     along = np.array([np.cos(yaw), np.sin(yaw)])
     beside = rear + 0.3 * along + (model.trailer.width_m / 2 + 0.5) * across  # a dock's shelter along one side
     shelter = np.column_stack([beside + np.linspace(-0.6, 0.6, 20)[:, None] * along, np.full(20, 2.0)])
     for points in (body, np.vstack([body, shelter])):  # no wall: nothing released
         owner = np.zeros(len(points), dtype=np.int64)
-        _own_body(points, owner, 0, prior)
+        assert not _own_body(points, owner, 0, prior)[1]
         assert np.all(owner == 0)
+
+
+def test_a_wall_across_the_trailer_at_an_angle_is_released():
+    """A Twizy's trailer pulled out of its dock at 45 deg to the wall: the wall's two faces (0.4 m
+    apart) run across the trailer's rear and out past both its sides. Their points are released,
+    and of the trailer's own only those within END_BAND_M / 2 of a face (where it crosses them)."""
+    model = volvo()
+    yaw = 0.3
+    prior = Prior(0.0, 4.0, yaw, 0.0, model)
+    body = vehicle_points(model, 0.0, 4.0, yaw, sensors=SENSORS, spacing=0.15)
+    kingpin = model.kingpin_xy(0.0, 4.0, yaw)
+    turn = np.array([[np.cos(yaw), -np.sin(yaw)], [np.sin(yaw), np.cos(yaw)]])
+    direction, normal = np.array([1.0, 1.0]) / np.sqrt(2.0), np.array([1.0, -1.0]) / np.sqrt(2.0)
+    centre = np.array([model.trailer.rear_m + 0.8, 0.0])  # in the trailer's frame
+    faces = [centre + k * 0.4 * normal + np.linspace(-3.0, 3.0, 60)[:, None] * direction for k in (0, 1)]
+    wall = np.column_stack([kingpin + np.vstack(faces) @ turn.T, np.full(120, 2.0)])
+    points = np.vstack([body, wall])
+    owner = np.zeros(len(points), dtype=np.int64)
+    assert _own_body(points, owner, 0, prior)[1]
+    assert np.all(owner[len(body) :] == -1)
+    local = (body[:, :2] - kingpin) @ turn  # the trailer's frame
+    off_faces = np.min([np.abs((local - centre) @ normal - k * 0.4) for k in (0, 1)], axis=0) > 0.25
+    assert off_faces.sum() > 0.8 * len(body) and np.all(owner[: len(body)][off_faces] == 0)
 
 
 def _seed_that_moved(points: np.ndarray, along_x_m: float) -> Seed:

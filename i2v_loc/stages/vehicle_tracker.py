@@ -15,6 +15,7 @@ import bisect
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
+from functools import lru_cache
 from itertools import count
 
 import numpy as np
@@ -50,6 +51,9 @@ REACH_MAX_HITCH_RAD = np.radians(5.0)  # nearly straight: the trailer's front re
 GAP_TEST_MAX_HITCH_RAD = np.radians(10.0)  # beyond, a trailer's front corner swings into the gap
 WALL_MIN_POINTS = 5
 WALL_MIN_ACROSS_M = 0.2
+WALL_MIN_ANGLE_DEG = 30.0
+WALL_ANGLE_STEP_DEG = 2.0
+WALL_LINE_M = 0.1
 GAP_FILL_RATIO = 0.5
 GAP_MIN_POINTS = 5
 GAP_OPEN_RATIO = 0.1  # a moving seed with so few points in its gap is two units, however well one box fits
@@ -255,6 +259,7 @@ class _Track:
     trailer_front: _Extent | None = None  # the trailer's front face ahead of the kingpin (with it)
     reach: _Extent | None = None  # the trailer's front face ahead of the rear axle (seen straight)
     frames: int = 0  # measured frames
+    at_wall: bool = False  # this frame: a wall ran across its trailer's body (its rear end is not seen)
 
     def report(self, measured: bool) -> VehicleReport:
         s = self.filter.state
@@ -297,9 +302,9 @@ class VehicleTracker:
         priors = [self._prior(t, stamp_s, ground) for t in self.tracks]
         lost = [self._tractor_lost(t) for t in self.tracks]
         owner = self._claim(points, priors, lost)
-        priors = [_own_body(points, owner, i, prior) for i, prior in enumerate(priors)]
+        owned = [_own_body(points, owner, i, prior) for i, prior in enumerate(priors)]
         reports = []
-        for i, (track, prior) in enumerate(zip(self.tracks, priors)):
+        for i, (track, (prior, track.at_wall)) in enumerate(zip(self.tracks, owned)):
             reports.append(self._step(track, prior, points[owner == i], stamp_s, lost[i]))
         self.tracks = [t for t in self.tracks if t.missed < self.params.leave_frames]
         reports = [r for r in reports if any(t.id == r.id for t in self.tracks)]
@@ -411,7 +416,8 @@ class VehicleTracker:
             self._learn_cab_length(track, m, local[0])
             new_boxes[0] = replace(new_boxes[0], length_m=track.cab_length.estimate)
         if model.trailer is not None and track.trailer_length is not None:
-            self._learn_trailer_length(track, m, local[1], new_boxes[1].width_m)
+            if not track.at_wall:  # its rear end went with the wall, or lies beyond it
+                self._learn_trailer_length(track, m, local[1], new_boxes[1].width_m)
             new_boxes[1] = replace(new_boxes[1], length_m=track.trailer_length.estimate)
             new_boxes[1] = replace(new_boxes[1], front_m=self._trailer_front(track))
             model = replace(model, kingpin_behind_axle_m=track.kingpin.estimate)
@@ -1021,49 +1027,90 @@ def _sized_start(m: Measurement, model: VehicleModel, ground_z_m: float) -> Prio
     return Prior(m.x_m, m.y_m, m.yaw_rad, m.hitch_rad, sized, ground_z_m, 0.0, True)
 
 
-def _own_body(points: np.ndarray, owner: np.ndarray, i: int, prior: Prior) -> Prior:
+def _own_body(points: np.ndarray, owner: np.ndarray, i: int, prior: Prior) -> tuple[Prior, bool]:
     """``prior`` with the claimed points of track ``i`` (``owner``) that are no part of its trailer's
     body released (-1): those behind a gap (``_beyond_gap``, which also cuts the prior's slack) and a
-    wall behind it (``_wall_behind``) among the rest."""
+    wall behind it (``_wall_behind``) among the rest; and whether the wall ran across the trailer's
+    body (``END_BAND_M / 2`` ahead of its rear face or more): its rear end is not seen then."""
     if prior.model.trailer is None:
-        return prior
+        return prior, False
     mine = np.flatnonzero(owner == i)
     q = trailer_frame(points[mine], prior.vector, prior.model)
     prior, beyond = _beyond_gap(q, prior)
     kept = np.flatnonzero(~beyond)
     owner[mine[beyond]] = -1
-    owner[mine[kept[_wall_behind(q[kept], prior.model)]]] = -1
-    return prior
+    wall = _wall_behind(q[kept], prior.model)
+    owner[mine[kept[wall]]] = -1
+    trailer, on_wall = prior.model.trailer, q[kept[wall]]
+    across = (on_wall[:, 0] >= trailer.rear_m + END_BAND_M / 2) & (np.abs(on_wall[:, 1]) <= trailer.width_m / 2)
+    return prior, bool(across.any())
 
 
 def _wall_behind(q: np.ndarray, model: VehicleModel) -> np.ndarray:
-    """Which of a trailer's claimed points (``q``: its frame, xy) are a wall behind it: a face at its
-    rear (``END_BAND_M`` ahead of it or any way behind) with at least ``WALL_MIN_POINTS`` points
-    ``WALL_BESIDE_M[0]`` or more out past its sides, spreading across the trailer (at least
-    ``WALL_MIN_ACROSS_M``, twice as far as along it: a dock's shelter beside a trailer's rear runs
-    along it), runs on past them; a trailer's body does not.
-    The wall's points lie along the line through those beside it (across the trailer where they lie
-    on one side only), with any of the trailer's own rear face within ``END_BAND_M / 2`` of it.
-    A dock's wall 0.2 m behind a Volvo's trailer, seen from the front, was explained by turning the
-    trailer 10 deg."""
-    none = np.zeros(len(q), dtype=bool)
-    half = model.trailer.width_m / 2
-    at_rear = q[:, 0] <= model.trailer.rear_m + END_BAND_M
-    beside = at_rear & (np.abs(q[:, 1]) >= half + WALL_BESIDE_M[0])
+    """Which of a trailer's claimed points (``q``: its frame, xy) are a wall behind it: straight
+    faces at its rear (``END_BAND_M`` ahead of it or any way behind) with points ``WALL_BESIDE_M[0]``
+    or more out past its sides run on past them; a trailer's body does not. Of those points beside
+    its rear, the most on one line (``_wall_normal``) give the wall's direction, which must lie
+    ``WALL_MIN_ANGLE_DEG`` or more off the trailer's axis (a dock's shelter beside a trailer's rear
+    runs along it); each line in that direction passing its rear with ``WALL_MIN_POINTS`` of the
+    points out past its sides, ``WALL_MIN_ACROSS_M`` long, is a face of the wall
+    (``_wall_offsets``). The wall's points lie within ``END_BAND_M / 2`` of one, ahead of the
+    trailer's front none. A dock's wall 0.2 m behind a Volvo's trailer, seen from the front, was
+    explained by turning the trailer 10 deg; a Twizy's trailer pulled out of its dock at 45 deg to
+    the wall, the wall's two faces across its box, by 5-9 deg of hitch (the first version took
+    walls square to the trailer only). (Tried: faces of points behind the trailer too: a vehicle
+    close behind an unknown trailer gave faces across its unseen rear, and its length was lost.)"""
+    trailer = model.trailer
+    out = WALL_BESIDE_M[0]
+    ahead = q[:, 0] <= trailer.front_m
+    past = ahead & (np.abs(q[:, 1]) >= trailer.width_m / 2 + out)
+    beside = past & (q[:, 0] <= trailer.rear_m + END_BAND_M)
+    wall = np.zeros(len(q), dtype=bool)
     if np.count_nonzero(beside) < WALL_MIN_POINTS:
-        return none
-    wall = q[beside]
-    across, along = np.ptp(np.abs(wall[:, 1])), np.ptp(wall[:, 0])
-    if across < WALL_MIN_ACROSS_M or across < 2 * along:  # a face along the side (a dock's shelter), not across
-        return none
-    left, right = wall[:, 1] > 0, wall[:, 1] < 0
-    if left.any() and right.any():  # the line through both sides' middles
-        x0, y0 = median(wall[left, 0]), median(wall[left, 1])
-        x1, y1 = median(wall[right, 0]), median(wall[right, 1])
-        slope = (x1 - x0) / (y1 - y0)
-    else:
-        x0, y0, slope = median(wall[:, 0]), 0.0, 0.0
-    return at_rear & (np.abs(q[:, 0] - (x0 + slope * (q[:, 1] - y0))) <= END_BAND_M / 2)
+        return wall
+    normal = _wall_normal(q[beside])
+    if abs(normal[1]) > np.sin(np.radians(90.0 - WALL_MIN_ANGLE_DEG)):
+        return wall  # along the trailer: a dock's shelter
+    edge = trailer.width_m / 2 + out
+    for offset in _wall_offsets(q[past], normal):
+        # it passes the trailer's rear: a line of points beside its middle (a shelter's end) does not
+        if min((offset - normal[1] * y) / normal[0] for y in (-edge, edge)) <= trailer.rear_m + END_BAND_M:
+            wall |= np.abs(q @ normal - offset) <= END_BAND_M / 2
+    return wall & ahead
+
+
+def _wall_normal(points: np.ndarray) -> np.ndarray:
+    """The normal of the direction in which most of ``points`` (xy) lie on one line: a Hough vote
+    over ``WALL_ANGLE_STEP_DEG`` steps in ``WALL_LINE_M`` wide bins, refined by the principal axes of
+    the points in and beside the winning bin (a step's error turns a 6 m face across three bins)."""
+    normals = _line_normals()
+    bins = np.floor(points @ normals.T / WALL_LINE_M).astype(np.int64)  # (n, angles)
+    low = bins.min(axis=0)
+    span = int((bins.max(axis=0) - low).max()) + 1
+    best, b = divmod(int(np.argmax(np.bincount((bins - low + np.arange(len(normals)) * span).ravel()))), span)
+    line = points[np.abs(bins[:, best] - low[best] - b) <= 1]
+    _, axes = np.linalg.eigh(np.cov((line - line.mean(axis=0)).T))
+    return axes[:, 0]
+
+
+def _wall_offsets(points: np.ndarray, normal: np.ndarray) -> list[float]:
+    """The offsets along ``normal`` of the lines across it (``WALL_LINE_M`` wide bins) that hold
+    ``WALL_MIN_POINTS`` of ``points`` (out past the trailer's sides) spanning ``WALL_MIN_ACROSS_M``:
+    a wall's faces."""
+    bins = np.floor(points @ normal / WALL_LINE_M).astype(np.int64)
+    along = points @ np.array([-normal[1], normal[0]])
+    offsets = []
+    for b in np.unique(bins):
+        on = bins == b
+        if np.count_nonzero(on) >= WALL_MIN_POINTS and np.ptp(along[on]) >= WALL_MIN_ACROSS_M:
+            offsets.append((b + 0.5) * WALL_LINE_M)
+    return offsets
+
+
+@lru_cache(maxsize=1)
+def _line_normals() -> np.ndarray:
+    angles = np.radians(np.arange(0.0, 180.0, WALL_ANGLE_STEP_DEG))
+    return np.column_stack([np.cos(angles), np.sin(angles)])
 
 
 def _beyond_gap(q: np.ndarray, prior: Prior) -> tuple[Prior, np.ndarray]:
