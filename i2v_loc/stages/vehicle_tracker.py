@@ -304,7 +304,8 @@ class VehicleTracker:
         owner = self._claim(points, priors, lost)
         owned = [_own_body(points, owner, i, prior) for i, prior in enumerate(priors)]
         reports = []
-        for i, (track, (prior, track.at_wall)) in enumerate(zip(self.tracks, owned)):
+        for i, (track, (prior, at_wall)) in enumerate(zip(self.tracks, owned)):
+            track.at_wall = at_wall
             reports.append(self._step(track, prior, points[owner == i], stamp_s, lost[i]))
         self.tracks = [t for t in self.tracks if t.missed < self.params.leave_frames]
         reports = [r for r in reports if any(t.id == r.id for t in self.tracks)]
@@ -718,7 +719,7 @@ class VehicleTracker:
         prior = Prior(m.x_m, m.y_m, m.yaw_rad, m.hitch_rad or 0.0, track.model, track.ground_z_m)
         again = fit(cluster, prior, self.params, START_ITERATIONS)
         if again is not None:
-            track.filter.restart(again.vector, again.covariance + np.diag(START_SIGMAS[: len(again.vector)] ** 2))
+            track.filter.restart(again.vector, _start_covariance(again))
             track.last = again
 
     def _candidate(
@@ -847,7 +848,7 @@ class VehicleTracker:
         self, track_id: int, model: VehicleModel, m: Measurement, ground_z_m: float, stamp_s: float, speed_m_s: float
     ) -> _Track:
         # the seed's points are not de-skewed (no motion known yet): the first pose is a rough one
-        start_cov = m.covariance + np.diag(START_SIGMAS[: len(m.vector)] ** 2)
+        start_cov = _start_covariance(m)
         filt = KinematicFilter(
             m.vector,
             start_cov,
@@ -1007,11 +1008,12 @@ def _around_kingpin(points: np.ndarray, prior: Prior, max_points: int) -> np.nda
     model = prior.model
     kingpin = model.kingpin_xy(prior.x_m, prior.y_m, prior.yaw_rad)
     reach = model.tractor.front_m - model.kingpin_behind_axle_m + END_BAND_M
-    q = trailer_frame(points, prior.vector, model)
-    trailer = model.trailer
+    trailer, yaw = model.trailer, prior.yaw_rad + prior.hitch_rad
+    centre = model.box_centers(prior.x_m, prior.y_m, prior.yaw_rad, prior.hitch_rad)[1]
     grown = END_BAND_M  # its faces' points lie on both sides of them
-    on_trailer = (q[:, 0] <= trailer.front_m + grown) & (q[:, 0] >= trailer.rear_m - grown)
-    on_trailer &= np.abs(q[:, 1]) <= trailer.width_m / 2 + grown
+    box = np.array([*centre, np.cos(yaw), np.sin(yaw), trailer.length_m / 2 + grown, trailer.width_m / 2 + grown])
+    on_trailer = np.empty(len(points), dtype=bool)
+    kernels.in_upright_box(np.ascontiguousarray(points), box, on_trailer)
     near = (np.hypot(*(points[:, :2] - kingpin).T) <= reach) & ~on_trailer
     n_near = int(np.count_nonzero(near))
     k_near = min(n_near, max(max_points // 2, max_points - (len(points) - n_near)))
@@ -1021,6 +1023,11 @@ def _around_kingpin(points: np.ndarray, prior: Prior, max_points: int) -> np.nda
 def _at_pose(prior: Prior, m: Measurement) -> Prior:
     """``prior`` moved to the pose of the fit ``m``."""
     return replace(prior, x_m=m.x_m, y_m=m.y_m, yaw_rad=m.yaw_rad, hitch_rad=m.hitch_rad or 0.0)
+
+
+def _start_covariance(m: Measurement) -> np.ndarray:
+    """A start fit's covariance widened by ``START_SIGMAS`` (the seed's points are not de-skewed)."""
+    return m.covariance + np.diag(START_SIGMAS[: len(m.vector)] ** 2)
 
 
 def _sized_start(m: Measurement, model: VehicleModel, ground_z_m: float) -> Prior:
@@ -1102,12 +1109,12 @@ def _wall_offsets(points: np.ndarray, normal: np.ndarray) -> list[float]:
     a wall's faces."""
     bins = np.floor(points @ normal / WALL_LINE_M).astype(np.int64)
     along = points @ np.array([-normal[1], normal[0]])
-    offsets = []
-    for b in np.unique(bins):
-        on = bins == b
-        if np.count_nonzero(on) >= WALL_MIN_POINTS and np.ptp(along[on]) >= WALL_MIN_ACROSS_M:
-            offsets.append((b + 0.5) * WALL_LINE_M)
-    return offsets
+    order = np.lexsort((along, bins))
+    bins, along = bins[order], along[order]
+    first = np.flatnonzero(np.r_[True, np.diff(bins) > 0])
+    last = np.r_[first[1:], len(bins)] - 1
+    face = (last - first + 1 >= WALL_MIN_POINTS) & (along[last] - along[first] >= WALL_MIN_ACROSS_M)
+    return [float((b + 0.5) * WALL_LINE_M) for b in bins[first[face]]]
 
 
 @lru_cache(maxsize=1)
