@@ -507,6 +507,13 @@ class ArticulatedParams(Section):
     curvature_rate_sigma_1_m_s: float = Field(
         0.03, gt=0.0, le=5.0, description="Process noise: rate of change of the path curvature"
     )
+    reverse_hold_m: float = Field(
+        1.5,
+        gt=0.0,
+        le=1000.0,
+        description="Process model: reversing, the path curvature relaxes to the one that holds the hitch angle "
+        "still over this distance travelled (a driver keeps a reversing trailer from folding)",
+    )
     position_sigma_m_s: float = Field(0.05, ge=0.0, le=5.0, description="Process noise: position (slip, model error)")
     yaw_sigma_deg_s: float = Field(
         0.2, ge=0.0, le=90.0, description="Process noise: tractor yaw beyond the curvature model"

@@ -14,6 +14,8 @@ PARAMS = Params()
 VOLVO = PARAMS.vehicles["volvo_fh"]
 ART = Articulation.from_vehicle(VOLVO)
 R = np.diag([0.03, 0.03, np.radians(0.3), np.radians(0.3)]) ** 2
+HOLD_M = PARAMS.articulated.reverse_hold_m
+NEVER_HOLDS_M = 1e12  # the kinematics alone (the simulator's driver steers as it likes)
 
 
 def new_filter(truth: np.ndarray, speed: float = 0.0) -> KinematicFilter:
@@ -49,7 +51,7 @@ def test_propagation_matches_the_simulator_kinematics():
     state = np.array([1.0, 2.0, 0.2, speed, np.tan(steer) / ART.wheelbase_m, 0.3])
     for _ in range(50):
         truth = step(truth, speed, steer, ART, 0.1)
-        state = propagate(state, 0.1, ART.hitch_behind_axle_m, ART.trailer_hitch_to_axle_m, True)
+        state = propagate(state, 0.1, ART.hitch_behind_axle_m, ART.trailer_hitch_to_axle_m, True, NEVER_HOLDS_M)
     assert np.hypot(*(state[:2] - truth[:2])) < 1e-3
     assert abs(angle_deg(state[2] - truth[2])) < 1e-3
     assert abs(angle_deg(state[HITCH] - (truth[3] - truth[2]))) < 1e-2
@@ -58,6 +60,61 @@ def test_propagation_matches_the_simulator_kinematics():
 
 def rms(values) -> float:
     return float(np.sqrt(np.mean(np.square(values))))
+
+
+@pytest.mark.parametrize("hitch_deg", [-60.0, -25.0, 0.0, 10.0, 45.0])
+def test_at_the_holding_curvature_the_hitch_holds_still_at_any_speed(hitch_deg):
+    from i2v_loc.stages import kernels
+
+    hitch = np.radians(hitch_deg)
+    kingpin, axle = ART.hitch_behind_axle_m, ART.trailer_hitch_to_axle_m
+    curvature = kernels.holding_curvature(hitch, kingpin, axle)
+    for speed in (-2.0, -0.3, 1.5):
+        assert abs(kernels.hitch_rate(speed, curvature, hitch, kingpin, axle)) < 1e-12
+        steer = np.arctan(curvature * ART.wheelbase_m)  # the simulator's own kinematics agree
+        truth = step(np.array([0.0, 0.0, 0.4, 0.4 + hitch]), speed, steer, ART, 0.1)
+        assert abs(angle_deg(truth[3] - truth[2]) - hitch_deg) < 1e-3
+    if hitch_deg:
+        assert np.sign(curvature) == -np.sign(hitch)
+
+
+def drive_reversing_and_hold(reverse_hold_m: float, seed: int) -> list[float]:
+    """A driver reversing folds the trailer (the steering at its limit) for 2 s, seen whole, then
+    holds the hitch where it is for 8 s while the cab is hidden: the filter gets the trailer's yaw
+    and the kingpin's position only. Per hidden frame, the filter's hitch error (deg)."""
+    rng = np.random.default_rng(seed)
+    params = PARAMS.articulated.model_copy(update={"reverse_hold_m": reverse_hold_m})
+    kingpin, axle, speed = ART.hitch_behind_axle_m, ART.trailer_hitch_to_axle_m, -1.2
+    truth = np.array([0.0, 0.0, 0.3, 0.3])
+    f = KinematicFilter(np.array([0.0, 0.0, 0.3, 0.0]), R, 0.0, kingpin, axle, True, params, speed)
+    target, errors = np.radians(-80.0), []
+    for k in range(1, 101):
+        hitch = truth[3] - truth[2]
+        if k == 21:
+            target = hitch
+        # the driver: the curvature that holds the target, and a correction towards it
+        curvature = -np.sin(target) / (axle + kingpin * np.cos(target)) - 2.0 * (hitch - target) / axle
+        steer = np.clip(np.arctan(curvature * ART.wheelbase_m), -np.radians(35.0), np.radians(35.0))
+        truth = step(truth, speed, steer, ART, 0.1)
+        f.predict(k * 0.1)
+        z = np.array([truth[0], truth[1], truth[2], truth[3] - truth[2]]) + rng.normal(0, np.sqrt(np.diag(R)))
+        if k <= 20:
+            f.update(z, R)
+            continue
+        yaw = truth[2]
+        rows = np.array([[0, 0, 1, 1], [1, 0, kingpin * np.sin(yaw), 0], [0, 1, -kingpin * np.cos(yaw), 0]], float)
+        f.update(z, R, (rows, rows @ R @ rows.T))
+        errors.append(angle_deg(f.state.hitch_rad - (truth[3] - truth[2])))
+    return errors
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_reversing_with_the_cab_hidden_the_hitch_does_not_run_off(seed):
+    # a reversing trailer folds unless its driver steers against it: the curvature the filter
+    # learned while folding would fold it on in the prediction; a driver holds it
+    errors = np.abs(drive_reversing_and_hold(HOLD_M, seed))
+    assert errors.max() < 13.0
+    assert np.abs(drive_reversing_and_hold(NEVER_HOLDS_M, seed)).max() > 18.0  # the kinematics alone ran off
 
 
 def test_reversing_vehicle_keeps_its_heading_and_negative_speed():
@@ -143,7 +200,7 @@ def test_the_filter_computes_what_filterpys_ukf_computes(articulated):
     points = MerweScaledSigmaPoints(6, alpha=0.3, beta=2.0, kappa=0.0, sqrt_method=lambda p: np.linalg.cholesky(p).T)
     measured, z_angles = ([0, 1, 2, HITCH], [2, 3]) if articulated else ([0, 1, 2], [2])
     theirs = UnscentedKalmanFilter(
-        6, n_z, 0.1, lambda x: x[measured], lambda x, dt: propagate(x, dt, -0.3, 7.0, articulated), points,
+        6, n_z, 0.1, lambda x: x[measured], lambda x, dt: propagate(x, dt, -0.3, 7.0, articulated, HOLD_M), points,
         x_mean_fn=lambda s, w: ref_mean(s, w, [2, HITCH]), z_mean_fn=lambda s, w: ref_mean(s, w, z_angles),
         residual_x=lambda a, b: ref_residual(a, b, [2, HITCH]), residual_z=lambda a, b: ref_residual(a, b, z_angles),
     )  # fmt: skip
@@ -182,24 +239,26 @@ def ref_residual(a, b, angles):
     return d
 
 
-def ref_derivative(s, kingpin_m, trailer_axle_m, articulated):
+def ref_derivative(s, kingpin_m, trailer_axle_m, articulated, hold_m):
     v, kappa, yaw, hitch = s[..., SPEED], s[..., CURVATURE], s[..., 2], s[..., HITCH]
     d = np.zeros_like(s)
     d[..., 0], d[..., 1], d[..., 2] = v * np.cos(yaw), v * np.sin(yaw), v * kappa
     if articulated:
         omega = v * kappa
         d[..., HITCH] = -(v * np.sin(hitch) + kingpin_m * omega * np.cos(hitch)) / trailer_axle_m - omega
+        holding = -np.sin(hitch) / np.maximum(trailer_axle_m + kingpin_m * np.cos(hitch), 0.5)
+        d[..., CURVATURE] = (holding - kappa) * np.maximum(-v, 0.0) / hold_m
     return d
 
 
-def ref_propagate(state, dt_s, kingpin_m, trailer_axle_m, articulated):
+def ref_propagate(state, dt_s, kingpin_m, trailer_axle_m, articulated, hold_m):
     """The numpy kinematics ``kernels.propagate_states`` replaced."""
     s = np.array(state, dtype=float)
     steps = max(1, int(np.ceil(abs(dt_s) / 0.1)))
     h = dt_s / steps
     for _ in range(steps):
-        mid = s + 0.5 * h * ref_derivative(s, kingpin_m, trailer_axle_m, articulated)
-        s = s + h * ref_derivative(mid, kingpin_m, trailer_axle_m, articulated)
+        mid = s + 0.5 * h * ref_derivative(s, kingpin_m, trailer_axle_m, articulated, hold_m)
+        s = s + h * ref_derivative(mid, kingpin_m, trailer_axle_m, articulated, hold_m)
     s[..., 2], s[..., HITCH] = ref_wrap(s[..., 2]), ref_wrap(s[..., HITCH])
     return s
 
@@ -215,11 +274,11 @@ def test_the_compiled_kinematics_and_sigma_means_are_numpys(articulated):
             + [rng.uniform(-4, 4, 13)]
         )
         dt = float(rng.choice([0.05, 0.1, 0.1000000001, 0.37, 2.0, -0.1]))
-        derivative = kernels._kinematics(states, -0.35, 7.9, articulated)
-        assert np.array_equal(derivative, ref_derivative(states, -0.35, 7.9, articulated))
-        want = ref_propagate(states, dt, -0.35, 7.9, articulated)
-        assert np.array_equal(propagate(states, dt, -0.35, 7.9, articulated), want)
-        assert np.array_equal(propagate(states[3], dt, -0.35, 7.9, articulated), want[3])
+        derivative = kernels._kinematics(states, -0.35, 7.9, articulated, 1.3)
+        assert np.array_equal(derivative, ref_derivative(states, -0.35, 7.9, articulated, 1.3))
+        want = ref_propagate(states, dt, -0.35, 7.9, articulated, 1.3)
+        assert np.array_equal(propagate(states, dt, -0.35, 7.9, articulated, 1.3), want)
+        assert np.array_equal(propagate(states[3], dt, -0.35, 7.9, articulated, 1.3), want[3])
         weights = rng.normal(size=13)
         mean = ref_mean(want, weights, [2, HITCH])
         # a weighted sum through BLAS: numpy's and scipy's builds part by 1e-15 on an AVX-512 Xeon
@@ -234,7 +293,7 @@ def test_the_compiled_kinematics_and_sigma_means_are_numpys(articulated):
     # the wrap's edges: exactly +-pi and beyond several turns
     edges = np.array([[0.0, 0.0, np.pi, 0.0, 0.0, -np.pi], [1.0, 0.0, 7 * np.pi, 0.0, 0.0, -1e-300]])
     assert np.array_equal(
-        propagate(edges, 0.0, -0.35, 7.9, articulated), ref_propagate(edges, 0.0, -0.35, 7.9, articulated)
+        propagate(edges, 0.0, -0.35, 7.9, articulated, 1.3), ref_propagate(edges, 0.0, -0.35, 7.9, articulated, 1.3)
     )
 
 
@@ -280,7 +339,8 @@ def test_moving_the_pose_keeps_the_motion_and_the_covariance():
     before = f.ukf.x.copy(), f.ukf.P.copy()
     f.move_pose(np.array([-0.4, 0.1, 0.1, -0.05]))
     assert np.allclose(f.ukf.x[:2], before[0][:2] + [-0.4, 0.1], atol=1e-12)
-    assert f.ukf.x[2] == pytest.approx(3.2 - 2 * np.pi)  # wrapped
+    assert f.ukf.x[2] == pytest.approx(before[0][2] + 0.1 - 2 * np.pi)  # wrapped
+    assert before[0][2] + 0.1 > np.pi
     assert f.ukf.x[HITCH] == pytest.approx(before[0][HITCH] - 0.05)
     assert f.ukf.x[SPEED] == before[0][SPEED] and f.ukf.x[CURVATURE] == before[0][CURVATURE]
     assert np.array_equal(f.ukf.P, before[1])

@@ -25,6 +25,7 @@ _INLINE = {**_JIT, "inline": "always"}
 DENSE_KEYS_PER_POINT = 8
 DENSE_KEYS_MIN = 1 << 16
 EMPTY = np.int64(-1)
+MIN_HOLD_ARM_M = 0.5  # the holding curvature's arm never shrinks below this (a kingpin far ahead, folded)
 
 
 # ----------------------------------------------------------------------------- merge
@@ -1341,7 +1342,7 @@ def wrap_angles(values):
 
 
 @njit(**_JIT)
-def _kinematics(s, kingpin_m, trailer_axle_m, articulated):
+def _kinematics(s, kingpin_m, trailer_axle_m, articulated, hold_m):
     """d/dt of states (k, 6) [x, y, yaw, v, curvature, hitch] (kinematic_filter's model)."""
     d = np.zeros_like(s)
     for i in range(s.shape[0]):
@@ -1349,7 +1350,15 @@ def _kinematics(s, kingpin_m, trailer_axle_m, articulated):
         d[i, 0], d[i, 1], d[i, 2] = v * math.cos(yaw), v * math.sin(yaw), v * kappa
         if articulated:
             d[i, 5] = hitch_rate(v, kappa, hitch, kingpin_m, trailer_axle_m)
+            # reversing (unstable), a driver steers the hitch still: over ``hold_m`` travelled
+            d[i, 4] = (holding_curvature(hitch, kingpin_m, trailer_axle_m) - kappa) * max(-v, 0.0) / hold_m
     return d
+
+
+@njit(**_JIT)
+def holding_curvature(hitch, kingpin_m, trailer_axle_m):
+    """The path curvature at which the hitch angle holds still (``hitch_rate`` = 0 at any speed)."""
+    return -math.sin(hitch) / max(trailer_axle_m + kingpin_m * math.cos(hitch), MIN_HOLD_ARM_M)
 
 
 @njit(**_JIT)
@@ -1360,14 +1369,14 @@ def hitch_rate(v, curvature, hitch, kingpin_m, trailer_axle_m):
 
 
 @njit(**_JIT)
-def propagate_states(states, step_s, steps, kingpin_m, trailer_axle_m, articulated):
+def propagate_states(states, step_s, steps, kingpin_m, trailer_axle_m, articulated, hold_m):
     """States (k, 6) after ``steps`` midpoint steps of ``step_s``, yaw and hitch wrapped: the
     arithmetic of the numpy code it replaced (s + h d(s + 0.5 h d(s)), products in its order)."""
     s = states.copy()
     half = 0.5 * step_s
     for _ in range(steps):
-        mid = s + half * _kinematics(s, kingpin_m, trailer_axle_m, articulated)
-        s = s + step_s * _kinematics(mid, kingpin_m, trailer_axle_m, articulated)
+        mid = s + half * _kinematics(s, kingpin_m, trailer_axle_m, articulated, hold_m)
+        s = s + step_s * _kinematics(mid, kingpin_m, trailer_axle_m, articulated, hold_m)
     s[:, 2] = wrap_angles(s[:, 2])
     s[:, 5] = wrap_angles(s[:, 5])
     return s
@@ -1436,10 +1445,12 @@ def _weighted_cross(a, b, wc):
 
 
 @njit(**_JIT)
-def ukf_predict(x, p, wm, wc, spread, q, step_s, steps, kingpin_m, trailer_axle_m, articulated, angles):
+def ukf_predict(x, p, wm, wc, spread, q, step_s, steps, kingpin_m, trailer_axle_m, articulated, hold_m, angles):
     """One unscented prediction over the one-trailer kinematics (``steps`` midpoint steps of
     ``step_s``): the state, its covariance and the sigma points drawn around them for the update."""
-    sigmas = propagate_states(_sigma_points(x, p, spread), step_s, steps, kingpin_m, trailer_axle_m, articulated)
+    sigmas = propagate_states(
+        _sigma_points(x, p, spread), step_s, steps, kingpin_m, trailer_axle_m, articulated, hold_m
+    )
     mean = angle_mean(sigmas, wm, angles)
     d = angle_residuals(sigmas, mean.reshape(1, -1), angles)
     cov = _weighted_cross(d, d, wc) + q
@@ -1550,9 +1561,10 @@ def warm_up() -> None:
         seed_groups(points, one * 0.5, one, 0.0, 0.0, 0.0, 0.0, 1, 0.5, 0.0)
     wrap_angles(np.zeros(2))
     hitch_rate(1.0, 0.1, 0.2, -0.3, 7.0)
+    holding_curvature(0.2, -0.3, 7.0)
     states = np.zeros((13, 6))
     for articulated in (True, False):
-        propagate_states(states, 0.1, 1, -0.3, 7.0, articulated)
+        propagate_states(states, 0.1, 1, -0.3, 7.0, articulated, 1.0)
     for columns in (np.array([2, 5]), np.array([2, 3]), np.array([2])):
         angle_residuals(states, states[:1], columns)
         angle_mean(states, np.ones(13), columns)
@@ -1562,7 +1574,7 @@ def warm_up() -> None:
         (False, np.arange(3), np.array([2])),
     ):
         x, p, sigmas = ukf_predict(
-            np.zeros(6), np.eye(6), weights, weights, 6.0, np.eye(6), 0.1, 1, -0.3, 7.0, articulated, x_angles
+            np.zeros(6), np.eye(6), weights, weights, 6.0, np.eye(6), 0.1, 1, -0.3, 7.0, articulated, 1.0, x_angles
         )
         for rows in (np.eye(len(measured)), np.eye(len(measured))[:1]):  # all directions, one
             noise = np.eye(len(rows))

@@ -5,7 +5,10 @@ State [x, y, ψ1, v, κ, γ]: tractor rear-axle position, tractor yaw, signed sp
 v < 0, never a turned heading), path curvature (yaw rate ω = v κ, so a standing vehicle keeps its
 yaw) and hitch angle γ = ψ2 − ψ1. With the kingpin M behind the rear axle and L2 from the kingpin
 to the trailer's axle, the trailer's yaw rate is ψ2' = (v sin(ψ1 − ψ2) − M ω cos(ψ1 − ψ2)) / L2,
-so γ' = −(v sin γ + M ω cos γ) / L2 − ω. A rigid vehicle keeps γ = 0 (no noise, not measured).
+so γ' = −(v sin γ + M ω cos γ) / L2 − ω. Reversing (γ = 0 unstable), a driver steers the trailer
+from folding: κ relaxes to the curvature that holds γ (``kernels.holding_curvature``) over
+``reverse_hold_m`` travelled backwards; forward, κ is a random walk. A rigid vehicle keeps γ = 0
+(no noise, not measured).
 Measurement: the hinged fit's (x, y, ψ1, γ) with its covariance.
 """
 
@@ -33,12 +36,15 @@ def _midpoint_steps(dt_s: float) -> tuple[float, int]:
     return float(dt_s / steps), steps
 
 
-def propagate(state: np.ndarray, dt_s: float, kingpin_m: float, trailer_axle_m: float, articulated: bool) -> np.ndarray:
+def propagate(
+    state: np.ndarray, dt_s: float, kingpin_m: float, trailer_axle_m: float, articulated: bool, hold_m: float
+) -> np.ndarray:
     """The state (6,) or states (k, 6) ``dt_s`` later (midpoint steps, compiled: ``kernels.propagate_states``)."""
     s = np.array(state, dtype=float)
     out = kernels.propagate_states(
-        np.atleast_2d(s), *_midpoint_steps(dt_s), float(kingpin_m), float(trailer_axle_m), bool(articulated)
-    )
+        np.atleast_2d(s), *_midpoint_steps(dt_s), float(kingpin_m), float(trailer_axle_m), bool(articulated),
+        float(hold_m),
+    )  # fmt: skip
     return out.reshape(s.shape)
 
 
@@ -62,10 +68,12 @@ class _Ukf:
         self.sigmas_f = np.zeros((2 * n + 1, n))
         self.mahalanobis = 0.0
 
-    def predict(self, dt: float, q: np.ndarray, kingpin_m: float, trailer_axle_m: float, articulated: bool) -> None:
+    def predict(
+        self, dt: float, q: np.ndarray, kingpin_m: float, trailer_axle_m: float, articulated: bool, hold_m: float
+    ) -> None:
         self.x, self.P, self.sigmas_f = kernels.ukf_predict(
             self.x, self.P, self.wm, self.wc, self.spread, q, *_midpoint_steps(dt),
-            float(kingpin_m), float(trailer_axle_m), articulated, _ANGLES_X,
+            float(kingpin_m), float(trailer_axle_m), articulated, float(hold_m), _ANGLES_X,
         )  # fmt: skip
 
     def update(self, z: np.ndarray, r: np.ndarray, rows: np.ndarray | None = None) -> None:
@@ -158,7 +166,9 @@ class KinematicFilter:
     def predict(self, stamp_s: float) -> FilterState:
         dt = stamp_s - self.stamp_s if np.isfinite(stamp_s) else 0.1
         if dt > 0:
-            self.ukf.predict(dt, self._q(dt), self.kingpin_m, self.trailer_axle_m, self.articulated)
+            self.ukf.predict(
+                dt, self._q(dt), self.kingpin_m, self.trailer_axle_m, self.articulated, self.params.reverse_hold_m
+            )
             self.stamp_s = stamp_s
         return self.state
 
