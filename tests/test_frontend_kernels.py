@@ -352,3 +352,25 @@ def test_ground_hypotheses_are_the_numpy_hypotheses():
         assert np.array_equal(normals, want[0]) and np.array_equal(offsets, want[1])
         kept += len(normals)
     assert 0 < kept < 200 * region.params.ransac_iterations  # some planes kept, some dropped as too steep
+
+
+def test_the_fullest_bin_is_the_numpy_histograms():
+    """``kernels.fullest_bin`` (a wall's Hough vote) finds the bin a histogram of all the directions'
+    bins at once finds, ties going to the first direction, then the lowest bin."""
+    from i2v_loc.stages.vehicle_tracker import WALL_LINE_M, _line_normals
+
+    normals = _line_normals()
+    rng = np.random.default_rng(3)
+    for trial in range(500):
+        n = int(rng.integers(5, 300))
+        points = rng.normal(0.0, 3.0, (n, 2))
+        if trial % 3 == 0:
+            points = np.round(points, 1)  # on the bins' edges, and ties
+        if trial % 5 == 0:
+            points[: n // 2, 0] = rng.uniform(-4.0, -3.9, n // 2)  # a wall
+        bins = np.floor(points @ normals.T / WALL_LINE_M).astype(np.int64)
+        low = bins.min(axis=0)
+        span = int((bins.max(axis=0) - low).max()) + 1
+        want = divmod(int(np.argmax(np.bincount((bins - low + np.arange(len(normals)) * span).ravel()))), span)
+        got = kernels.fullest_bin(np.ascontiguousarray(points @ normals.T), WALL_LINE_M)
+        assert tuple(int(v) for v in got) == want

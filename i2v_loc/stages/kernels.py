@@ -1125,6 +1125,33 @@ def observed_directions(marginal, prior_sigmas, floor):
 
 
 @njit(**_JIT)
+def fullest_bin(projections, width):
+    """(column, bin) of the fullest ``width``-wide bin of ``projections`` (n, k), one column at a
+    time, bins counted from each column's lowest (floor(p / width) - its minimum); the first column,
+    then the lowest bin, on ties: a Hough vote over k directions without an (n, k) array of bins
+    and its histogram."""
+    n, k = projections.shape
+    best, best_column, best_bin = -1, 0, 0
+    bins = np.empty(n, dtype=np.int64)
+    for j in range(k):
+        low, high = np.int64(0), np.int64(0)
+        for i in range(n):
+            b = np.int64(math.floor(projections[i, j] / width))
+            bins[i] = b
+            if i == 0 or b < low:
+                low = b
+            if i == 0 or b > high:
+                high = b
+        counts = np.zeros(high - low + 1, dtype=np.int64)
+        for i in range(n):
+            counts[bins[i] - low] += 1
+        for b in range(high - low + 1):
+            if counts[b] > best:
+                best, best_column, best_bin = counts[b], j, b
+    return best_column, best_bin
+
+
+@njit(**_JIT)
 def any_closer(a, b, distance):
     """Whether a point of ``b`` (M, 2) lies closer than ``distance`` to a point of ``a`` (N, 2)
     (squared distances summed x then y, strictly below distance squared: a k-d tree's query with
@@ -1556,6 +1583,7 @@ def warm_up() -> None:
     observed_directions(np.eye(4), np.ones(4), np.ones(4))
     fit_faces(xy, z, geometry, 0.25, 4, True, True, v0)  # the tests call it on its own
     any_closer(xy, xy, 0.5)  # the tests call it on its own
+    fullest_bin(np.ones((3, 2)), 0.1)
     rays_through_box(p32, p64[:1], np.array([0, 3]), np.eye(3), np.array([0.0, 0.0, 1.0, 0.0, 1.0, 1.0, 0.0, 1.0]), 0.3)
     for points, one in ((p32, np.float32(1.0)), (p64, 1.0)):  # level ground keeps float32; a slope float64
         seed_groups(points, one * 0.5, one, 0.0, 0.0, 0.0, 0.0, 1, 0.5, 0.0)

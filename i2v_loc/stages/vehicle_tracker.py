@@ -1094,11 +1094,10 @@ def _wall_normal(points: np.ndarray) -> np.ndarray:
     over ``WALL_ANGLE_STEP_DEG`` steps in ``WALL_LINE_M`` wide bins, refined by the principal axes of
     the points in and beside the winning bin (a step's error turns a 6 m face across three bins)."""
     normals = _line_normals()
-    bins = np.floor(points @ normals.T / WALL_LINE_M).astype(np.int64)  # (n, angles)
-    low = bins.min(axis=0)
-    span = int((bins.max(axis=0) - low).max()) + 1
-    best, b = divmod(int(np.argmax(np.bincount((bins - low + np.arange(len(normals)) * span).ravel()))), span)
-    line = points[np.abs(bins[:, best] - low[best] - b) <= 1]
+    projections = np.ascontiguousarray(points @ normals.T)  # (n, angles)
+    best, b = kernels.fullest_bin(projections, WALL_LINE_M)
+    bins = np.floor(projections[:, best] / WALL_LINE_M).astype(np.int64)
+    line = points[np.abs(bins - bins.min() - b) <= 1]
     _, axes = np.linalg.eigh(np.cov((line - line.mean(axis=0)).T))
     return axes[:, 0]
 
