@@ -356,7 +356,7 @@ class VehicleTracker:
             if self.params.learn_dimensions:
                 self._learn_kingpin(track, prior, points)
                 before = (track.model, track.catalogue_name)
-                self._learn(track, m)
+                self._learn(track, m, points)
                 self._follow_model(track, prior, m, *before)
             track = self._recheck_rigid(track, points, stamp_s)
         else:
@@ -402,7 +402,8 @@ class VehicleTracker:
 
     # ----------------------------------------------------------------- dimensions
 
-    def _learn(self, track: _Track, m: Measurement) -> None:
+    def _learn(self, track: _Track, m: Measurement, points: np.ndarray) -> None:
+        """The sizes the fit ``m`` of the vehicle's claimed ``points`` shows."""
         model = track.model
         boxes = model.boxes
         local = unit_frames(m.points, m.vector, model)
@@ -418,7 +419,7 @@ class VehicleTracker:
             new_boxes[0] = replace(new_boxes[0], length_m=track.cab_length.estimate)
         if model.trailer is not None and track.trailer_length is not None:
             if not track.at_wall:  # its rear end went with the wall, or lies beyond it
-                self._learn_trailer_length(track, m, local[1], new_boxes[1].width_m)
+                self._learn_trailer_length(track, m, local[1], new_boxes[1].width_m, points)
             new_boxes[1] = replace(new_boxes[1], length_m=track.trailer_length.estimate)
             new_boxes[1] = replace(new_boxes[1], front_m=self._trailer_front(track))
             model = replace(model, kingpin_behind_axle_m=track.kingpin.estimate)
@@ -504,7 +505,9 @@ class VehicleTracker:
         track.filter.kingpin_m = prior.kingpin_behind_axle_m
         track.filter.shift_reference(model.tractor.front_m - prior.tractor.front_m)  # the cab stays where it is
 
-    def _learn_trailer_length(self, track: _Track, m: Measurement, q: np.ndarray, width_m: float) -> None:
+    def _learn_trailer_length(
+        self, track: _Track, m: Measurement, q: np.ndarray, width_m: float, points: np.ndarray
+    ) -> None:
         """The rear face: the hindmost of the trailer body's points (within its width and height band,
         reached from the front without a gap longer than ``MAX_BODY_GAP_M``, ahead of any face that
         runs on past the trailer's sides: a wall). A length when points across the middle of the
@@ -541,7 +544,7 @@ class VehicleTracker:
             if length >= TRAILER_LENGTH_RANGE_M[0]:
                 track.trailer_length.add(length)
         elif not track.trailer_length.settled:
-            end = self._seen_end(track, m, [qb[side, 0] for side in sides if side.any()], width_m)
+            end = self._seen_end(track, m, points, [qb[side] for side in sides if side.any()], width_m)
             if end is not None:
                 track.trailer_length.add(trailer.front_m - end)
         bound = min(trailer.front_m - rear - END_BAND_M, MAX_TRAILER_LENGTH_M)
@@ -549,13 +552,39 @@ class VehicleTracker:
         if abs(track.filter.speed_m_s) >= STILL_END_MIN_SPEED_M_S:
             track.trailer_length.add_reach(min(trailer.front_m - rear, MAX_TRAILER_LENGTH_M))
 
-    def _seen_end(self, track: _Track, m: Measurement, sides: list[np.ndarray], width_m: float) -> float | None:
-        """Where the trailer ends, though its rear face is not seen (from one side it never is): the
-        first of its sides' hindmost points (``sides``: each seen side's points along the trailer's
-        frame) behind which the rays show no body (``_seen_empty_behind``). A dock's shelter right
-        beside one side reaches on past the end; the other side's end is taken then."""
-        ends = sorted((float(x.min()) for x in sides), reverse=True)
-        return next((end for end in ends if self._seen_empty_behind(track, m, end, width_m)), None)
+    def _side_end(self, track: _Track, m: Measurement, points: np.ndarray, side: np.ndarray, width_m: float) -> float:
+        """The hindmost of the claimed ``points`` on the trailer's side whose fitted points are ``side``
+        (its frame, xy), reached from the fitted ones' hindmost without a gap longer than
+        ``MAX_BODY_GAP_M``: the fit's thinned sample keeps one point in many, and its hindmost lay
+        0.1-1.2 m short of a MAN's trailer's end (all its side's points: 0.0-0.2 m)."""
+        trailer = track.model.trailer
+        end = float(side[:, 0].min())
+        q = trailer_frame(points, m.vector, track.model)
+        z_rel = points[:, 2] - track.ground_z_m
+        on_side = (
+            (np.abs(q[:, 1] - np.sign(side[0, 1]) * width_m / 2) <= self.params.fit_inlier_m)
+            & (z_rel >= trailer.floor_m - END_BAND_M)
+            & (z_rel <= trailer.top_m + END_BAND_M)
+            & (q[:, 0] < end)
+        )
+        behind = np.sort(q[on_side, 0])[::-1]
+        gaps = np.flatnonzero(-np.diff(np.r_[end, behind]) > MAX_BODY_GAP_M)
+        reached = behind[: gaps[0]] if len(gaps) else behind
+        return float(reached[-1]) if len(reached) else end
+
+    def _seen_end(
+        self, track: _Track, m: Measurement, points: np.ndarray, sides: list[np.ndarray], width_m: float
+    ) -> float | None:
+        """Where the trailer ends, though its rear face is not seen (from one side it never is): at
+        the first of its sides (``sides``: each seen side's fitted points, the trailer's frame) whose
+        hindmost fitted point has no body behind it in the rays (``_seen_empty_behind``), that
+        side's hindmost claimed point (``_side_end``). A dock's shelter right beside one side
+        reaches on past the end; the other side's end is taken then. (The claimed points' end
+        asked of the rays instead: a MAN's side ending 0.7 m short in a neighbour's shadow passed.)"""
+        for side in sorted(sides, key=lambda points_xy: -float(points_xy[:, 0].min())):
+            if self._seen_empty_behind(track, m, float(side[:, 0].min()), width_m):
+                return self._side_end(track, m, points, side, width_m)
+        return None
 
     def _seen_empty_behind(self, track: _Track, m: Measurement, end_m: float, width_m: float) -> bool:
         """Whether at least ``END_SEEN_MIN_RAYS`` rays crossed the trailer's body behind ``end_m`` (its
@@ -713,7 +742,7 @@ class VehicleTracker:
         if not self.params.learn_dimensions:
             return
         before, name = track.model, track.catalogue_name
-        self._learn(track, m)
+        self._learn(track, m, cluster)
         if track.model == before or track.catalogue_name != name:
             return
         prior = Prior(m.x_m, m.y_m, m.yaw_rad, m.hitch_rad or 0.0, track.model, track.ground_z_m)
