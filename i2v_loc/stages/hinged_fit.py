@@ -135,14 +135,7 @@ def thin_by_unit(points: np.ndarray, max_points: int, prior: Prior) -> np.ndarra
     model = prior.model
     if len(points) <= max_points or model.trailer is None:
         return thin(points, max_points)
-    centres = model.box_centers(prior.x_m, prior.y_m, prior.yaw_rad, prior.hitch_rad)
-    grow = UNIT_SAMPLE_MARGIN_M
-    on_tractor, on_trailer = np.empty(len(points), dtype=bool), np.empty(len(points), dtype=bool)
-    for centre, yaw, box, inside in zip(
-        centres, (prior.yaw_rad, prior.yaw_rad + prior.hitch_rad), model.boxes, (on_tractor, on_trailer)
-    ):
-        rows = np.array([*centre, math.cos(yaw), math.sin(yaw), box.length_m / 2 + grow, box.width_m / 2 + grow])
-        kernels.in_upright_box(points, rows, inside)
+    on_tractor, on_trailer = (in_unit_box(points, prior, unit, UNIT_SAMPLE_MARGIN_M) for unit in (0, 1))
     on_tractor &= ~on_trailer  # folded, the boxes overlap: a hidden cab's box holds the trailer's points
     n_tractor = int(np.count_nonzero(on_tractor))
     floor = int(MIN_UNIT_SHARE * max_points)
@@ -151,6 +144,16 @@ def thin_by_unit(points: np.ndarray, max_points: int, prior: Prior) -> np.ndarra
         return thin(points, max_points)
     k_tractor = min(n_tractor, max(share, floor), max_points - min(len(points) - n_tractor, floor))
     return np.asarray(points[kernels.strided_pick(on_tractor, k_tractor, max_points - k_tractor)], dtype=float)
+
+
+def in_unit_box(points: np.ndarray, prior: Prior, unit: int, grow_m: float) -> np.ndarray:
+    """Which of ``points`` lie (xy) in the prior's box of ``unit`` (0 tractor, 1 trailer) grown by ``grow_m``."""
+    centre = prior.model.box_centers(prior.x_m, prior.y_m, prior.yaw_rad, prior.hitch_rad)[unit]
+    yaw, box = prior.yaw_rad + (prior.hitch_rad if unit else 0.0), prior.model.boxes[unit]
+    rows = np.array([*centre, math.cos(yaw), math.sin(yaw), box.length_m / 2 + grow_m, box.width_m / 2 + grow_m])
+    inside = np.empty(len(points), dtype=bool)
+    kernels.in_upright_box(np.ascontiguousarray(points), rows, inside)
+    return inside
 
 
 def _geometry(v: np.ndarray, model: VehicleModel, trailer_slack_m: float) -> np.ndarray:

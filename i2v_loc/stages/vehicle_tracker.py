@@ -23,10 +23,21 @@ from scipy.spatial import cKDTree
 
 from i2v_loc.params import ArticulatedParams, VehicleConfig
 from i2v_loc.stages import kernels
-from i2v_loc.stages.hinged_fit import FRONT, LEFT, REAR, RIGHT, TRAILER_LENGTH_RANGE_M, Measurement, Prior, fit, thin
+from i2v_loc.stages.hinged_fit import (
+    FRONT,
+    LEFT,
+    REAR,
+    RIGHT,
+    TRAILER_LENGTH_RANGE_M,
+    Measurement,
+    Prior,
+    fit,
+    in_unit_box,
+    thin,
+)
 from i2v_loc.stages.kinematic_filter import FilterState, KinematicFilter
 from i2v_loc.stages.primitives import Rect, median, min_area_rect, voxel_keys
-from i2v_loc.stages.vehicle_model import VehicleModel
+from i2v_loc.stages.vehicle_model import Box, VehicleModel
 from i2v_loc.stages.visibility import Rays
 
 START_HITCHES_DEG = (-90.0, -60.0, -30.0, 0.0, 30.0, 60.0, 90.0)
@@ -515,7 +526,7 @@ class VehicleTracker:
         reaches at least that far back)."""
         trailer = track.model.trailer
         z_rel = m.points[:, 2] - track.ground_z_m
-        tall = (z_rel >= trailer.floor_m - END_BAND_M) & (z_rel <= trailer.top_m + END_BAND_M)
+        tall = _body_heights(z_rel, trailer)
         tall &= q[:, 0] <= trailer.front_m + END_BAND_M
         side = np.abs(q[:, 1]) - width_m / 2
         band = tall & (side <= self.params.fit_inlier_m)
@@ -563,8 +574,7 @@ class VehicleTracker:
         z_rel = points[:, 2] - track.ground_z_m
         on_side = (
             (np.abs(q[:, 1] - np.sign(side[0, 1]) * width_m / 2) <= self.params.fit_inlier_m)
-            & (z_rel >= trailer.floor_m - END_BAND_M)
-            & (z_rel <= trailer.top_m + END_BAND_M)
+            & _body_heights(z_rel, trailer)
             & (q[:, 0] < end)
         )
         behind = np.sort(q[on_side, 0])[::-1]
@@ -1037,12 +1047,7 @@ def _around_kingpin(points: np.ndarray, prior: Prior, max_points: int) -> np.nda
     model = prior.model
     kingpin = model.kingpin_xy(prior.x_m, prior.y_m, prior.yaw_rad)
     reach = model.tractor.front_m - model.kingpin_behind_axle_m + END_BAND_M
-    trailer, yaw = model.trailer, prior.yaw_rad + prior.hitch_rad
-    centre = model.box_centers(prior.x_m, prior.y_m, prior.yaw_rad, prior.hitch_rad)[1]
-    grown = END_BAND_M  # its faces' points lie on both sides of them
-    box = np.array([*centre, np.cos(yaw), np.sin(yaw), trailer.length_m / 2 + grown, trailer.width_m / 2 + grown])
-    on_trailer = np.empty(len(points), dtype=bool)
-    kernels.in_upright_box(np.ascontiguousarray(points), box, on_trailer)
+    on_trailer = in_unit_box(points, prior, 1, END_BAND_M)  # its faces' points lie on both sides of them
     near = (np.hypot(*(points[:, :2] - kingpin).T) <= reach) & ~on_trailer
     n_near = int(np.count_nonzero(near))
     k_near = min(n_near, max(max_points // 2, max_points - (len(points) - n_near)))
@@ -1052,6 +1057,11 @@ def _around_kingpin(points: np.ndarray, prior: Prior, max_points: int) -> np.nda
 def _at_pose(prior: Prior, m: Measurement) -> Prior:
     """``prior`` moved to the pose of the fit ``m``."""
     return replace(prior, x_m=m.x_m, y_m=m.y_m, yaw_rad=m.yaw_rad, hitch_rad=m.hitch_rad or 0.0)
+
+
+def _body_heights(z_rel: np.ndarray, trailer: Box) -> np.ndarray:
+    """Heights above the ground (``z_rel``) within ``END_BAND_M`` of the trailer body's floor to roof."""
+    return (z_rel >= trailer.floor_m - END_BAND_M) & (z_rel <= trailer.top_m + END_BAND_M)
 
 
 def _start_covariance(m: Measurement) -> np.ndarray:
