@@ -367,3 +367,33 @@ def test_the_strided_pick_is_numpys_stride_over_each_part():
         counts = [int(rng.integers(0, len(p) + 1)) for p in parts]
         expected = np.concatenate([p[np.linspace(0, len(p) - 1, k).astype(np.int64)] for p, k in zip(parts, counts)])
         np.testing.assert_array_equal(kernels.strided_pick(mask, *counts), expected)
+
+
+def test_the_unit_masks_and_frames_are_the_numpy_ones():
+    """``in_first_box_only`` is the first box's rotated-rectangle test and not the second's, and
+    ``to_frame`` / ``owned_to_frame`` turn points into a frame as the numpy rotation does, to the bit."""
+    rng = np.random.default_rng(5)
+    for trial in range(50):
+        points = rng.uniform(-8.0, 8.0, (int(rng.integers(0, 400)), 3)).astype(np.float32 if trial % 2 else float)
+        boxes = [
+            np.array([*rng.uniform(-2, 2, 2), math.cos(a), math.sin(a), *rng.uniform(0.5, 4.0, 2)])
+            for a in rng.uniform(-3, 3, 2)
+        ]
+
+        def inside(points, box):
+            dx, dy = points[:, 0].astype(float) - box[0], points[:, 1].astype(float) - box[1]
+            return (np.abs(box[2] * dx + box[3] * dy) <= box[4]) & (np.abs(box[2] * dy - box[3] * dx) <= box[5])
+
+        out = np.empty(len(points), dtype=bool)
+        n = kernels.in_first_box_only(points, *boxes, out)
+        np.testing.assert_array_equal(out, inside(points, boxes[0]) & ~inside(points, boxes[1]))
+        assert n == np.count_nonzero(out)
+        origin, yaw = rng.uniform(-3, 3, 2), float(rng.uniform(-3, 3))
+        c, s = np.cos(yaw), np.sin(yaw)
+        d = points[:, :2] - origin
+        want = np.column_stack([c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1]])
+        np.testing.assert_array_equal(kernels.to_frame(points, *origin, c, s), want)
+        owner = rng.integers(-1, 3, len(points))
+        rows, q = kernels.owned_to_frame(points, owner, 1, *origin, c, s)
+        np.testing.assert_array_equal(rows, np.flatnonzero(owner == 1))
+        np.testing.assert_array_equal(q, want[rows])

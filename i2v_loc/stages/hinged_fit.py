@@ -135,9 +135,11 @@ def thin_by_unit(points: np.ndarray, max_points: int, prior: Prior) -> np.ndarra
     model = prior.model
     if len(points) <= max_points or model.trailer is None:
         return thin(points, max_points)
-    on_tractor, on_trailer = (in_unit_box(points, prior, unit, UNIT_SAMPLE_MARGIN_M) for unit in (0, 1))
-    on_tractor &= ~on_trailer  # folded, the boxes overlap: a hidden cab's box holds the trailer's points
-    n_tractor = int(np.count_nonzero(on_tractor))
+    # folded, the boxes overlap: a hidden cab's box holds the trailer's points, which are the trailer's
+    on_tractor = np.empty(len(points), dtype=bool)
+    n_tractor = kernels.in_first_box_only(
+        np.ascontiguousarray(points), *_unit_box_rows(prior, UNIT_SAMPLE_MARGIN_M), on_tractor
+    )
     floor = int(MIN_UNIT_SHARE * max_points)
     share = round(max_points * n_tractor / len(points))
     if floor <= share <= max_points - floor:  # both units well represented: the even stride
@@ -148,12 +150,21 @@ def thin_by_unit(points: np.ndarray, max_points: int, prior: Prior) -> np.ndarra
 
 def in_unit_box(points: np.ndarray, prior: Prior, unit: int, grow_m: float) -> np.ndarray:
     """Which of ``points`` lie (xy) in the prior's box of ``unit`` (0 tractor, 1 trailer) grown by ``grow_m``."""
-    centre = prior.model.box_centers(prior.x_m, prior.y_m, prior.yaw_rad, prior.hitch_rad)[unit]
-    yaw, box = prior.yaw_rad + (prior.hitch_rad if unit else 0.0), prior.model.boxes[unit]
-    rows = np.array([*centre, math.cos(yaw), math.sin(yaw), box.length_m / 2 + grow_m, box.width_m / 2 + grow_m])
     inside = np.empty(len(points), dtype=bool)
-    kernels.in_upright_box(np.ascontiguousarray(points), rows, inside)
+    kernels.in_upright_box(np.ascontiguousarray(points), _unit_box_rows(prior, grow_m)[unit], inside)
     return inside
+
+
+def _unit_box_rows(prior: Prior, grow_m: float) -> list[np.ndarray]:
+    """Each unit's box of the prior grown by ``grow_m`` as ``kernels.in_upright_box`` takes it."""
+    centres = prior.model.box_centers(prior.x_m, prior.y_m, prior.yaw_rad, prior.hitch_rad)
+    rows = []
+    for unit, (centre, box) in enumerate(zip(centres, prior.model.boxes)):
+        yaw = prior.yaw_rad + (prior.hitch_rad if unit else 0.0)
+        rows.append(
+            np.array([*centre, math.cos(yaw), math.sin(yaw), box.length_m / 2 + grow_m, box.width_m / 2 + grow_m])
+        )
+    return rows
 
 
 def _geometry(v: np.ndarray, model: VehicleModel, trailer_slack_m: float) -> np.ndarray:
@@ -207,7 +218,7 @@ def fit(
         _RANGES,
     )  # fmt: skip
     at = _Faces(*found)
-    cost = float(np.mean(np.log1p((at.residual / scale) ** 2))) * scale**2 / 2
+    cost = kernels.cauchy_cost(at.residual, float(scale)) * scale**2 / 2
     marginal = _covariance(at, sigmas, params)
     floor = _floor(params, n_pose)
     covariance = marginal + np.diag(floor**2)

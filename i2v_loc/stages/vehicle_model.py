@@ -76,18 +76,23 @@ class VehicleModel:
         return replace(self, tractor=tractor, trailer=trailer)
 
     def kingpin_xy(self, x_m: float, y_m: float, yaw_rad: float) -> np.ndarray:
-        return np.array(
-            [x_m - self.kingpin_behind_axle_m * np.cos(yaw_rad), y_m - self.kingpin_behind_axle_m * np.sin(yaw_rad)]
-        )
+        return np.array(self._kingpin(x_m, y_m, np.cos(yaw_rad), np.sin(yaw_rad)))
+
+    def _kingpin(self, x_m: float, y_m: float, cos_yaw: float, sin_yaw: float) -> tuple[float, float]:
+        return x_m - self.kingpin_behind_axle_m * cos_yaw, y_m - self.kingpin_behind_axle_m * sin_yaw
 
     def box_centers(
         self, x_m: float, y_m: float, yaw_rad: float, hitch_rad: float = 0.0
     ) -> tuple[np.ndarray, np.ndarray | None]:
-        """xy centres of the tractor's and (or None) the trailer's boxes for a tractor pose and hitch."""
-        e1 = np.array([np.cos(yaw_rad), np.sin(yaw_rad)])
-        tractor = np.array([x_m, y_m]) + self.tractor.center_x_m * e1
+        """xy centres of the tractor's and (or None) the trailer's boxes for a tractor pose and hitch.
+        (In scalars: the same values as in small arrays, at a fifth of the cost; it runs several
+        times per vehicle and frame.)"""
+        c, s = np.cos(yaw_rad), np.sin(yaw_rad)
+        reach = self.tractor.center_x_m
+        tractor = np.array([x_m + reach * c, y_m + reach * s])
         if self.trailer is None:
             return tractor, None
         yaw2 = yaw_rad + hitch_rad
-        trailer = self.kingpin_xy(x_m, y_m, yaw_rad) + self.trailer.center_x_m * np.array([np.cos(yaw2), np.sin(yaw2)])
-        return tractor, trailer
+        kx, ky = self._kingpin(x_m, y_m, c, s)
+        reach = self.trailer.center_x_m
+        return tractor, np.array([kx + reach * np.cos(yaw2), ky + reach * np.sin(yaw2)])

@@ -1083,8 +1083,7 @@ def _own_body(points: np.ndarray, owner: np.ndarray, i: int, prior: Prior) -> tu
     body (``END_BAND_M / 2`` ahead of its rear face or more): its rear end is not seen then."""
     if prior.model.trailer is None:
         return prior, False
-    mine = np.flatnonzero(owner == i)
-    q = trailer_frame(points[mine], prior.vector, prior.model)
+    mine, q = kernels.owned_to_frame(points, owner, i, *_frame_args(*_unit_origins(prior.vector, prior.model)[1]))
     prior, beyond = _beyond_gap(q, prior)
     kept = np.flatnonzero(~beyond)
     owner[mine[beyond]] = -1
@@ -1388,9 +1387,12 @@ def trailer_frame(points: np.ndarray, v: np.ndarray, model: VehicleModel) -> np.
 
 
 def _in_frame(points: np.ndarray, origin: np.ndarray, yaw: float) -> np.ndarray:
-    c, s = np.cos(yaw), np.sin(yaw)
-    d = points[:, :2] - origin
-    return np.column_stack([c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1]])
+    return kernels.to_frame(np.ascontiguousarray(points), *_frame_args(origin, yaw))
+
+
+def _frame_args(origin: np.ndarray, yaw: float) -> tuple[float, float, float, float]:
+    """A frame as ``kernels.to_frame`` takes it: origin x, y, cosine and sine of its yaw."""
+    return float(origin[0]), float(origin[1]), float(np.cos(yaw)), float(np.sin(yaw))
 
 
 def prior_boxes(prior: Prior) -> np.ndarray:
