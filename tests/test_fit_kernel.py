@@ -397,3 +397,67 @@ def test_the_unit_masks_and_frames_are_the_numpy_ones():
         rows, q = kernels.owned_to_frame(points, owner, 1, *origin, c, s)
         np.testing.assert_array_equal(rows, np.flatnonzero(owner == 1))
         np.testing.assert_array_equal(q, want[rows])
+
+
+def ref_rear_face(q, z_rel, unit, face, heights, front, width, inlier, beside, max_gap, end_band, middle_below, span):
+    """The numpy code ``kernels.rear_face`` replaced: (points in the band, the kept points hindmost
+    last, whether the rear face is seen, its middle's median x)."""
+    tall = (z_rel >= heights[0]) & (z_rel <= heights[1]) & (q[:, 0] <= front)
+    side = np.abs(q[:, 1]) - width / 2
+    band = tall & (side <= inlier)
+    if band.sum() < 5:
+        return int(band.sum()), None, False, None
+    near = tall & (unit != 0) & (side >= beside[0]) & (side <= beside[1])
+    left, right = q[near & (q[:, 1] > 0), 0], q[near & (q[:, 1] < 0), 0]
+    order = np.argsort(-q[band][:, 0], kind="stable")
+    qb, zb = q[band][order], z_rel[band][order]
+    walled = np.zeros(len(qb) - 1, dtype=bool)
+    if len(left) and len(right):  # a face running on past both sides: a wall
+        walled = (np.abs(qb[1:, 0, None] - left[None, :]).min(axis=1) <= end_band / 2) & (
+            np.abs(qb[1:, 0, None] - right[None, :]).min(axis=1) <= end_band / 2
+        )
+    cut = np.flatnonzero((-np.diff(qb[:, 0]) > max_gap) | walled)
+    keep = cut[0] + 1 if len(cut) else len(qb)
+    qb, zb = qb[:keep], zb[:keep]
+    at_end = qb[:, 0] <= qb[-1, 0] + end_band
+    end = qb[at_end]
+    middle = end[(np.abs(end[:, 1]) <= width / 4) & (zb[at_end] < middle_below)]
+    seen = len(middle) >= 2 and np.ptp(end[:, 1]) >= span
+    return int(band.sum()), qb, bool(seen), float(np.median(middle[:, 0])) if seen else None
+
+
+def test_the_rear_face_kernel_is_the_numpy_one():
+    """``kernels.rear_face`` against the numpy code it replaced on random trailers' points: a body
+    with gaps, its rear face or none, a wall across its rear running past both sides or one."""
+    rng = np.random.default_rng(11)
+    width, heights, front = 2.5, (0.6, 4.4), 1.6
+    outcomes = set()
+    for trial in range(300):
+        n = int(rng.integers(3, 300))
+        x = rng.uniform(-15.0, 1.5, n)
+        if trial % 3 == 1:
+            x[x < -6.0] -= 1.5  # a gap in the body
+        y = rng.choice([-1.0, 1.0], n) * width / 2 + rng.normal(0.0, 0.05, n)
+        face_rows = rng.random(n) < (0.3 if trial % 3 else 0.0)  # points across the rear face
+        y[face_rows] = rng.uniform(-width / 2, width / 2, face_rows.sum())
+        x[face_rows] = x.min()
+        if trial % 7 == 0:
+            x[rng.random(n) < 0.1] = x.min() - 3.0  # an object behind it
+        if trial % 4 == 0:  # a wall level with the rear, past both sides (or one)
+            wall = rng.random(n) < 0.2
+            y[wall] = rng.choice([-1.0, 1.0] if trial % 8 else [1.0], wall.sum()) * rng.uniform(1.6, 2.0, wall.sum())
+            x[wall] = x.min() + rng.normal(0.0, 0.05, wall.sum())
+        q = np.column_stack([np.round(x, 2 if trial % 5 == 0 else 6), y])  # ties too
+        z_rel = rng.uniform(0.0, 5.0, n)
+        unit = rng.choice(np.array([-1, 0, 1], dtype=np.int8), n, p=[0.1, 0.1, 0.8])
+        face = rng.integers(-1, 4, n).astype(np.int8)
+        args = (q, z_rel, unit, face, heights, front, width / 2, 0.3, (0.35, 0.8), 1.0, 0.4, 4.0, 0.6 * width)
+        n_band, rows, seen, middle = kernels.rear_face(*args)
+        want = ref_rear_face(q, z_rel, unit, face, heights, front, width, *args[7:])
+        assert n_band == want[0]
+        if want[1] is None:
+            continue
+        np.testing.assert_array_equal(q[rows, 0], want[1][:, 0])  # the same kept points, in order
+        assert seen == want[2] and (middle == want[3] if seen else True)
+        outcomes.add((seen, len(rows) < n_band))
+    assert outcomes == {(False, False), (False, True), (True, False), (True, True)}  # seen or not, cut or not

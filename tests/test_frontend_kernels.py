@@ -14,7 +14,7 @@ from conftest import SAMPLES
 from i2v_loc.frame import SensorScan
 from i2v_loc.params import BackgroundParams, ConcatenationParams, Extrinsics, RegionParams, SensorConfig, load_params
 from i2v_loc.recording import Recording
-from i2v_loc.stages import kernels, primitives
+from i2v_loc.stages import kernels
 from i2v_loc.stages.background import BackgroundMap, ProtectedBox
 from i2v_loc.stages.concatenation import Concatenation, MotionHint
 from i2v_loc.stages.primitives import euclidean_labels, grid_labels, min_area_rect, split_by_label, voxel_centroids
@@ -313,13 +313,22 @@ def test_euclidean_labels_join_points_exactly_at_the_tolerance_and_no_further():
 
 
 @pytest.mark.parametrize("n", [1, 2, 3, 4, 57, 200, 201])
-def test_median_is_numpys_median(n):
+def test_a_faces_median_is_numpys_median_of_its_points(n):
+    """``kernels.face_median`` takes the points of one unit's face and gives ``np.median``'s value
+    of their coordinate (repeated values too), and none for a face without points."""
     rng = np.random.default_rng(n)
-    for rounded in (False, True):  # with repeated values too
-        values = rng.normal(size=n) * 3.0
-        values = np.round(values, 1) if rounded else values
-        assert primitives.median(values) == float(np.median(values))
-        assert primitives.median(values[::-1]) == float(np.median(values))  # a view, any order
+    for rounded in (False, True):
+        q = rng.normal(size=(2 * n, 2)) * 3.0
+        q = np.round(q, 1) if rounded else q
+        unit = np.repeat(np.array([0, 1], dtype=np.int8), n)
+        face = rng.integers(-1, 4, 2 * n).astype(np.int8)
+        for u, f, column in ((0, 2, 1), (1, 0, 0), (1, 3, 1)):
+            on = (unit == u) & (face == f)
+            got = kernels.face_median(q, column, unit, face, u, f)
+            assert got[0] == np.count_nonzero(on)
+            if got[0]:
+                assert got[1] == float(np.median(q[on, column]))
+        assert kernels.face_median(q, 0, unit, face, 2, 0) == (0, pytest.approx(np.nan, nan_ok=True))
 
 
 def test_ground_hypotheses_are_the_numpy_hypotheses():

@@ -1117,6 +1117,99 @@ def fit_labels(unit, face, distance, residual, inlier_m, rear_face):
 
 
 @njit(**_JIT)
+def face_median(q, column, unit, face, which_unit, which_face):
+    """(how many, median) of ``q[:, column]`` over the points of a fit on one face of one unit
+    (``unit``, ``face``: the fit's labels); the median is ``np.median``'s value (NaN for none)."""
+    values = np.empty(q.shape[0])
+    n = 0
+    for i in range(q.shape[0]):
+        if unit[i] == which_unit and face[i] == which_face:
+            values[n] = q[i, column]
+            n += 1
+    return n, _median(values[:n]) if n else np.nan
+
+
+@njit(**_JIT)
+def rear_face(q, z_rel, unit, face, heights, front, half_width, inlier, beside, max_gap, end_band, middle_below, span):
+    """The trailer body's hindmost points of a fit (``vehicle_tracker._learn_trailer_length``): the
+    points (``q``: the trailer's frame, ``z_rel``: height above the ground) within the body's
+    ``heights`` (low, high), up to ``front`` and ``inlier`` outside its sides, hindmost last, cut
+    at the first gap longer than ``max_gap`` or point level with a face that runs on past both sides
+    (points of the other units ``beside`` (min, max) out past them, within ``end_band / 2``).
+    Returns (how many in the body's band, the rows kept, hindmost first... last; whether the rear
+    face is seen: points across its middle (within a quarter width of the axis, below
+    ``middle_below``) within ``end_band`` of the hindmost and the face's points spanning ``span``;
+    their median x)."""
+    n = q.shape[0]
+    band = np.empty(n, dtype=np.int64)
+    left, right = np.empty(n), np.empty(n)
+    n_band = n_left = n_right = 0
+    for i in range(n):
+        tall = heights[0] <= z_rel[i] <= heights[1] and q[i, 0] <= front
+        side = abs(q[i, 1]) - half_width
+        if tall and side <= inlier:
+            band[n_band] = i
+            n_band += 1
+        if tall and unit[i] != 0 and beside[0] <= side <= beside[1]:
+            if q[i, 1] > 0:
+                left[n_left] = q[i, 0]
+                n_left += 1
+            elif q[i, 1] < 0:
+                right[n_right] = q[i, 0]
+                n_right += 1
+    no_rows = np.empty(0, dtype=np.int64)
+    if n_band < 5:
+        return n_band, no_rows, False, np.nan
+    x = np.empty(n_band)
+    for k in range(n_band):
+        x[k] = -q[band[k], 0]
+    rows = band[:n_band][np.argsort(x, kind="mergesort")]
+    keep = n_band
+    walled = n_left > 0 and n_right > 0
+    for k in range(n_band - 1):
+        here, after = q[rows[k], 0], q[rows[k + 1], 0]
+        if here - after > max_gap or (
+            walled
+            and _nearest(after, left[:n_left]) <= end_band / 2
+            and _nearest(after, right[:n_right]) <= end_band / 2
+        ):
+            keep = k + 1
+            break
+    rows = rows[:keep]
+    rear = q[rows[keep - 1], 0]
+    lo, hi = np.inf, -np.inf
+    middle = np.empty(keep)
+    n_middle = 0
+    for k in range(keep):
+        r = rows[k]
+        if q[r, 0] <= rear + end_band:
+            lo, hi = min(lo, q[r, 1]), max(hi, q[r, 1])
+            if abs(q[r, 1]) <= half_width / 2 and z_rel[r] < middle_below:
+                middle[n_middle] = q[r, 0]
+                n_middle += 1
+    if n_middle < 2 or hi - lo < span:
+        return n_band, rows, False, np.nan
+    return n_band, rows, True, _median(middle[:n_middle])
+
+
+@njit(**_JIT)
+def _median(values):
+    """``np.median`` of a non-empty array: the middle order statistic, or the mean of the two."""
+    ordered = np.sort(values)
+    half = ordered.shape[0] // 2
+    return ordered[half] if ordered.shape[0] % 2 else (ordered[half - 1] + ordered[half]) / 2
+
+
+@njit(**_INLINE)
+def _nearest(x, marks):
+    """The distance from ``x`` to the nearest of ``marks``."""
+    best = np.inf
+    for v in marks:
+        best = min(best, abs(x - v))
+    return best
+
+
+@njit(**_JIT)
 def fit_covariance(residual, jacobian, prior_information, scale, inlier_m, no_inlier_noise2, noise_floor2, k):
     """The hinged fit's covariance of its first ``k`` parameters (the others marginalised):
     Gauss-Newton with the Cauchy weights of the residuals and the noise of the inliers' residuals
@@ -1133,10 +1226,7 @@ def fit_covariance(residual, jacobian, prior_information, scale, inlier_m, no_in
             n_in += 1
     sigma2 = no_inlier_noise2
     if n_in:
-        ordered = np.sort(squares[:n_in])
-        half = n_in // 2
-        median = ordered[half] if n_in % 2 else (ordered[half - 1] + ordered[half]) / 2
-        sigma2 = median / 0.455
+        sigma2 = _median(squares[:n_in]) / 0.455
     sigma2 = max(sigma2, noise_floor2)
     info = np.dot(weighted.T, jacobian) / sigma2
     for j in range(n_params):
@@ -1641,6 +1731,11 @@ def warm_up() -> None:
     _, residual, jacobian, _, _, _ = irls(xy, z, geometry, 0.25, 4, True, True, v0, np.ones(7), 0.1, 0.2, 2, ranges)
     cauchy_cost(residual, 0.1)
     fit_covariance(residual, jacobian, np.ones(7), 0.1, 0.3, 0.01, 0.0004, 4)
+    face_median(p64, 1, np.zeros(3, dtype=np.int8), np.zeros(3, dtype=np.int8), 0, 0)
+    labels = np.zeros(3, dtype=np.int8)
+    rear_face(
+        p64[:, :2].copy(), p64[:, 2].copy(), labels, labels, (0.0, 1.0), 1.0, 1.0, 0.1, (0.3, 0.8), 1.0, 0.4, 1.0, 1.0
+    )
     fit_labels(np.zeros(3, dtype=np.int64), np.zeros(3, dtype=np.int64), residual[:3], residual[:3], 0.1, 1)
     observed_directions(np.eye(4), np.ones(4), np.ones(4))
     fit_faces(xy, z, geometry, 0.25, 4, True, True, v0)  # the tests call it on its own

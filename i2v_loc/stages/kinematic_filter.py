@@ -14,7 +14,9 @@ Measurement: the hinged fit's (x, y, ψ1, γ) with its covariance.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 
@@ -101,6 +103,19 @@ class FilterState:
         return float(np.sqrt(max(self.covariance[HITCH, HITCH], 0.0)))
 
 
+_TINY_NOISE = np.eye(6) * 1e-12  # keeps the covariance positive definite
+
+
+@lru_cache(maxsize=16)
+def _squared_rates(rates: tuple) -> np.ndarray:
+    """The squared random-walk rates of the state's columns from (position, yaw in deg/s,
+    acceleration, curvature rate, hitch in deg/s or None): the process noise per second. Cached
+    per parameter set (``kernels.ukf_predict`` only reads the noise it is given)."""
+    position, yaw_deg, accel, curvature, hitch_deg = rates
+    hitch = 0.0 if hitch_deg is None else np.radians(hitch_deg)
+    return np.array([position, position, np.radians(yaw_deg), accel, curvature, hitch]) ** 2
+
+
 class KinematicFilter:
     """One vehicle's UKF. ``predict(stamp)`` then ``update(z, R)``; ``state`` after either."""
 
@@ -150,18 +165,14 @@ class KinematicFilter:
 
     def _q(self, dt_s: float) -> np.ndarray:
         p = self.params
-        dt = max(dt_s, 1e-3)
-        sig = np.array(
-            [
-                p.position_sigma_m_s,
-                p.position_sigma_m_s,
-                np.radians(p.yaw_sigma_deg_s),
-                p.accel_sigma_m_s2,
-                p.curvature_rate_sigma_1_m_s,
-                np.radians(p.hitch_sigma_deg_s) if self.articulated else 0.0,
-            ]
+        rates = (
+            p.position_sigma_m_s,
+            p.yaw_sigma_deg_s,
+            p.accel_sigma_m_s2,
+            p.curvature_rate_sigma_1_m_s,
+            p.hitch_sigma_deg_s if self.articulated else None,
         )
-        return np.diag(sig**2 * dt) + np.eye(6) * 1e-12
+        return np.diag(_squared_rates(rates) * max(dt_s, 1e-3)) + _TINY_NOISE
 
     def predict(self, stamp_s: float) -> FilterState:
         dt = stamp_s - self.stamp_s if np.isfinite(stamp_s) else 0.1
@@ -214,16 +225,14 @@ class KinematicFilter:
 
     @property
     def state(self) -> FilterState:
-        x = self.ukf.x
+        x = self.ukf.x.tolist()
         rate = (
-            kernels.hitch_rate(
-                float(x[SPEED]), float(x[CURVATURE]), float(x[HITCH]), float(self.kingpin_m), float(self.trailer_axle_m)
-            )
+            kernels.hitch_rate(x[SPEED], x[CURVATURE], x[HITCH], float(self.kingpin_m), float(self.trailer_axle_m))
             if self.articulated
             else 0.0
         )
         jackknife = self.articulated and (
-            abs(x[HITCH]) > np.radians(self.params.jackknife_hitch_deg)
-            or abs(rate) > np.radians(self.params.jackknife_rate_deg_s)
+            abs(x[HITCH]) > math.radians(self.params.jackknife_hitch_deg)
+            or abs(rate) > math.radians(self.params.jackknife_rate_deg_s)
         )
-        return FilterState(*(float(v) for v in x), self.ukf.P.copy(), rate, bool(jackknife))
+        return FilterState(*x, self.ukf.P.copy(), rate, bool(jackknife))

@@ -9,16 +9,6 @@ import numpy as np
 from i2v_loc.stages import kernels
 
 
-def median(values: np.ndarray) -> float:
-    """``np.median`` of a non-empty 1-D array without NaNs (the same value: the middle order
-    statistic, or the mean of the two) at a fifth of its call overhead."""
-    half = len(values) // 2
-    if len(values) % 2:
-        return float(np.partition(values, half)[half])
-    low, high = np.partition(values, [half - 1, half])[half - 1 : half + 1]
-    return (float(low) + float(high)) / 2
-
-
 def voxel_keys(points: np.ndarray, voxel_m: float) -> np.ndarray:
     """One int64 key per point for the voxel (or 2D cell) it falls in (paper Eq. 1, origin at the cloud minimum)."""
     ijk = np.floor((points - points.min(axis=0)) / voxel_m).astype(np.int64)

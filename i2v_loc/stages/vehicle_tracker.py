@@ -36,7 +36,7 @@ from i2v_loc.stages.hinged_fit import (
     thin,
 )
 from i2v_loc.stages.kinematic_filter import FilterState, KinematicFilter
-from i2v_loc.stages.primitives import Rect, median, min_area_rect, voxel_keys
+from i2v_loc.stages.primitives import Rect, min_area_rect, voxel_keys
 from i2v_loc.stages.vehicle_model import Box, VehicleModel
 from i2v_loc.stages.visibility import Rays
 
@@ -416,30 +416,33 @@ class VehicleTracker:
     def _learn(self, track: _Track, m: Measurement, points: np.ndarray) -> None:
         """The sizes the fit ``m`` of the vehicle's claimed ``points`` shows."""
         model = track.model
-        boxes = model.boxes
         local = unit_frames(m.points, m.vector, model)
-        new_boxes = []
-        for u, box in enumerate(boxes):
-            mine = m.unit == u
-            left, right = local[u][mine & (m.face == LEFT), 1], local[u][mine & (m.face == RIGHT), 1]
-            if min(len(left), len(right)) >= SIDE_MIN_POINTS:  # both sides seen: the width between them
-                track.widths[u].add(median(left) - median(right))
-            new_boxes.append(replace(box, width_m=track.widths[u].estimate))
+        widths = []
+        for u in range(len(model.boxes)):
+            (n_left, left), (n_right, right) = (
+                kernels.face_median(local[u], 1, m.unit, m.face, u, f) for f in (LEFT, RIGHT)
+            )
+            if min(n_left, n_right) >= SIDE_MIN_POINTS:  # both sides seen: the width between them
+                track.widths[u].add(left - right)
+            widths.append(track.widths[u].estimate)
+        tractor = {"width_m": widths[0]}
         if track.cab_length is not None:
             self._learn_cab_length(track, m, local[0])
-            new_boxes[0] = replace(new_boxes[0], length_m=track.cab_length.estimate)
-        if model.trailer is not None and track.trailer_length is not None:
-            if not track.at_wall:  # its rear end went with the wall, or lies beyond it
-                self._learn_trailer_length(track, m, local[1], new_boxes[1].width_m, points)
-            new_boxes[1] = replace(new_boxes[1], length_m=track.trailer_length.estimate)
-            new_boxes[1] = replace(new_boxes[1], front_m=self._trailer_front(track))
-            model = replace(model, kingpin_behind_axle_m=track.kingpin.estimate)
-            track.filter.kingpin_m = model.kingpin_behind_axle_m
-        track.model = model.with_boxes(new_boxes[0], new_boxes[1] if len(new_boxes) > 1 else None)
+            tractor["length_m"] = track.cab_length.estimate
+        learned = {"tractor": _changed(model.tractor, **tractor)}
+        if model.trailer is not None:
+            trailer = {"width_m": widths[1]}
+            if track.trailer_length is not None:
+                if not track.at_wall:  # its rear end went with the wall, or lies beyond it
+                    self._learn_trailer_length(track, m, local[1], widths[1], points)
+                trailer.update(length_m=track.trailer_length.estimate, front_m=self._trailer_front(track))
+                learned["kingpin_behind_axle_m"] = track.filter.kingpin_m = track.kingpin.estimate
+            learned["trailer"] = _changed(model.trailer, **trailer)
+        track.model = _changed(model, **learned)
         name = self._type_name(track)
         if name in self.catalogue and name != track.catalogue_name:
             self._retype(track, name)
-        track.model = replace(track.model, name=name, trailer_axle_m=self._trailer_axle(track))
+        track.model = _changed(track.model, name=name, trailer_axle_m=self._trailer_axle(track))
         track.filter.trailer_axle_m = track.model.trailer_axle_m
 
     def _follow_model(self, track: _Track, prior: Prior, m: Measurement, before: VehicleModel, name: str) -> None:
@@ -459,10 +462,9 @@ class VehicleTracker:
         """The cab's length: between the middles of its front and rear faces' points, when at least
         ``SIDE_MIN_POINTS`` lie on each (its front pins it in the fit; an unknown tractor's cab 0.27 m
         shorter than the MAN's put its box centre 0.13 m off)."""
-        cab = m.unit == 0
-        front, rear = q[cab & (m.face == FRONT), 0], q[cab & (m.face == REAR), 0]
-        if min(len(front), len(rear)) >= SIDE_MIN_POINTS:
-            track.cab_length.add(median(front) - median(rear))
+        (n_front, front), (n_rear, rear) = (kernels.face_median(q, 0, m.unit, m.face, 0, f) for f in (FRONT, REAR))
+        if min(n_front, n_rear) >= SIDE_MIN_POINTS:
+            track.cab_length.add(front - rear)
 
     def _learn_kingpin(self, track: _Track, prior: Prior, points: np.ndarray) -> None:
         """The kingpin's offset shows only at a hitch angle (straight, it trades with the trailer's
@@ -526,36 +528,21 @@ class VehicleTracker:
         reaches at least that far back)."""
         trailer = track.model.trailer
         z_rel = m.points[:, 2] - track.ground_z_m
-        tall = _body_heights(z_rel, trailer)
-        tall &= q[:, 0] <= trailer.front_m + END_BAND_M
-        side = np.abs(q[:, 1]) - width_m / 2
-        band = tall & (side <= self.params.fit_inlier_m)
-        if band.sum() < 5:
+        n_band, rows, face_seen, middle = kernels.rear_face(
+            q, z_rel, m.unit, m.face, (trailer.floor_m - END_BAND_M, trailer.top_m + END_BAND_M),
+            trailer.front_m + END_BAND_M, width_m / 2, self.params.fit_inlier_m, WALL_BESIDE_M, MAX_BODY_GAP_M,
+            END_BAND_M, trailer.top_m - self.params.fit_top_band_m, FACE_SEEN_SPAN * width_m,
+        )  # fmt: skip
+        if n_band < 5:
             return
-        # a face running on past both sides is a wall behind the trailer (one side: a pillar beside
-        # it, a neighbour, or at a hitch angle the cab, which is not counted)
-        beside = tall & (m.unit != 0) & (side >= WALL_BESIDE_M[0]) & (side <= WALL_BESIDE_M[1])
-        left, right = q[beside & (q[:, 1] > 0), 0], q[beside & (q[:, 1] < 0), 0]
-        order = np.argsort(-q[band][:, 0])
-        qb, zb = q[band][order], z_rel[band][order]
-        ends = -np.diff(qb[:, 0]) > MAX_BODY_GAP_M
-        if len(left) and len(right):
-            ends |= _near_any(qb[1:, 0], left, END_BAND_M / 2) & _near_any(qb[1:, 0], right, END_BAND_M / 2)
-        cut = np.flatnonzero(ends)
-        keep = cut[0] + 1 if len(cut) else len(qb)
-        qb, zb = qb[:keep], zb[:keep]
-        sides = [((m.unit == 1) & (m.face == face))[band][order][:keep] for face in (LEFT, RIGHT)]
-        rear = float(qb[-1, 0])
-        at_end = qb[:, 0] <= rear + END_BAND_M
-        end = qb[at_end]
-        # the face's middle below the roof (roof points near the edge lie up to END_BAND_M ahead of it)
-        middle = end[(np.abs(end[:, 1]) <= width_m / 4) & (zb[at_end] < trailer.top_m - self.params.fit_top_band_m)]
-        if len(middle) >= 2 and np.ptp(end[:, 1]) >= FACE_SEEN_SPAN * width_m:
-            length = trailer.front_m - median(middle[:, 0])
+        rear = float(q[rows[-1], 0])
+        if face_seen:
+            length = trailer.front_m - middle
             if length >= TRAILER_LENGTH_RANGE_M[0]:
                 track.trailer_length.add(length)
         elif not track.trailer_length.settled:
-            end = self._seen_end(track, m, points, [qb[side] for side in sides if side.any()], width_m)
+            on_side = [rows[(m.unit[rows] == 1) & (m.face[rows] == face)] for face in (LEFT, RIGHT)]
+            end = self._seen_end(track, m, points, [q[side] for side in on_side if len(side)], width_m)
             if end is not None:
                 track.trailer_length.add(trailer.front_m - end)
         bound = min(trailer.front_m - rear - END_BAND_M, MAX_TRAILER_LENGTH_M)
@@ -1059,6 +1046,14 @@ def _at_pose(prior: Prior, m: Measurement) -> Prior:
     return replace(prior, x_m=m.x_m, y_m=m.y_m, yaw_rad=m.yaw_rad, hitch_rad=m.hitch_rad or 0.0)
 
 
+def _changed(obj, **values):
+    """``dataclasses.replace(obj, **values)``, or ``obj`` itself when it holds those values already
+    (the learned sizes of a settled vehicle rarely change: a frozen copy costs more than the check)."""
+    if all(getattr(obj, name) == value for name, value in values.items()):
+        return obj
+    return replace(obj, **values)
+
+
 def _body_heights(z_rel: np.ndarray, trailer: Box) -> np.ndarray:
     """Heights above the ground (``z_rel``) within ``END_BAND_M`` of the trailer body's floor to roof."""
     return (z_rel >= trailer.floor_m - END_BAND_M) & (z_rel <= trailer.top_m + END_BAND_M)
@@ -1297,14 +1292,6 @@ def ground_heights(ground, xy: np.ndarray) -> np.ndarray:
     """The ground's height under each of ``xy`` (N, 2): it is a plane, so three samples give it."""
     z0 = ground(0.0, 0.0)
     return z0 + (ground(1.0, 0.0) - z0) * xy[:, 0] + (ground(0.0, 1.0) - z0) * xy[:, 1]
-
-
-def _near_any(x: np.ndarray, marks: np.ndarray, tolerance: float) -> np.ndarray:
-    """Whether each of ``x`` lies within ``tolerance`` of one of ``marks``."""
-    marks = np.sort(marks)
-    i = np.clip(np.searchsorted(marks, x), 1, len(marks) - 1) if len(marks) > 1 else np.zeros(len(x), int)
-    nearest = np.minimum(np.abs(x - marks[i]), np.abs(x - marks[np.maximum(i - 1, 0)]))
-    return nearest <= tolerance
 
 
 def seed_groups(
