@@ -7,7 +7,10 @@ from scipy.spatial.transform import Rotation
 
 
 def _wrap(angle, half_turn: float):
-    """Wrap to (-half_turn, half_turn]; scalars stay floats, arrays stay arrays."""
+    """Wrap to (-half_turn, half_turn]; scalars stay floats, arrays stay arrays. (A float in Python's
+    own arithmetic, whose ``%`` is numpy's: the same value at a tenth of the cost.)"""
+    if isinstance(angle, float):
+        return float(-((-angle + half_turn) % (2.0 * half_turn) - half_turn))
     wrapped = -((-np.asarray(angle, dtype=float) + half_turn) % (2.0 * half_turn) - half_turn)
     return float(wrapped) if np.ndim(wrapped) == 0 else wrapped
 

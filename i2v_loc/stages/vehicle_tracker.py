@@ -274,8 +274,8 @@ class _Track:
 
     def report(self, measured: bool) -> VehicleReport:
         s = self.filter.state
-        n0 = int(np.sum(self.last.unit == 0)) if measured else 0
-        n1 = int(np.sum(self.last.unit == 1)) if measured else 0
+        n0 = int(np.count_nonzero(self.last.unit == 0)) if measured else 0
+        n1 = int(np.count_nonzero(self.last.unit == 1)) if measured else 0
         travel = float(np.hypot(s.x_m - self.first_xy[0], s.y_m - self.first_xy[1]))
         return VehicleReport(self.id, self.model, s, n0, n1, measured, travel)
 
@@ -1080,17 +1080,20 @@ def _own_body(points: np.ndarray, owner: np.ndarray, i: int, prior: Prior) -> tu
         return prior, False
     mine, q = kernels.owned_to_frame(points, owner, i, *_frame_args(*_unit_origins(prior.vector, prior.model)[1]))
     prior, beyond = _beyond_gap(q, prior)
-    kept = np.flatnonzero(~beyond)
-    owner[mine[beyond]] = -1
-    wall = _wall_behind(q[kept], prior.model)
-    owner[mine[kept[wall]]] = -1
-    trailer, on_wall = prior.model.trailer, q[kept[wall]]
+    if beyond is not None:
+        owner[mine[beyond]] = -1
+        mine, q = mine[~beyond], q[~beyond]
+    wall = _wall_behind(q, prior.model)
+    if wall is None:
+        return prior, False
+    owner[mine[wall]] = -1
+    trailer, on_wall = prior.model.trailer, q[wall]
     across = (on_wall[:, 0] >= trailer.rear_m + END_BAND_M / 2) & (np.abs(on_wall[:, 1]) <= trailer.width_m / 2)
     return prior, bool(across.any())
 
 
-def _wall_behind(q: np.ndarray, model: VehicleModel) -> np.ndarray:
-    """Which of a trailer's claimed points (``q``: its frame, xy) are a wall behind it: straight
+def _wall_behind(q: np.ndarray, model: VehicleModel) -> np.ndarray | None:
+    """Which of a trailer's claimed points (``q``: its frame, xy) are a wall behind it (None: no wall): straight
     faces at its rear (``END_BAND_M`` ahead of it or any way behind) with points ``WALL_BESIDE_M[0]``
     or more out past its sides run on past them; a trailer's body does not. Of those points beside
     its rear, the most on one line (``_wall_normal``) give the wall's direction, which must lie
@@ -1104,17 +1107,16 @@ def _wall_behind(q: np.ndarray, model: VehicleModel) -> np.ndarray:
     walls square to the trailer only). (Tried: faces of points behind the trailer too: a vehicle
     close behind an unknown trailer gave faces across its unseen rear, and its length was lost.)"""
     trailer = model.trailer
-    out = WALL_BESIDE_M[0]
+    edge = trailer.width_m / 2 + WALL_BESIDE_M[0]
+    if kernels.count_beside(q, trailer.front_m, edge, trailer.rear_m + END_BAND_M) < WALL_MIN_POINTS:
+        return None  # (most frames: counted without the masks)
     ahead = q[:, 0] <= trailer.front_m
-    past = ahead & (np.abs(q[:, 1]) >= trailer.width_m / 2 + out)
+    past = ahead & (np.abs(q[:, 1]) >= edge)
     beside = past & (q[:, 0] <= trailer.rear_m + END_BAND_M)
-    wall = np.zeros(len(q), dtype=bool)
-    if np.count_nonzero(beside) < WALL_MIN_POINTS:
-        return wall
     normal = _wall_normal(q[beside])
     if abs(normal[1]) > np.sin(np.radians(90.0 - WALL_MIN_ANGLE_DEG)):
-        return wall  # along the trailer: a dock's shelter
-    edge = trailer.width_m / 2 + out
+        return None  # along the trailer: a dock's shelter
+    wall = np.zeros(len(q), dtype=bool)
     for offset in _wall_offsets(q[past], normal):
         # it passes the trailer's rear: a line of points beside its middle (a shelter's end) does not
         if min((offset - normal[1] * y) / normal[0] for y in (-edge, edge)) <= trailer.rear_m + END_BAND_M:
@@ -1155,14 +1157,14 @@ def _line_normals() -> np.ndarray:
     return np.column_stack([np.cos(angles), np.sin(angles)])
 
 
-def _beyond_gap(q: np.ndarray, prior: Prior) -> tuple[Prior, np.ndarray]:
+def _beyond_gap(q: np.ndarray, prior: Prior) -> tuple[Prior, np.ndarray | None]:
     """(``prior`` with its trailer's slack cut where its claimed points (``q``: the trailer's frame,
     xy) behind the model's rear face stop running on without a gap longer than ``MAX_BODY_GAP_M``,
-    which of them lie beyond). A trailer is one body: an object the moving trailer has just
+    which of them lie beyond; None when its length is settled). A trailer is one body: an object the moving trailer has just
     uncovered metres behind it (a fence, a parked car) is not its unseen rear, and it pulled the
     fit's sides (a Volvo driving off from a fence 5-7 m behind it read a 3 degree hitch for 5 s)."""
     if prior.trailer_slack_m <= SETTLED_SLACK_M:
-        return prior, np.zeros(len(q), dtype=bool)
+        return prior, None
     behind = prior.model.trailer.rear_m - q[:, 0]
     chain = np.concatenate([[0.0], np.sort(behind[behind > 0.0])])
     gaps = np.flatnonzero(np.diff(chain) > MAX_BODY_GAP_M)
