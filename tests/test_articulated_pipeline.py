@@ -24,7 +24,7 @@ from i2v_loc.stages.vehicle_tracker import (
     VehicleTracker,
     _around_kingpin,
     _Extent,
-    _face_span,
+    _face_seen,
     _gap_filled,
     _gap_open,
     _own_body,
@@ -993,21 +993,29 @@ def test_a_model_change_shifts_the_reference_point_by_its_fronts_and_kingpin_not
     assert _shift_along_m(volvo, cab) == pytest.approx(0.3)  # the cab's rear face moved
 
 
-def test_a_faces_span_is_measured_across_its_own_unit():
-    """The trailer's front face, at a 30 deg hitch, 2.1 m of its points across it and one point on
-    the cab's rear face: the span is taken across the trailer (yaw + hitch), not along the cab."""
+def test_a_face_is_seen_across_its_own_unit_and_its_middle_not_at_its_corners():
+    """The trailer's front face at a 30 deg hitch: 2.1 m of points across it (its middle too) and
+    one point on the cab's rear face. It is seen, taken across the trailer (yaw + hitch); its two
+    corners alone (the ends of its sides, 2.1 m apart) are not, nor the same spread beside its axis;
+    the cab's one point is not its rear face."""
     yaw, hitch = 0.4, np.radians(30.0)
+    model = VehicleModel.from_config("volvo_fh", PARAMS.vehicles["volvo_fh"])  # trailer 2.5 m wide
     across = np.array([-np.sin(yaw + hitch), np.cos(yaw + hitch)])
     along = np.array([np.cos(yaw + hitch), np.sin(yaw + hitch)])
-    xy = np.array([5.0, 1.0]) + np.outer(np.linspace(-1.05, 1.05, 8), across) + 0.02 * along
+    front = model.kingpin_xy(0.0, 0.0, yaw) + model.trailer.front_m * along
+    xy = front + np.outer(np.linspace(-1.05, 1.05, 8), across) + 0.02 * along
     points = np.column_stack([np.vstack([xy, [[4.0, 0.5]]]), np.full(9, 2.0)])
     unit = np.array([1] * 8 + [0], dtype=np.int8)
     face = np.array([FRONT] * 8 + [REAR], dtype=np.int8)
     m = Measurement(0.0, 0.0, yaw, hitch, np.eye(4), points, unit, 0.0, face=face)
-    model = VehicleModel.from_config("volvo_fh", PARAMS.vehicles["volvo_fh"])
-    assert _face_span(m, model, 1, FRONT) == pytest.approx(2.1)
-    assert _face_span(m, model, 0, REAR) == 0.0  # one point spans nothing
-    assert _face_span(replace(m, hitch_rad=0.0), model, 1, FRONT) < 2.1 * np.cos(hitch) + 1e-9  # seen askew
+    assert _face_seen(m, model, 1, FRONT)  # 2.1 m >= 0.6 x 2.5 m, four points in the middle
+    aside = points.copy()
+    aside[:8, :2] += 1.6 * across  # the same spread beside the trailer's front: no middle
+    assert not _face_seen(replace(m, points=aside), model, 1, FRONT)
+    assert not _face_seen(m, model, 0, REAR)  # one point
+    corners = face.copy()
+    corners[1:7] = -1  # the first and last points only
+    assert not _face_seen(replace(m, face=corners), model, 1, FRONT)
 
 
 def test_a_side_running_on_through_the_gap_just_outside_the_cab_fills_it():
