@@ -485,10 +485,7 @@ class VehicleTracker:
         if turning:
             kingpin.add(m.kingpin_m)
             track.trailer_front.add(m.trailer_front_m)
-        elif (
-            np.sum((m.unit == 0) & (m.face == REAR)) >= REAR_FACE_MIN_POINTS
-            and _face_seen(m, track.model, 1, FRONT)
-        ):
+        elif np.sum((m.unit == 0) & (m.face == REAR)) >= REAR_FACE_MIN_POINTS and _face_seen(m, track.model, 1, FRONT):
             track.reach.add(m.trailer_front_m - m.kingpin_m)
 
     def _trailer_front(self, track: _Track) -> float:
