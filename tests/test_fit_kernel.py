@@ -370,8 +370,9 @@ def test_the_strided_pick_is_numpys_stride_over_each_part():
 
 
 def test_the_unit_masks_and_frames_are_the_numpy_ones():
-    """``in_first_box_only`` is the first box's rotated-rectangle test and not the second's, and
-    ``to_frame`` / ``owned_to_frame`` turn points into a frame as the numpy rotation does, to the bit."""
+    """``in_first_box_only`` is the first box's rotated-rectangle test and not the second's,
+    ``to_frame`` / ``owned_to_frame`` turn points into a frame as the numpy rotation does, to the
+    bit, and ``count_beside`` counts the points up to a front and a rear and out past an edge."""
     rng = np.random.default_rng(5)
     for trial in range(50):
         points = rng.uniform(-8.0, 8.0, (int(rng.integers(0, 400)), 3)).astype(np.float32 if trial % 2 else float)
@@ -397,6 +398,9 @@ def test_the_unit_masks_and_frames_are_the_numpy_ones():
         rows, q = kernels.owned_to_frame(points, owner, 1, *origin, c, s)
         np.testing.assert_array_equal(rows, np.flatnonzero(owner == 1))
         np.testing.assert_array_equal(q, want[rows])
+        front, edge, rear = rng.uniform(-2.0, 4.0), rng.uniform(0.5, 3.0), rng.uniform(-6.0, 2.0)
+        beside = (want[:, 0] <= front) & (want[:, 0] <= rear) & (np.abs(want[:, 1]) >= edge)
+        assert kernels.count_beside(want, front, edge, rear) == np.count_nonzero(beside)
 
 
 def ref_rear_face(q, z_rel, unit, face, heights, front, width, inlier, beside, max_gap, end_band, middle_below, span):
