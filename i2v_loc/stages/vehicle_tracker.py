@@ -526,7 +526,7 @@ class VehicleTracker:
         trailer = track.model.trailer
         z_rel = m.points[:, 2] - track.ground_z_m
         n_band, rows, face_seen, middle = kernels.rear_face(
-            q, z_rel, m.unit, m.face, (trailer.floor_m - END_BAND_M, trailer.top_m + END_BAND_M),
+            q, z_rel, m.unit, m.face, _body_band(trailer),
             trailer.front_m + END_BAND_M, width_m / 2, self.params.fit_inlier_m, WALL_BESIDE_M, MAX_BODY_GAP_M,
             END_BAND_M, trailer.top_m - self.params.fit_top_band_m, FACE_SEEN_SPAN * width_m,
         )  # fmt: skip
@@ -1051,9 +1051,15 @@ def _changed(obj, **values):
     return replace(obj, **values)
 
 
+def _body_band(trailer: Box) -> tuple[float, float]:
+    """The heights above the ground within ``END_BAND_M`` of the trailer body's floor to roof."""
+    return trailer.floor_m - END_BAND_M, trailer.top_m + END_BAND_M
+
+
 def _body_heights(z_rel: np.ndarray, trailer: Box) -> np.ndarray:
-    """Heights above the ground (``z_rel``) within ``END_BAND_M`` of the trailer body's floor to roof."""
-    return (z_rel >= trailer.floor_m - END_BAND_M) & (z_rel <= trailer.top_m + END_BAND_M)
+    """Which heights above the ground (``z_rel``) lie in the trailer body's band (``_body_band``)."""
+    low, high = _body_band(trailer)
+    return (z_rel >= low) & (z_rel <= high)
 
 
 def _start_covariance(m: Measurement) -> np.ndarray:
