@@ -63,7 +63,7 @@ def ref_face_table(v, model, trailer_slack_m):
     return np.array(rows)
 
 
-def ref_faces(v, xy, z_rel, model, top_band_m, trailer_slack_m=0.0):
+def ref_faces(v, xy, z_rel, model, top_band_m, trailer_slack_m=0.0, chassis_gap_m=hinged_fit.CHASSIS_GAP_M):
     """Returns (residual, jacobian, unit, distance, face)."""
     table = ref_face_table(v, model, trailer_slack_m)
     n = len(xy)
@@ -93,6 +93,14 @@ def ref_faces(v, xy, z_rel, model, top_band_m, trailer_slack_m=0.0):
     if model.articulated:
         jac[:, 3] = np.where(unit == 1, lever, 0.0)
     on_roof = roof[rows, unit]
+    if model.articulated:  # the chassis behind the cab: low, within its width, its rear face nearest
+        cab = model.tractor
+        on_roof |= (
+            (pick == 1)
+            & (perp[:, 1] > chassis_gap_m)
+            & (np.abs(along[:, 1]) <= table[1, 6])
+            & (z_rel < cab.floor_m + cab.height_m / 2)
+        )
     residual[on_roof] = 0.0
     jac[on_roof] = 0.0
     return residual, jac, unit, np.sqrt(dist2[rows, pick]), np.where(on_roof, -1, pick % 4)
@@ -106,7 +114,7 @@ def ref_faces_of(v, xy, z_rel, prior, top_band_m):
     if prior.fits_kingpin:
         trailer = replace(model.trailer, front_m=float(v[-1]))
         model = replace(model.with_boxes(model.tractor, trailer), kingpin_behind_axle_m=float(v[-2]))
-    residual, jac, unit, distance, face = ref_faces(v[:4], xy, z_rel, model, top_band_m)
+    residual, jac, unit, distance, face = ref_faces(v[:4], xy, z_rel, model, top_band_m, 0.0, prior.chassis_gap_m)
     columns = [jac]
     if prior.fits_length:
         columns.append(-((unit == 1) & (face == hinged_fit.REAR)).astype(float))
@@ -222,7 +230,9 @@ def kernel_faces_of(v, xy, z, prior):
     geometry = hinged_fit._geometry(v, prior.model, 0.0)
     xy, z = np.ascontiguousarray(xy, dtype=float), np.ascontiguousarray(z, dtype=float)
     return hinged_fit._Faces(
-        *kernels.fit_faces(xy, z, geometry, TOP_BAND_M, 4, prior.fits_length, prior.fits_kingpin, v)
+        *kernels.fit_faces(
+            xy, z, geometry, TOP_BAND_M, 4, prior.fits_length, prior.fits_kingpin, v, prior.chassis_gap_m
+        )
     )
 
 
@@ -242,7 +252,9 @@ def ref_fit(points, prior, params, iterations, start_scale_m):
         if prior.extra:
             residual, jacobian, *_ = ref_faces_of(v, xy, z_rel, prior, params.fit_top_band_m)
         else:
-            residual, jacobian, *_ = ref_faces(v, xy, z_rel, prior.model, params.fit_top_band_m, prior.trailer_slack_m)
+            residual, jacobian, *_ = ref_faces(
+                v, xy, z_rel, prior.model, params.fit_top_band_m, prior.trailer_slack_m, prior.chassis_gap_m
+            )
         w = 1.0 / (1.0 + (residual / c) ** 2)
         jw = jacobian * w[:, None]
         step = np.linalg.solve(jw.T @ jacobian + prior_info, -(jw.T @ residual + prior_weights * (v - v0)))

@@ -9,7 +9,7 @@ import pytest
 from hinged_points import vehicle_points
 
 from i2v_loc.params import Params
-from i2v_loc.stages.hinged_fit import Prior, fit
+from i2v_loc.stages.hinged_fit import CHASSIS_GAP_M, REAR, Prior, faces, fit
 from i2v_loc.stages.vehicle_model import VehicleModel
 
 PARAMS = Params()
@@ -234,3 +234,52 @@ def test_a_hidden_cab_folded_over_its_trailer_gets_no_share_of_the_trailers_poin
 
     assert in_cab_box(points) > 300  # the trailer's points reach into the cab's box
     assert in_cab_box(thin_by_unit(points, 200, Prior(*TRUTH, hitch, model))) <= 6
+
+
+def twizy() -> VehicleModel:
+    return VehicleModel.from_config("twizy", PARAMS.vehicles["twizy"])
+
+
+def behind_cab(model: VehicleModel, x: float, y: float, yaw: float, back_m, across_m, z_m) -> np.ndarray:
+    """Yard points ``back_m`` behind the cab's rear face, ``across_m`` left of its axis, ``z_m`` high."""
+    local_x, local_y = model.tractor.rear_m - np.ravel(back_m), np.ravel(across_m)
+    c, s = np.cos(yaw), np.sin(yaw)
+    return np.column_stack([x + c * local_x - s * local_y, y + s * local_x + c * local_y, np.ravel(z_m)])
+
+
+def test_the_chassis_behind_a_cab_is_not_its_rear_face():
+    """Behind an articulated vehicle's cab, below half its height and within its width, stand its
+    chassis, coupling and rear wheels (the simulator's Twizy has a plate there, 0.6-0.75 m high):
+    more than CHASSIS_GAP_M behind the rear face such a point says nothing (residual 0, face -1);
+    nearer, higher or beside the cab it is the rear face's. A start's hypothesis excuses none."""
+    model, hitch = twizy(), np.radians(10.0)
+    v = np.array([*TRUTH, hitch])
+    half = model.tractor.floor_m + model.tractor.height_m / 2
+    back = np.array([0.3, 0.45, 0.05, 0.3, 0.3])
+    across = np.array([0.2, -0.5, 0.2, 0.2, model.tractor.width_m / 2 + 0.2])
+    z = np.array([half - 0.2, 0.4, half - 0.2, half + 0.2, half - 0.2])
+    xy = behind_cab(model, *TRUTH, back, across, z)[:, :2]
+    tracked = faces(v, xy, z, model, PARAMS.articulated.fit_top_band_m)
+    assert tracked.unit.tolist() == [0] * 5
+    assert tracked.face.tolist()[:4] == [-1, -1, REAR, REAR] and tracked.face[4] >= 0  # the last: its side's
+    np.testing.assert_allclose(tracked.residual[:2], 0.0)
+    np.testing.assert_allclose(tracked.jacobian[:2], 0.0)
+    np.testing.assert_allclose(tracked.residual[2:4], back[2:4], atol=1e-9)  # on the rear face's plane
+    placed = faces(v, xy, z, model, PARAMS.articulated.fit_top_band_m, chassis_gap_m=np.inf)
+    assert placed.face.tolist()[:4] == [REAR] * 4
+    np.testing.assert_allclose(placed.residual[:2], back[:2], atol=1e-9)
+    assert Prior(*TRUTH, hitch, model).chassis_gap_m == CHASSIS_GAP_M < 0.3
+    assert Prior(*TRUTH, hitch, model, hypothesis=True).chassis_gap_m == np.inf
+
+
+def test_a_plate_behind_the_cab_leaves_the_fit_at_its_pose():
+    model, hitch = twizy(), np.radians(10.0)
+    back, across = np.meshgrid(np.arange(0.15, 0.5, 0.025), np.arange(0.0, 0.5, 0.025))
+    plate = behind_cab(model, *TRUTH, back, across, np.full(back.size, 0.65))
+    points = np.vstack([vehicle_points(model, *TRUTH, hitch, sensors=SENSORS, seed=5), plate])
+    dx, dy, dyaw, dhitch = PRIOR_OFFSET
+    m = fit(points, Prior(TRUTH[0] + dx, TRUTH[1] + dy, TRUTH[2] + dyaw, hitch + dhitch, model), PARAMS.articulated, 20)
+    assert np.hypot(m.x_m - TRUTH[0], m.y_m - TRUTH[1]) < 0.03
+    assert abs(np.degrees(m.yaw_rad - TRUTH[2])) < 0.2 and abs(np.degrees(m.hitch_rad - hitch)) < 0.3
+    on_plate = np.isclose(m.points[:, 2], 0.65)
+    assert on_plate.sum() >= 5 and (m.face[on_plate] == -1).all()

@@ -38,6 +38,7 @@ KINGPIN_RANGE_M = (-1.5, 1.5)
 _RANGES = np.array([*TRAILER_LENGTH_RANGE_M, *KINGPIN_RANGE_M])
 MIN_UNIT_SHARE = 0.1  # of the fit's thinned sample, for each unit that has as many points
 UNIT_SAMPLE_MARGIN_M = 0.5
+CHASSIS_GAP_M = 0.1  # a low point farther behind a tracked cab's rear face is its chassis (nearest_faces)
 
 
 @dataclass(frozen=True)
@@ -55,11 +56,18 @@ class Prior:
     trailer_slack_m: float = 0.0
     free_trailer_length: bool = False  # fit the trailer's length too (its rear face moves)
     free_kingpin: bool = False  # fit the kingpin's offset and the trailer's front from it (seen at a hitch angle)
+    # a start's hypothesis: where its cab is, is what is tested, and no point behind it is excused as
+    # its chassis (excused, a parked object beside a trailer started as a cab bent 34 deg)
+    hypothesis: bool = False
 
     @property
     def vector(self) -> np.ndarray:
         v = [self.x_m, self.y_m, self.yaw_rad]
         return np.array(v + [self.hitch_rad] if self.model.articulated else v)
+
+    @property
+    def chassis_gap_m(self) -> float:
+        return math.inf if self.hypothesis else CHASSIS_GAP_M
 
     @property
     def fits_length(self) -> bool:
@@ -184,11 +192,13 @@ def faces(
     model: VehicleModel,
     top_band_m: float,
     trailer_slack_m: float = 0.0,
+    chassis_gap_m: float = CHASSIS_GAP_M,
 ) -> _Faces:
     """The nearest faces of the pose ``v`` (x, y, yaw[, hitch])."""
     xy = np.ascontiguousarray(xy, dtype=float)
     z_rel = np.ascontiguousarray(z_rel, dtype=float)
-    return _Faces(*kernels.nearest_faces(xy, z_rel, _geometry(v, model, trailer_slack_m), float(top_band_m), len(v)))
+    geometry = _geometry(v, model, trailer_slack_m)
+    return _Faces(*kernels.nearest_faces(xy, z_rel, geometry, float(top_band_m), len(v), float(chassis_gap_m)))
 
 
 def fit(
@@ -215,7 +225,7 @@ def fit(
         xy, np.ascontiguousarray(z_rel), _geometry(v0, prior.model, 0.0 if prior.extra else prior.trailer_slack_m),
         float(params.fit_top_band_m), n_pose, prior.fits_length, prior.fits_kingpin, v0, prior_weights,
         float(scale), float(start_scale_m or params.fit_start_scale_m), int(iterations or params.fit_iterations),
-        _RANGES,
+        _RANGES, prior.chassis_gap_m,
     )  # fmt: skip
     at = _Faces(*found)
     cost = kernels.cauchy_cost(at.residual, float(scale)) * scale**2 / 2

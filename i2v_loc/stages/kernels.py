@@ -947,13 +947,16 @@ def claim_points(points, boxes, track_of_box, n_tracks, margin):
 
 
 @njit(**_JIT)
-def nearest_faces(xy, z_rel, geometry, top_band, n_params):
+def nearest_faces(xy, z_rel, geometry, top_band, n_params, chassis_gap):
     """Per point the nearest face of either unit box (``_face_table``'s rows; the first on a tie):
     signed distance to its plane (the residual), Jacobian row over the first ``n_params`` of
     (x, y, yaw, hitch), unit, distance to the face itself (beyond its ends too; inf above every
     roof) and face number (0 front, 1 rear, 2 left, 3 right). A point on a unit's roof or under its
     floor, inside its footprint (the trailer's reaching ``slack`` further back), is at distance 0
-    from each of that unit's faces; picked so, it gets residual 0, a zero row and face -1.
+    from each of that unit's faces; picked so, it gets residual 0, a zero row and face -1. So does a
+    point whose nearest face is an articulated vehicle's cab's rear face, more than ``chassis_gap``
+    behind it, within its width and below half its height: the chassis, the coupling and the rear
+    wheels stand there (inf: none is).
 
     Beyond a box's corner two faces are at the same distance: which one is picked is decided by the
     last bit, so the dot products are rounded like the (n, 2) x (2, faces) matrix products of the numpy
@@ -999,7 +1002,14 @@ def nearest_faces(xy, z_rel, geometry, top_band, n_params):
         u = np.int64(table[pick, 9])
         unit[i] = u
         distance[i] = math.sqrt(dist2[pick])
-        if roof[u]:  # a roof or undercarriage point says nothing about the pose
+        chassis = (
+            n_units == 2
+            and pick == 1
+            and perp[1] > chassis_gap
+            and abs(along[1]) <= table[1, 6]
+            and z < geometry[9] + geometry[10] / 2
+        )
+        if roof[u] or chassis:  # a roof, undercarriage or chassis point says nothing about the pose
             face[i] = -1
             continue
         face[i] = pick % 4
@@ -1012,7 +1022,7 @@ def nearest_faces(xy, z_rel, geometry, top_band, n_params):
 
 
 @njit(**_JIT)
-def fit_faces(xy, z_rel, geometry, top_band, n_pose, fits_length, fits_kingpin, v):
+def fit_faces(xy, z_rel, geometry, top_band, n_pose, fits_length, fits_kingpin, v, chassis_gap):
     """``nearest_faces`` of the pose and fitted dimensions ``v`` (pose, then the trailer's length,
     then the kingpin's offset and the trailer's front), with the dimensions' Jacobian columns: the
     rear face moves with the length; the trailer moves back along the tractor's axis with the
@@ -1024,7 +1034,7 @@ def fit_faces(xy, z_rel, geometry, top_band, n_pose, fits_length, fits_kingpin, 
         geometry[12] = v[4]
     if fits_kingpin:
         geometry[4], geometry[11] = v[n_params - 2], v[n_params - 1]
-    residual, pose_jacobian, unit, distance, face = nearest_faces(xy, z_rel, geometry, top_band, n_pose)
+    residual, pose_jacobian, unit, distance, face = nearest_faces(xy, z_rel, geometry, top_band, n_pose, chassis_gap)
     if n_params == n_pose:
         return residual, pose_jacobian, unit, distance, face
     n = xy.shape[0]
@@ -1060,6 +1070,7 @@ def irls(
     start_scale,
     iterations,
     ranges,
+    chassis_gap,
 ):
     """Iteratively reweighted Gauss-Newton steps of the hinged fit from ``v0`` (Cauchy weights, the
     loss scale halved per step from ``start_scale`` down to ``scale``, a weak prior pulling towards
@@ -1073,13 +1084,13 @@ def irls(
     v = v0.copy()
     n_params = v.shape[0]
     residual, jacobian, unit, distance, face = fit_faces(
-        xy, z_rel, geometry, top_band, n_pose, fits_length, fits_kingpin, v
+        xy, z_rel, geometry, top_band, n_pose, fits_length, fits_kingpin, v, chassis_gap
     )
     for k in range(iterations):
         c = max(scale, start_scale * 0.5**k)
         if k > 0:
             residual, jacobian, unit, distance, face = fit_faces(
-                xy, z_rel, geometry, top_band, n_pose, fits_length, fits_kingpin, v
+                xy, z_rel, geometry, top_band, n_pose, fits_length, fits_kingpin, v, chassis_gap
             )
         weighted = _cauchy_weighted(jacobian, residual, c)
         normal = np.dot(weighted.T, jacobian) + prior_info
@@ -1734,12 +1745,16 @@ def warm_up() -> None:
         claim_points(points, np.zeros((2, 6)), np.array([0, 0]), 1, 0.5)
     for n_boxes in (1, 2):
         geometry = np.r_[np.zeros(5), 1.0, np.tile([2.0, 4.0, 2.0, 0.5, 3.0], n_boxes)]
-        nearest_faces(np.ascontiguousarray(p64[:, :2]), np.ascontiguousarray(p64[:, 2]), geometry, 0.25, 2 + n_boxes)
+        nearest_faces(
+            np.ascontiguousarray(p64[:, :2]), np.ascontiguousarray(p64[:, 2]), geometry, 0.25, 2 + n_boxes, 0.1
+        )
     xy, z = np.ascontiguousarray(p64[:, :2]), np.ascontiguousarray(p64[:, 2])
     v0 = np.array([0.0, 0.0, 0.1, 0.2, 9.0, 0.3, 1.0])
     geometry = np.r_[np.zeros(5), 0.0, np.tile([2.0, 4.0, 2.0, 0.5, 3.0], 2)]
     ranges = np.array([2.0, 16.5, -1.5, 1.5])
-    _, residual, jacobian, _, _, _ = irls(xy, z, geometry, 0.25, 4, True, True, v0, np.ones(7), 0.1, 0.2, 2, ranges)
+    _, residual, jacobian, _, _, _ = irls(
+        xy, z, geometry, 0.25, 4, True, True, v0, np.ones(7), 0.1, 0.2, 2, ranges, 0.1
+    )
     cauchy_cost(residual, 0.1)
     fit_covariance(residual, jacobian, np.ones(7), 0.1, 0.3, 0.01, 0.0004, 4)
     face_median(p64, 1, np.zeros(3, dtype=np.int8), np.zeros(3, dtype=np.int8), 0, 0)
@@ -1749,7 +1764,7 @@ def warm_up() -> None:
     )
     fit_labels(np.zeros(3, dtype=np.int64), np.zeros(3, dtype=np.int64), residual[:3], residual[:3], 0.1, 1)
     observed_directions(np.eye(4), np.ones(4), np.ones(4))
-    fit_faces(xy, z, geometry, 0.25, 4, True, True, v0)  # the tests call it on its own
+    fit_faces(xy, z, geometry, 0.25, 4, True, True, v0, 0.1)  # the tests call it on its own
     any_closer(xy, xy, 0.5)  # the tests call it on its own
     fullest_bin(np.ones((3, 2)), 0.1)
     rays_through_box(p32, p64[:1], np.array([0, 3]), np.eye(3), np.array([0.0, 0.0, 1.0, 0.0, 1.0, 1.0, 0.0, 1.0]), 0.3)

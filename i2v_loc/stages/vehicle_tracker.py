@@ -459,12 +459,14 @@ class VehicleTracker:
             track.filter.move_pose(again.vector - m.vector)
 
     def _learn_cab_length(self, track: _Track, m: Measurement, q: np.ndarray) -> None:
-        """The cab's length: between the middles of its front and rear faces' points, when at least
-        ``SIDE_MIN_POINTS`` lie on each (its front pins it in the fit; an unknown tractor's cab 0.27 m
-        shorter than the MAN's put its box centre 0.13 m off)."""
-        (n_front, front), (n_rear, rear) = (kernels.face_median(q, 0, m.unit, m.face, 0, f) for f in (FRONT, REAR))
-        if min(n_front, n_rear) >= SIDE_MIN_POINTS:
-            track.cab_length.add(front - rear)
+        """The cab's length: between the middles of its front and rear faces' points, when both are
+        seen (``_face_seen``; its front pins it in the fit; an unknown tractor's cab 0.27 m shorter
+        than the MAN's put its box centre 0.13 m off). (Five points on each, before: with the chassis
+        behind the cab no longer on its rear face, an unknown tractor's cab had them only after 20 s.)"""
+        if not (_face_seen(m, track.model, 0, FRONT) and _face_seen(m, track.model, 0, REAR)):
+            return
+        (_, front), (_, rear) = (kernels.face_median(q, 0, m.unit, m.face, 0, f) for f in (FRONT, REAR))
+        track.cab_length.add(front - rear)
 
     def _learn_kingpin(self, track: _Track, prior: Prior, points: np.ndarray) -> None:
         """The kingpin's offset shows only at a hitch angle (straight, it trades with the trailer's
@@ -1010,7 +1012,7 @@ class VehicleTracker:
 
 
 def _tractor_around(prior: Prior) -> list[Prior]:
-    """``prior`` with its trailer where it is and its tractor at each of the start hitches."""
+    """``prior`` with its trailer where it is and its tractor at each of the start hitches (hypotheses)."""
     model = prior.model
     trailer_yaw = prior.yaw_rad + prior.hitch_rad
     kingpin = model.kingpin_xy(prior.x_m, prior.y_m, prior.yaw_rad)
@@ -1018,7 +1020,9 @@ def _tractor_around(prior: Prior) -> list[Prior]:
     for hitch in np.radians(START_HITCHES_DEG):
         yaw = trailer_yaw - hitch
         x, y = kingpin + model.kingpin_behind_axle_m * np.array([np.cos(yaw), np.sin(yaw)])
-        out.append(replace(prior, x_m=float(x), y_m=float(y), yaw_rad=float(yaw), hitch_rad=float(hitch)))
+        out.append(
+            replace(prior, x_m=float(x), y_m=float(y), yaw_rad=float(yaw), hitch_rad=float(hitch), hypothesis=True)
+        )
     return out
 
 
@@ -1071,7 +1075,7 @@ def _sized_start(m: Measurement, model: VehicleModel, ground_z_m: float) -> Prio
     """A start fit's refinement from ``m``: ``model`` with the trailer's length ``m`` fitted, the
     length fitted again."""
     sized = _with_trailer_length(model, m.trailer_length_m)
-    return Prior(m.x_m, m.y_m, m.yaw_rad, m.hitch_rad, sized, ground_z_m, 0.0, True)
+    return Prior(m.x_m, m.y_m, m.yaw_rad, m.hitch_rad, sized, ground_z_m, 0.0, True, hypothesis=True)
 
 
 def _own_body(points: np.ndarray, owner: np.ndarray, i: int, prior: Prior) -> tuple[Prior, bool]:
@@ -1363,7 +1367,9 @@ def _placed(model: VehicleModel, rect, sign: float, hitch_rad: float, ground_z_m
         back = trailer_c - (model.trailer.length_m / 2) * np.array([np.cos(yaw + hitch_rad), np.sin(yaw + hitch_rad)])
         centre = (front + back) / 2
     x, y = rect.center_xy - centre
-    return Prior(float(x), float(y), float(yaw), float(hitch_rad), model, ground_z_m, 0.0, model.articulated)
+    return Prior(
+        float(x), float(y), float(yaw), float(hitch_rad), model, ground_z_m, 0.0, model.articulated, hypothesis=True
+    )
 
 
 def _unit_origins(v: np.ndarray, model: VehicleModel) -> list[tuple[np.ndarray, float]]:
