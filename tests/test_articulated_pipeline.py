@@ -231,6 +231,31 @@ def test_a_track_is_reported_with_the_length_its_start_frame_shows():
     assert np.hypot(*(centre - true_centre)) < 0.15
 
 
+def test_a_trailer_length_learned_long_is_measured_again_where_the_cab_pins_it():
+    """A Volvo FH standing at a -45 deg hitch, seen by one sensor beside its trailer's rear: the rear
+    face, the cab's side and front, not the trailer's front. Its trailer's length was learned 6.51 m
+    (6.30; a start frame's points, not de-skewed): the frames' fits with the length free measure
+    6.30 m, and the front stays the catalogue's (the frame's own fit measured its model's length
+    again, and the turning fit put the front where that length and the rear face had it, 1.1 m)."""
+    model, hitch = volvo(), np.radians(-45.0)
+    sensors = ((-4.0, 12.0, 4.0),)
+    long_by_0_21 = replace(model, trailer=replace(model.trailer, length_m=6.51))
+    tracker = VehicleTracker(PARAMS.articulated, PARAMS.vehicles)
+    points = vehicle_points(model, 0.0, 0.0, 0.0, hitch, sensors=sensors, spacing=0.15, seed=1, noise_m=0.02)
+    track = tracker._track(
+        1, long_by_0_21, fit(points, Prior(0.0, 0.0, 0.0, hitch, long_by_0_21), PARAMS.articulated), 0.0, 0.0, 0.0
+    )
+    for _ in range(3):
+        track.trailer_length.add(6.51)
+    tracker.tracks = [track]
+    for k in range(1, 41):
+        points = vehicle_points(model, 0.0, 0.0, 0.0, hitch, sensors=sensors, spacing=0.15, seed=k + 1, noise_m=0.02)
+        (report,) = tracker.process(points, flat, 0.1 * k)
+    assert report.model.trailer.length_m == pytest.approx(6.30, abs=0.02)
+    assert report.model.trailer.front_m == pytest.approx(0.90, abs=0.01)
+    assert np.hypot(report.state.x_m, report.state.y_m) < 0.03
+
+
 def _long_trailer(length_m: float) -> VehicleModel:
     model = volvo()
     l2 = model.trailer_axle_m * (length_m - model.trailer.front_m) / (model.trailer.length_m - model.trailer.front_m)

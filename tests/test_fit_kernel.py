@@ -238,7 +238,7 @@ def kernel_faces_of(v, xy, z, prior):
 
 def ref_fit(points, prior, params, iterations, start_scale_m):
     """The numpy loop ``kernels.irls`` replaced, and the covariance of ``kernels.fit_covariance``:
-    (solution, covariance, residual of the last step)."""
+    (solution, covariance, residual of the last step, the fitted trailer length's standard deviation)."""
     sample = hinged_fit.thin_by_unit(points, params.fit_max_points, prior)
     xy, z_rel = np.ascontiguousarray(sample[:, :2]), sample[:, 2] - prior.ground_z_m
     v0 = np.concatenate([prior.vector, prior.extra])
@@ -271,7 +271,9 @@ def ref_fit(points, prior, params, iterations, start_scale_m):
     info = (jacobian * w[:, None]).T @ jacobian / sigma2 + np.diag(1.0 / sigmas**2)
     position, angle = params.fit_position_floor_m, math.radians(params.fit_angle_floor_deg)
     floor = np.array([position, position, angle, angle][: min(len(sigmas), 4)])
-    return v, np.linalg.inv(info)[:4, :4] + np.diag(floor**2), residual
+    full = np.linalg.inv(info)
+    length_sd = math.sqrt(full[4, 4]) if prior.fits_length else None
+    return v, full[:4, :4] + np.diag(floor**2), residual, length_sd
 
 
 FIT_CASES = [
@@ -316,13 +318,14 @@ def test_the_compiled_fit_is_the_numpy_fit(model, free, hitch_deg):
         runs = ((1, params.fit_start_scale_m), (1, 0.8))
     for iterations, start_scale_m in runs:
         m = hinged_fit.fit(points, prior, params, iterations, start_scale_m)
-        v, covariance, residual = ref_fit(points, prior, params, iterations, start_scale_m)
+        v, covariance, residual, length_sd = ref_fit(points, prior, params, iterations, start_scale_m)
         assert _same(m.vector, np.r_[v[:2], hinged_fit.wrap_rad(v[2 : len(m.vector)])])
         assert _same(m.covariance, covariance)
         cost = float(np.mean(np.log1p((residual / params.fit_loss_scale_m) ** 2))) * params.fit_loss_scale_m**2 / 2
         assert _same(m.cost, cost)
         if prior.fits_length:
             assert _same(m.trailer_length_m, v[4])
+            assert _same(m.trailer_length_sd_m, length_sd)
         if prior.fits_kingpin:
             assert _same([m.kingpin_m, m.trailer_front_m], v[-2:])
 
@@ -384,7 +387,7 @@ def test_the_strided_pick_is_numpys_stride_over_each_part():
 def test_the_unit_masks_and_frames_are_the_numpy_ones():
     """``in_first_box_only`` is the first box's rotated-rectangle test and not the second's,
     ``to_frame`` / ``owned_to_frame`` turn points into a frame as the numpy rotation does, to the
-    bit, and ``count_beside`` counts the points up to a front and a rear and out past an edge."""
+    bit, and ``count_beside`` counts the points up to a place along the axis and out past an edge."""
     rng = np.random.default_rng(5)
     for trial in range(50):
         points = rng.uniform(-8.0, 8.0, (int(rng.integers(0, 400)), 3)).astype(np.float32 if trial % 2 else float)
@@ -410,9 +413,9 @@ def test_the_unit_masks_and_frames_are_the_numpy_ones():
         rows, q = kernels.owned_to_frame(points, owner, 1, *origin, c, s)
         np.testing.assert_array_equal(rows, np.flatnonzero(owner == 1))
         np.testing.assert_array_equal(q, want[rows])
-        front, edge, rear = rng.uniform(-2.0, 4.0), rng.uniform(0.5, 3.0), rng.uniform(-6.0, 2.0)
-        beside = (want[:, 0] <= front) & (want[:, 0] <= rear) & (np.abs(want[:, 1]) >= edge)
-        assert kernels.count_beside(want, front, edge, rear) == np.count_nonzero(beside)
+        up_to, edge = rng.uniform(-6.0, 2.0), rng.uniform(0.5, 3.0)
+        beside = (want[:, 0] <= up_to) & (np.abs(want[:, 1]) >= edge)
+        assert kernels.count_beside(want, up_to, edge) == np.count_nonzero(beside)
 
 
 def ref_rear_face(q, z_rel, unit, face, heights, front, width, inlier, beside, max_gap, end_band, middle_below, span):

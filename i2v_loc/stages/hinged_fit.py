@@ -97,6 +97,7 @@ class Measurement:
     unit: np.ndarray  # (n,) int8 per fitted point: 0 tractor, 1 trailer, -1 not explained
     cost: float  # mean Cauchy loss per fitted point (m^2)
     trailer_length_m: float | None = None  # fitted (Prior.free_trailer_length), else None
+    trailer_length_sd_m: float | None = None  # its standard deviation (how well the points pin it)
     kingpin_m: float | None = None  # fitted (Prior.free_kingpin), else None
     trailer_front_m: float | None = None  # fitted (Prior.free_kingpin), else None
     rear_points: int = 0  # explained points on the trailer's rear face
@@ -229,13 +230,14 @@ def fit(
     )  # fmt: skip
     at = _Faces(*found)
     cost = kernels.cauchy_cost(at.residual, float(scale)) * scale**2 / 2
-    marginal = _covariance(at, sigmas, params)
+    full = _covariance(at, sigmas, params)
+    marginal = full[:n_pose, :n_pose]
     floor = _floor(params, n_pose)
     covariance = marginal + np.diag(floor**2)
     # explained: on a face, not only on its plane (a wall running on past a box's corner is no side of it)
     unit, face, rear = kernels.fit_labels(at.unit, at.face, at.distance, at.residual, params.fit_inlier_m, REAR)
     hitch = float(wrap_rad(v[3])) if prior.model.articulated else None
-    length = float(v[4]) if prior.fits_length else None
+    length = (float(v[4]), math.sqrt(full[4, 4])) if prior.fits_length else (None, None)
     kingpin = (float(v[-2]), float(v[-1])) if prior.fits_kingpin else (None, None)
     return Measurement(
         float(v[0]),
@@ -246,7 +248,7 @@ def fit(
         sample,
         unit,
         cost,
-        length,
+        *length,
         *kingpin,
         rear,
         face,
@@ -263,7 +265,7 @@ def _weak_prior_sigmas(prior: Prior) -> np.ndarray:
 
 
 def _covariance(at: _Faces, sigmas: np.ndarray, params: ArticulatedParams) -> np.ndarray:
-    """Gauss-Newton covariance of the pose (the model's dimensions fitted too marginalised) with the
+    """Gauss-Newton covariance of the pose and the model's fitted dimensions (after it) with the
     Cauchy weights of the residuals, the noise from the explained residuals and the weak prior."""
     scale = params.fit_loss_scale_m
     return kernels.fit_covariance(
@@ -274,7 +276,7 @@ def _covariance(at: _Faces, sigmas: np.ndarray, params: ArticulatedParams) -> np
         params.fit_inlier_m,
         scale**2,
         params.fit_noise_floor_m**2,
-        min(len(sigmas), 4),
+        len(sigmas),
     )
 
 

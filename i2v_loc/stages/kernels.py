@@ -363,12 +363,12 @@ def _frame_row(points, i, ox, oy, c, s, out, k):
 
 
 @njit(**_JIT)
-def count_beside(q, front, edge, rear):
-    """How many of a trailer's points (``q``: its frame, xy) lie up to ``front`` and ``rear`` along
-    it and ``edge`` or more out from its axis."""
+def count_beside(q, up_to, edge):
+    """How many of a trailer's points (``q``: its frame, xy) lie up to ``up_to`` along it and
+    ``edge`` or more out from its axis."""
     n = 0
     for i in range(q.shape[0]):
-        n += (q[i, 0] <= front) & (q[i, 0] <= rear) & (abs(q[i, 1]) >= edge)
+        n += (q[i, 0] <= up_to) & (abs(q[i, 1]) >= edge)
     return n
 
 
@@ -1724,7 +1724,7 @@ def warm_up() -> None:
         to_frame(p, 0.0, 0.0, 1.0, 0.0)
         in_first_box_only(p, np.array([0.0, 0.0, 1.0, 0.0, 1.0, 1.0]), np.zeros(6), np.empty(3, dtype=np.bool_))
         owned_to_frame(p, np.zeros(3, dtype=np.int64), 0, 0.0, 0.0, 1.0, 0.0)
-    count_beside(np.zeros((2, 2)), 1.0, 1.0, 0.0)
+    count_beside(np.zeros((2, 2)), 1.0, 1.0)
     above_plane(p32, take, np.array([0.0, 0.0, 1.0]), 0.0, 0.1, np.empty(3, dtype=np.int64))
     plane_scores(p64, np.array([[0.0, 0.0, 1.0]]), np.zeros(1), 0.1)
     row_mean(p64)

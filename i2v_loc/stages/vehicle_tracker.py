@@ -75,6 +75,7 @@ SOLID_INSET_M = 0.5  # a unit's box this far inside its faces is crossed by no r
 SEEN_THROUGH_RATIO = 0.1  # of the rays ending on a unit, at most this many cross it (real ones: under 0.01)
 CAB_SLICE_MIN_M = 1.0
 LENGTH_CONVERGED_OBSERVATIONS = 5
+LENGTH_MAX_SD_M = 0.05  # a trailer's length the points pin no better than this is not measured
 SETTLED_SLACK_M = 0.5
 STILL_END_FRAMES = 20  # moving frames whose reach must agree before it is taken as the unit's end
 STILL_END_SPREAD_M = 0.5  # a shadow's edge moves by metres over these frames; the thinned points' hindmost by 0.3 m
@@ -484,18 +485,24 @@ class VehicleTracker:
         m = fit(points, replace(prior, free_kingpin=True), self.params)
         if m is None:
             return
+        front_seen = _face_seen(m, _changed(track.model, kingpin_behind_axle_m=m.kingpin_m), 1, FRONT)
         if turning:
             kingpin.add(m.kingpin_m)
-            track.trailer_front.add(m.trailer_front_m)
-        elif np.sum((m.unit == 0) & (m.face == REAR)) >= REAR_FACE_MIN_POINTS and _face_seen(m, track.model, 1, FRONT):
+            if front_seen:
+                track.trailer_front.add(m.trailer_front_m)
+        elif front_seen and np.sum((m.unit == 0) & (m.face == REAR)) >= REAR_FACE_MIN_POINTS:
             track.reach.add(m.trailer_front_m - m.kingpin_m)
 
     def _trailer_front(self, track: _Track) -> float:
-        """The trailer's front ahead of the kingpin: measured at a hitch angle, else the reach seen
-        straight less the kingpin's offset."""
-        if track.kingpin.values:
+        """The trailer's front ahead of the kingpin: where its face was seen at a hitch angle, else
+        the reach seen straight less the kingpin's offset, else the prior's. (Unseen, the turning fit
+        put it where the rear face and the model's length had it: a length learned 0.2 m long moved
+        the front 0.2 m forward, the two confirmed each other ever after.)"""
+        if track.trailer_front.values:
             return track.trailer_front.estimate
-        return track.reach.estimate + track.kingpin.estimate
+        if track.reach.values:
+            return track.reach.estimate + track.kingpin.estimate
+        return track.trailer_front.prior
 
     def _retype(self, track: _Track, name: str) -> None:
         """The learned sizes match another catalogue vehicle better than the start's: take its
@@ -536,8 +543,8 @@ class VehicleTracker:
             return
         rear = float(q[rows[-1], 0])
         if face_seen:
-            length = trailer.front_m - middle
-            if length >= TRAILER_LENGTH_RANGE_M[0]:
+            length = self._fitted_length(track, m, points, trailer.front_m - middle)
+            if length is not None:
                 track.trailer_length.add(length)
         elif not track.trailer_length.settled:
             on_side = [rows[(m.unit[rows] == 1) & (m.face[rows] == face)] for face in (LEFT, RIGHT)]
@@ -548,6 +555,21 @@ class VehicleTracker:
         track.trailer_length.add_bound(bound)
         if abs(track.filter.speed_m_s) >= STILL_END_MIN_SPEED_M_S:
             track.trailer_length.add_reach(min(trailer.front_m - rear, MAX_TRAILER_LENGTH_M))
+
+    def _fitted_length(self, track: _Track, m: Measurement, points: np.ndarray, seen_m: float) -> float | None:
+        """The trailer's length fitted to the claimed ``points`` from the frame's fit ``m`` and the length
+        its rear face shows in it (``seen_m``), when they pin it within ``LENGTH_MAX_SD_M``. (The length
+        the frame's fit shows is the model's own whenever the cab's place along the vehicle is pinned
+        weakly: a length learned 0.2 m long from a start frame's points, not de-skewed, stayed so, and
+        the fits put the tractor 0.2 m off.)"""
+        if seen_m < TRAILER_LENGTH_RANGE_M[0]:  # its front face, seen from ahead
+            return None
+        model = _with_trailer_length(track.model, seen_m)
+        prior = Prior(m.x_m, m.y_m, m.yaw_rad, m.hitch_rad, model, track.ground_z_m, free_trailer_length=True)
+        free = fit(points, prior, self.params)
+        if free is None or free.trailer_length_sd_m > LENGTH_MAX_SD_M:
+            return None
+        return free.trailer_length_m
 
     def _side_end(self, track: _Track, m: Measurement, points: np.ndarray, side: np.ndarray, width_m: float) -> float:
         """The hindmost of the claimed ``points`` on the trailer's side whose fitted points are ``side``
@@ -1115,7 +1137,7 @@ def _wall_behind(q: np.ndarray, model: VehicleModel) -> np.ndarray | None:
     close behind an unknown trailer gave faces across its unseen rear, and its length was lost.)"""
     trailer = model.trailer
     edge = trailer.width_m / 2 + WALL_BESIDE_M[0]
-    if kernels.count_beside(q, trailer.front_m, edge, trailer.rear_m + END_BAND_M) < WALL_MIN_POINTS:
+    if kernels.count_beside(q, trailer.rear_m + END_BAND_M, edge) < WALL_MIN_POINTS:  # its rear is behind its front
         return None  # (most frames: counted without the masks)
     ahead = q[:, 0] <= trailer.front_m
     past = ahead & (np.abs(q[:, 1]) >= edge)
