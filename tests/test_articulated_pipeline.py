@@ -20,6 +20,7 @@ from i2v_loc.stages.vehicle_model import Box, VehicleModel
 from i2v_loc.stages.vehicle_tracker import (
     SEED_RETRY_FRAMES,
     SETTLED_SLACK_M,
+    TURN_MAX_SPEED_SD_M_S,
     Seed,
     VehicleTracker,
     _around_kingpin,
@@ -254,6 +255,26 @@ def test_a_trailer_length_learned_long_is_measured_again_where_the_cab_pins_it()
     assert report.model.trailer.length_m == pytest.approx(6.30, abs=0.02)
     assert report.model.trailer.front_m == pytest.approx(0.90, abs=0.01)
     assert np.hypot(report.state.x_m, report.state.y_m) < 0.03
+
+
+def test_a_hinge_is_measured_in_a_turn_once_the_speed_is_known():
+    """A Volvo FH first seen in a turn (hitch 30 deg): the track starts with its speed unknown
+    (3 m/s standard deviation), and its first frames, de-skewed with a speed metres per second off,
+    measure no kingpin (a Twizy started in a roundabout had its trailer's front learned 0.08 m off
+    there); once the filter knows the speed within 0.5 m/s, every turning frame does."""
+    tracker = VehicleTracker(PARAMS.articulated, PARAMS.vehicles)
+    rows = []
+    start = (-12.0, 4.0, 0.0, np.radians(-30.0))
+    for t, points, (truth,) in drive([(volvo(), start)], 2.0, 2.0, 0.35):
+        reports = tracker.process(points, flat, t)
+        if reports:
+            track = tracker.tracks[0]
+            rows.append((track.filter.speed_sd_m_s, len(track.kingpin.values), abs(truth[3] - truth[2])))
+    assert min(hitch for _, _, hitch in rows) >= np.radians(20.0)  # turning throughout
+    unknown = [n for sd, n, _ in rows if sd > TURN_MAX_SPEED_SD_M_S]
+    known = [n for sd, n, _ in rows if sd <= TURN_MAX_SPEED_SD_M_S]
+    assert len(unknown) >= 1 and max(unknown) == 0
+    assert len(known) >= 10 and known[-1] - known[0] == len(known) - 1
 
 
 def _long_trailer(length_m: float) -> VehicleModel:

@@ -224,6 +224,10 @@ class KinematicFilter:
         return float(self.ukf.x[SPEED])
 
     @property
+    def speed_sd_m_s(self) -> float:
+        return float(np.sqrt(max(self.ukf.P[SPEED, SPEED], 0.0)))
+
+    @property
     def state(self) -> FilterState:
         x = self.ukf.x.tolist()
         rate = (

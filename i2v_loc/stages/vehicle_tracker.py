@@ -75,6 +75,7 @@ SOLID_INSET_M = 0.5  # a unit's box this far inside its faces is crossed by no r
 SEEN_THROUGH_RATIO = 0.1  # of the rays ending on a unit, at most this many cross it (real ones: under 0.01)
 CAB_SLICE_MIN_M = 1.0
 LENGTH_CONVERGED_OBSERVATIONS = 5
+TURN_MAX_SPEED_SD_M_S = 0.5  # the hinge is measured in a turn from frames de-skewed with a speed known this well
 LENGTH_MAX_SD_M = 0.05  # a trailer's length the points pin no better than this is not measured
 SETTLED_SLACK_M = 0.5
 STILL_END_FRAMES = 20  # moving frames whose reach must agree before it is taken as the unit's end
@@ -478,7 +479,11 @@ class VehicleTracker:
         kingpin = track.kingpin
         if kingpin is None:
             return
-        turning = abs(prior.hitch_rad) >= KINGPIN_MIN_HITCH_RAD and len(kingpin.values) < KINGPIN_SETTLED
+        turning = (
+            abs(prior.hitch_rad) >= KINGPIN_MIN_HITCH_RAD
+            and len(kingpin.values) < KINGPIN_SETTLED
+            and track.filter.speed_sd_m_s <= TURN_MAX_SPEED_SD_M_S
+        )
         straight = abs(prior.hitch_rad) <= REACH_MAX_HITCH_RAD and not kingpin.values
         if not (turning or (straight and len(track.reach.values) < KINGPIN_SETTLED)):
             return
