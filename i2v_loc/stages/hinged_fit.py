@@ -231,7 +231,7 @@ def fit(
     at = _Faces(*found)
     cost = kernels.cauchy_cost(at.residual, float(scale)) * scale**2 / 2
     full = _covariance(at, sigmas, params)
-    marginal = full[:n_pose, :n_pose]
+    marginal = np.ascontiguousarray(full[:n_pose, :n_pose])  # (one compiled layout for the kernels)
     floor = _floor(params, n_pose)
     covariance = marginal + np.diag(floor**2)
     # explained: on a face, not only on its plane (a wall running on past a box's corner is no side of it)
