@@ -20,7 +20,7 @@ from i2v_loc.stages.vehicle_model import Box, VehicleModel
 from i2v_loc.stages.vehicle_tracker import (
     SEED_RETRY_FRAMES,
     SETTLED_SLACK_M,
-    TURN_MAX_SPEED_SD_M_S,
+    TURN_MAX_SPEED_STD_M_S,
     Seed,
     VehicleTracker,
     _around_kingpin,
@@ -269,10 +269,10 @@ def test_a_hinge_is_measured_in_a_turn_once_the_speed_is_known():
         reports = tracker.process(points, flat, t)
         if reports:
             track = tracker.tracks[0]
-            rows.append((track.filter.speed_sd_m_s, len(track.kingpin.values), abs(truth[3] - truth[2])))
+            rows.append((track.filter.speed_std_m_s, len(track.kingpin.values), abs(truth[3] - truth[2])))
     assert min(hitch for _, _, hitch in rows) >= np.radians(20.0)  # turning throughout
-    unknown = [n for sd, n, _ in rows if sd > TURN_MAX_SPEED_SD_M_S]
-    known = [n for sd, n, _ in rows if sd <= TURN_MAX_SPEED_SD_M_S]
+    unknown = [n for sd, n, _ in rows if sd > TURN_MAX_SPEED_STD_M_S]
+    known = [n for sd, n, _ in rows if sd <= TURN_MAX_SPEED_STD_M_S]
     assert len(unknown) >= 1 and max(unknown) == 0
     assert len(known) >= 10 and known[-1] - known[0] == len(known) - 1
 

@@ -272,8 +272,8 @@ def ref_fit(points, prior, params, iterations, start_scale_m):
     position, angle = params.fit_position_floor_m, math.radians(params.fit_angle_floor_deg)
     floor = np.array([position, position, angle, angle][: min(len(sigmas), 4)])
     full = np.linalg.inv(info)
-    length_sd = math.sqrt(full[4, 4]) if prior.fits_length else None
-    return v, full[:4, :4] + np.diag(floor**2), residual, length_sd
+    length_std = math.sqrt(full[4, 4]) if prior.fits_length else None
+    return v, full[:4, :4] + np.diag(floor**2), residual, length_std
 
 
 FIT_CASES = [
@@ -318,14 +318,14 @@ def test_the_compiled_fit_is_the_numpy_fit(model, free, hitch_deg):
         runs = ((1, params.fit_start_scale_m), (1, 0.8))
     for iterations, start_scale_m in runs:
         m = hinged_fit.fit(points, prior, params, iterations, start_scale_m)
-        v, covariance, residual, length_sd = ref_fit(points, prior, params, iterations, start_scale_m)
+        v, covariance, residual, length_std = ref_fit(points, prior, params, iterations, start_scale_m)
         assert _same(m.vector, np.r_[v[:2], hinged_fit.wrap_rad(v[2 : len(m.vector)])])
         assert _same(m.covariance, covariance)
         cost = float(np.mean(np.log1p((residual / params.fit_loss_scale_m) ** 2))) * params.fit_loss_scale_m**2 / 2
         assert _same(m.cost, cost)
         if prior.fits_length:
             assert _same(m.trailer_length_m, v[4])
-            assert _same(m.trailer_length_sd_m, length_sd)
+            assert _same(m.trailer_length_std_m, length_std)
         if prior.fits_kingpin:
             assert _same([m.kingpin_m, m.trailer_front_m], v[-2:])
 

@@ -97,7 +97,7 @@ class Measurement:
     unit: np.ndarray  # (n,) int8 per fitted point: 0 tractor, 1 trailer, -1 not explained
     cost: float  # mean Cauchy loss per fitted point (m^2)
     trailer_length_m: float | None = None  # fitted (Prior.free_trailer_length), else None
-    trailer_length_sd_m: float | None = None  # its standard deviation (how well the points pin it)
+    trailer_length_std_m: float | None = None  # its standard deviation (how well the points pin it)
     kingpin_m: float | None = None  # fitted (Prior.free_kingpin), else None
     trailer_front_m: float | None = None  # fitted (Prior.free_kingpin), else None
     rear_points: int = 0  # explained points on the trailer's rear face
@@ -276,7 +276,6 @@ def _covariance(at: _Faces, sigmas: np.ndarray, params: ArticulatedParams) -> np
         params.fit_inlier_m,
         scale**2,
         params.fit_noise_floor_m**2,
-        len(sigmas),
     )
 
 

@@ -1231,8 +1231,8 @@ def _nearest(x, marks):
 
 
 @njit(**_JIT)
-def fit_covariance(residual, jacobian, prior_information, scale, inlier_m, no_inlier_noise2, noise_floor2, k):
-    """The hinged fit's covariance of its first ``k`` parameters (the others marginalised):
+def fit_covariance(residual, jacobian, prior_information, scale, inlier_m, no_inlier_noise2, noise_floor2):
+    """The hinged fit's covariance of all its parameters (the pose, then the fitted dimensions):
     Gauss-Newton with the Cauchy weights of the residuals and the noise of the inliers' residuals
     (their median square / 0.455, else ``no_inlier_noise2``; at least ``noise_floor2``), plus the
     weak prior (``prior_information``: its diagonal, 1 / sigma^2).
@@ -1252,8 +1252,7 @@ def fit_covariance(residual, jacobian, prior_information, scale, inlier_m, no_in
     info = np.dot(weighted.T, jacobian) / sigma2
     for j in range(n_params):
         info[j, j] += prior_information[j]
-    covariance = np.linalg.solve(info, np.eye(n_params))
-    return covariance[:k, :k].copy()
+    return np.linalg.solve(info, np.eye(n_params))
 
 
 @njit(**_JIT)
@@ -1756,7 +1755,7 @@ def warm_up() -> None:
         xy, z, geometry, 0.25, 4, True, True, v0, np.ones(7), 0.1, 0.2, 2, ranges, 0.1
     )
     cauchy_cost(residual, 0.1)
-    fit_covariance(residual, jacobian, np.ones(7), 0.1, 0.3, 0.01, 0.0004, 4)
+    fit_covariance(residual, jacobian, np.ones(7), 0.1, 0.3, 0.01, 0.0004)
     face_median(p64, 1, np.zeros(3, dtype=np.int8), np.zeros(3, dtype=np.int8), 0, 0)
     labels = np.zeros(3, dtype=np.int8)
     rear_face(

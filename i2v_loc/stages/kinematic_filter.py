@@ -224,7 +224,7 @@ class KinematicFilter:
         return float(self.ukf.x[SPEED])
 
     @property
-    def speed_sd_m_s(self) -> float:
+    def speed_std_m_s(self) -> float:
         return float(np.sqrt(max(self.ukf.P[SPEED, SPEED], 0.0)))
 
     @property

@@ -75,8 +75,8 @@ SOLID_INSET_M = 0.5  # a unit's box this far inside its faces is crossed by no r
 SEEN_THROUGH_RATIO = 0.1  # of the rays ending on a unit, at most this many cross it (real ones: under 0.01)
 CAB_SLICE_MIN_M = 1.0
 LENGTH_CONVERGED_OBSERVATIONS = 5
-TURN_MAX_SPEED_SD_M_S = 0.5  # the hinge is measured in a turn from frames de-skewed with a speed known this well
-LENGTH_MAX_SD_M = 0.05  # a trailer's length the points pin no better than this is not measured
+TURN_MAX_SPEED_STD_M_S = 0.5  # the hinge is measured in a turn from frames de-skewed with a speed known this well
+LENGTH_MAX_STD_M = 0.05  # a trailer's length the points pin no better than this is not measured
 SETTLED_SLACK_M = 0.5
 STILL_END_FRAMES = 20  # moving frames whose reach must agree before it is taken as the unit's end
 STILL_END_SPREAD_M = 0.5  # a shadow's edge moves by metres over these frames; the thinned points' hindmost by 0.3 m
@@ -482,7 +482,7 @@ class VehicleTracker:
         turning = (
             abs(prior.hitch_rad) >= KINGPIN_MIN_HITCH_RAD
             and len(kingpin.values) < KINGPIN_SETTLED
-            and track.filter.speed_sd_m_s <= TURN_MAX_SPEED_SD_M_S
+            and track.filter.speed_std_m_s <= TURN_MAX_SPEED_STD_M_S
         )
         straight = abs(prior.hitch_rad) <= REACH_MAX_HITCH_RAD and not kingpin.values
         if not (turning or (straight and len(track.reach.values) < KINGPIN_SETTLED)):
@@ -563,16 +563,14 @@ class VehicleTracker:
 
     def _fitted_length(self, track: _Track, m: Measurement, points: np.ndarray, seen_m: float) -> float | None:
         """The trailer's length fitted to the claimed ``points`` from the frame's fit ``m`` and the length
-        its rear face shows in it (``seen_m``), when they pin it within ``LENGTH_MAX_SD_M``. (The length
+        its rear face shows in it (``seen_m``), when they pin it within ``LENGTH_MAX_STD_M``. (The length
         the frame's fit shows is the model's own whenever the cab's place along the vehicle is pinned
         weakly: a length learned 0.2 m long from a start frame's points, not de-skewed, stayed so, and
         the fits put the tractor 0.2 m off.)"""
         if seen_m < TRAILER_LENGTH_RANGE_M[0]:  # its front face, seen from ahead
             return None
-        model = _with_trailer_length(track.model, seen_m)
-        prior = Prior(m.x_m, m.y_m, m.yaw_rad, m.hitch_rad, model, track.ground_z_m, free_trailer_length=True)
-        free = fit(points, prior, self.params)
-        if free is None or free.trailer_length_sd_m > LENGTH_MAX_SD_M:
+        free = fit(points, _free_length_at(m, track.model, seen_m, track.ground_z_m), self.params)
+        if free is None or free.trailer_length_std_m > LENGTH_MAX_STD_M:
             return None
         return free.trailer_length_m
 
@@ -1101,8 +1099,17 @@ def _start_covariance(m: Measurement) -> np.ndarray:
 def _sized_start(m: Measurement, model: VehicleModel, ground_z_m: float) -> Prior:
     """A start fit's refinement from ``m``: ``model`` with the trailer's length ``m`` fitted, the
     length fitted again."""
-    sized = _with_trailer_length(model, m.trailer_length_m)
-    return Prior(m.x_m, m.y_m, m.yaw_rad, m.hitch_rad, sized, ground_z_m, 0.0, True, hypothesis=True)
+    return _free_length_at(m, model, m.trailer_length_m, ground_z_m, hypothesis=True)
+
+
+def _free_length_at(
+    m: Measurement, model: VehicleModel, length_m: float, ground_z_m: float, hypothesis: bool = False
+) -> Prior:
+    """At the pose of the fit ``m``: ``model`` with its trailer ``length_m`` long, the length free."""
+    sized = _with_trailer_length(model, length_m)
+    return Prior(
+        m.x_m, m.y_m, m.yaw_rad, m.hitch_rad, sized, ground_z_m, free_trailer_length=True, hypothesis=hypothesis
+    )
 
 
 def _own_body(points: np.ndarray, owner: np.ndarray, i: int, prior: Prior) -> tuple[Prior, bool]:
