@@ -738,6 +738,73 @@ def test_a_vehicle_standing_at_a_dock_starts_and_keeps_its_trailer_length():
     assert len(lengths) > 70 and np.abs(np.array(lengths) - model.trailer.length_m).max() < 0.15
 
 
+def test_a_wall_beside_the_trailers_rear_is_not_its_side():
+    """A Twizy standing, seen from both sides, its trailer's length known: its box reaches
+    ``SETTLED_SLACK_M`` on behind the rear. A wall 0.1 m out from its left side runs on from 0.3 m
+    behind its rear (a dock shelter): the width is measured between the sides' points along the
+    body only, 1.75 m (with the wall's points in the slack: 1.78 m here, and 1.89 m in the paper
+    suite's docking seen by one sensor, which turned its car's yaw 2.5 deg)."""
+    model = VehicleModel.from_config("twizy", PARAMS.vehicles["twizy"])
+    axle, sensors = (2.0, 3.0), ((0.0, -15.0, 4.0), (0.0, 20.0, 4.0))
+    rear_x = axle[0] - model.kingpin_behind_axle_m - (model.trailer.length_m - model.trailer.front_m)
+    wall_xy = np.array([rear_x - 0.3 - 1.5, axle[1] + model.trailer.width_m / 2 + 0.1 + 0.1])
+    wall = WorldBox(wall_xy, 0.0, Box(1.5, 3.0, 0.2, 0.0, 3.5), 2)
+    wall_model, boxes = VehicleModel.rigid("wall", 3.0, 0.2, 3.5), world_boxes(model, *axle, 0.0)
+
+    def frame(k: int) -> np.ndarray:
+        vehicle = vehicle_points(model, *axle, 0.0, sensors=sensors, spacing=0.15, others=[wall], seed=k)
+        beside = vehicle_points(wall_model, *wall_xy, 0.0, sensors=sensors, spacing=0.15, others=boxes, seed=k)
+        return np.vstack([vehicle, beside])
+
+    tracker = VehicleTracker(PARAMS.articulated, PARAMS.vehicles)
+    m = fit(frame(0), Prior(*axle, 0.0, 0.0, model), PARAMS.articulated)
+    tracker.tracks = [track := tracker._track(1, model, m, 0.0, 0.0, 0.0)]
+    for _ in range(5):
+        track.trailer_length.add(model.trailer.length_m)
+    for k in range(1, 21):
+        tracker.process(frame(k), flat, 0.1 * k)
+    assert track.model.trailer.length_m == pytest.approx(2.5, abs=0.02) and len(track.widths[1].values) >= 10
+    assert track.model.trailer.width_m == pytest.approx(1.75, abs=0.015)
+
+
+def pulling_out_lengths(trailer_length_m: float, shelter: bool) -> list[float]:
+    """The trailer lengths reported while a Twizy whose trailer is ``trailer_length_m`` long pulls
+    forward at 1 m/s for 3 s, seen from both sides, never from behind, its track started with the
+    catalogue's 2.5 m; with ``shelter``, a 2.2 m tall wall stands 0.06 m out from its left side from
+    1.5 m behind its rear to 1 m ahead of it, where it started."""
+    model = VehicleModel.from_config("twizy", PARAMS.vehicles["twizy"])
+    truth = replace(model, trailer=replace(model.trailer, length_m=trailer_length_m))
+    sensors = ((0.0, -12.0, 4.0), (0.0, 12.0, 4.0))
+    axle = (-3.0, 0.0)
+    rear_x = axle[0] - truth.kingpin_behind_axle_m - (truth.trailer.length_m - truth.trailer.front_m)
+    wall_xy = np.array([rear_x - 0.25, truth.trailer.width_m / 2 + 0.06 + 0.05])
+    wall = VehicleModel.rigid("wall", 2.5, 0.1, 2.2)
+    tracker = VehicleTracker(PARAMS.articulated, PARAMS.vehicles)
+    lengths = []
+    for t, points, (state,) in drive([(truth, (*axle, 0.0, 0.0))], 3.0, 1.0, 0.0, sensors=sensors):
+        if shelter:
+            boxes = world_boxes(truth, state[0], state[1], state[2])
+            points = np.vstack(
+                [points, vehicle_points(wall, *wall_xy, 0.0, sensors=sensors, spacing=0.15, others=boxes)]
+            )
+        if not tracker.tracks:
+            m = fit(points, Prior(*state[:2], 0.0, 0.0, model), PARAMS.articulated)
+            tracker.tracks = [tracker._track(1, model, m, 0.0, t, 1.0)]
+            continue
+        (report,) = tracker.process(points, flat, t)
+        lengths.append(report.model.trailer.length_m)
+    return lengths
+
+
+def test_a_shelter_wall_left_behind_is_not_the_trailers_end():
+    """Pulling out of a dock shelter, a Twizy's trailer's points ran on along the shelter's wall past
+    its rear, and the wall's end, which stays put in the yard, made it up to 4.55 m long (2.5;
+    5.3 m in the paper suite's docking): an end counts only once it went along with the trailer.
+    A trailer truly longer than its track's model (3.7 m) does reach further: at least 3.2 m."""
+    assert np.abs(np.array(pulling_out_lengths(2.5, shelter=True)) - 2.5).max() < 0.1
+    assert pulling_out_lengths(3.7, shelter=False)[-1] > 3.2
+
+
 def test_a_rigid_track_becomes_articulated_when_it_moves():
     """Driving straight, a tractor and trailer can be taken for one long box. While the track moves
     it is fitted again as every model: it becomes the Volvo (same id) and its hitch is right."""

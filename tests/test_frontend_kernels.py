@@ -314,21 +314,23 @@ def test_euclidean_labels_join_points_exactly_at_the_tolerance_and_no_further():
 
 @pytest.mark.parametrize("n", [1, 2, 3, 4, 57, 200, 201])
 def test_a_faces_median_is_numpys_median_of_its_points(n):
-    """``kernels.face_median`` takes the points of one unit's face and gives ``np.median``'s value
-    of their coordinate (repeated values too), and none for a face without points."""
+    """``kernels.face_median`` takes the points of one unit's face within bounds along it and gives
+    ``np.median``'s value of their coordinate (repeated values too), and none for a face without points."""
     rng = np.random.default_rng(n)
     for rounded in (False, True):
         q = rng.normal(size=(2 * n, 2)) * 3.0
         q = np.round(q, 1) if rounded else q
         unit = np.repeat(np.array([0, 1], dtype=np.int8), n)
         face = rng.integers(-1, 4, 2 * n).astype(np.int8)
-        for u, f, column in ((0, 2, 1), (1, 0, 0), (1, 3, 1)):
-            on = (unit == u) & (face == f)
-            got = kernels.face_median(q, column, unit, face, u, f)
+        for (u, f, column), along in itertools.product(
+            ((0, 2, 1), (1, 0, 0), (1, 3, 1)), ((-np.inf, np.inf), (-1.0, 2.0))
+        ):
+            on = (unit == u) & (face == f) & (q[:, 0] >= along[0]) & (q[:, 0] <= along[1])
+            got = kernels.face_median(q, column, unit, face, u, f, along)
             assert got[0] == np.count_nonzero(on)
             if got[0]:
                 assert got[1] == float(np.median(q[on, column]))
-        assert kernels.face_median(q, 0, unit, face, 2, 0) == (0, pytest.approx(np.nan, nan_ok=True))
+        assert kernels.face_median(q, 0, unit, face, 2, 0, (-np.inf, np.inf)) == (0, pytest.approx(np.nan, nan_ok=True))
 
 
 def test_ground_hypotheses_are_the_numpy_hypotheses():

@@ -1138,13 +1138,14 @@ def fit_labels(unit, face, distance, residual, inlier_m, rear_face):
 
 
 @njit(**_JIT)
-def face_median(q, column, unit, face, which_unit, which_face):
+def face_median(q, column, unit, face, which_unit, which_face, along):
     """(how many, median) of ``q[:, column]`` over the points of a fit on one face of one unit
-    (``unit``, ``face``: the fit's labels); the median is ``np.median``'s value (NaN for none)."""
+    (``unit``, ``face``: the fit's labels) whose ``q[:, 0]`` lies within ``along`` (low, high); the
+    median is ``np.median``'s value (NaN for none)."""
     values = np.empty(q.shape[0])
     n = 0
     for i in range(q.shape[0]):
-        if unit[i] == which_unit and face[i] == which_face:
+        if unit[i] == which_unit and face[i] == which_face and along[0] <= q[i, 0] <= along[1]:
             values[n] = q[i, column]
             n += 1
     return n, _median(values[:n]) if n else np.nan
@@ -1756,7 +1757,7 @@ def warm_up() -> None:
     )
     cauchy_cost(residual, 0.1)
     fit_covariance(residual, jacobian, np.ones(7), 0.1, 0.3, 0.01, 0.0004)
-    face_median(p64, 1, np.zeros(3, dtype=np.int8), np.zeros(3, dtype=np.int8), 0, 0)
+    face_median(p64, 1, np.zeros(3, dtype=np.int8), np.zeros(3, dtype=np.int8), 0, 0, (-1.0, 1.0))
     labels = np.zeros(3, dtype=np.int8)
     rear_face(
         p64[:, :2].copy(), p64[:, 2].copy(), labels, labels, (0.0, 1.0), 1.0, 1.0, 0.1, (0.3, 0.8), 1.0, 0.4, 1.0, 1.0

@@ -85,6 +85,8 @@ END_SEEN_OFFSET_M = 0.3  # past the hindmost point: a side's points are up to a 
 END_SEEN_LENGTH_M = 2.0
 END_SEEN_MIN_RAYS = 2
 END_SEEN_REACH_M = 1.0
+END_TRAVEL_M = 0.3  # a moving trailer's end counts once it has gone this far with it (not stayed put)
+ANYWHERE = (-np.inf, np.inf)  # no bound along a unit
 FACE_SEEN_SPAN = 0.6  # an end face is seen when its points span this share of the unit's width
 END_BAND_M = 0.4
 MAX_BODY_GAP_M = 1.0
@@ -273,6 +275,7 @@ class _Track:
     reach: _Extent | None = None  # the trailer's front face ahead of the rear axle (seen straight)
     frames: int = 0  # measured frames
     at_wall: bool = False  # this frame: a wall ran across its trailer's body (its rear end is not seen)
+    ends: dict = field(default_factory=dict)  # per kind of end, the last seen moving: (yard xy, x, kingpin xy)
 
     def report(self, measured: bool) -> VehicleReport:
         s = self.filter.state
@@ -420,11 +423,14 @@ class VehicleTracker:
         model = track.model
         local = unit_frames(m.points, m.vector, model)
         widths = []
-        for u in range(len(model.boxes)):
+        for u, box in enumerate(model.boxes):
             (n_left, left), (n_right, right) = (
-                kernels.face_median(local[u], 1, m.unit, m.face, u, f) for f in (LEFT, RIGHT)
+                kernels.face_median(local[u], 1, m.unit, m.face, u, f, (box.rear_m, box.front_m)) for f in (LEFT, RIGHT)
             )
-            if min(n_left, n_right) >= SIDE_MIN_POINTS:  # both sides seen: the width between them
+            # both sides seen along the body, a trailer's once its length is settled: the width between
+            # them (the trailer's box reaches a slack on behind its rear, where a dock shelter's wall
+            # beside a Twizy made its trailer 1.89 m wide, 1.75)
+            if min(n_left, n_right) >= SIDE_MIN_POINTS and (u == 0 or track.trailer_length.settled):
                 track.widths[u].add(left - right)
             widths.append(track.widths[u].estimate)
         tractor = {"width_m": widths[0]}
@@ -467,7 +473,7 @@ class VehicleTracker:
         behind the cab no longer on its rear face, an unknown tractor's cab had them only after 20 s.)"""
         if not (_face_seen(m, track.model, 0, FRONT) and _face_seen(m, track.model, 0, REAR)):
             return
-        (_, front), (_, rear) = (kernels.face_median(q, 0, m.unit, m.face, 0, f) for f in (FRONT, REAR))
+        (_, front), (_, rear) = (kernels.face_median(q, 0, m.unit, m.face, 0, f, ANYWHERE) for f in (FRONT, REAR))
         track.cab_length.add(front - rear)
 
     def _learn_kingpin(self, track: _Track, prior: Prior, points: np.ndarray) -> None:
@@ -554,10 +560,10 @@ class VehicleTracker:
         elif not track.trailer_length.settled:
             on_side = [rows[(m.unit[rows] == 1) & (m.face[rows] == face)] for face in (LEFT, RIGHT)]
             end = self._seen_end(track, m, points, [q[side] for side in on_side if len(side)], width_m)
-            if end is not None:
+            if end is not None and self._end_went_along(track, m, "seen", end):
                 track.trailer_length.add(trailer.front_m - end)
-        bound = min(trailer.front_m - rear - END_BAND_M, MAX_TRAILER_LENGTH_M)
-        track.trailer_length.add_bound(bound)
+        if self._end_went_along(track, m, "bound", rear):
+            track.trailer_length.add_bound(min(trailer.front_m - rear - END_BAND_M, MAX_TRAILER_LENGTH_M))
         if abs(track.filter.speed_m_s) >= STILL_END_MIN_SPEED_M_S:
             track.trailer_length.add_reach(min(trailer.front_m - rear, MAX_TRAILER_LENGTH_M))
 
@@ -573,6 +579,24 @@ class VehicleTracker:
         if free is None or free.trailer_length_std_m > LENGTH_MAX_STD_M:
             return None
         return free.trailer_length_m
+
+    def _end_went_along(self, track: _Track, m: Measurement, kind: str, end_m: float) -> bool:
+        """Whether an end of the trailer's points (``end_m``, its frame; ``kind``: which) is the
+        trailer's: standing, it is; moving, once it went along with the trailer (its place in the
+        trailer's frame kept better than its place in the yard) since the end of its kind seen
+        ``END_TRAVEL_M`` of travel before. A dock shelter's walls beside a Twizy pulling out stayed
+        put in the yard and ran on 1-3 m past its trailer's rear (3.0-3.7 m long, 2.5)."""
+        kingpin = track.model.kingpin_xy(m.x_m, m.y_m, m.yaw_rad)
+        yaw = m.yaw_rad + m.hitch_rad
+        place = kingpin + end_m * np.array([np.cos(yaw), np.sin(yaw)])
+        if abs(track.filter.speed_m_s) < STILL_END_MIN_SPEED_M_S:
+            track.ends.pop(kind, None)
+            return True
+        before = track.ends.get(kind)
+        if before is not None and np.hypot(*(kingpin - before[2])) < END_TRAVEL_M:
+            return False
+        track.ends[kind] = (place, end_m, kingpin)
+        return before is not None and abs(end_m - before[1]) < np.hypot(*(place - before[0]))
 
     def _side_end(self, track: _Track, m: Measurement, points: np.ndarray, side: np.ndarray, width_m: float) -> float:
         """The hindmost of the claimed ``points`` on the trailer's side whose fitted points are ``side``
