@@ -742,8 +742,7 @@ def test_a_wall_beside_the_trailers_rear_is_not_its_side():
     """A Twizy standing, seen from both sides, its trailer's length known: its box reaches
     ``SETTLED_SLACK_M`` on behind the rear. A wall 0.1 m out from its left side runs on from 0.3 m
     behind its rear (a dock shelter): the width is measured between the sides' points along the
-    body only, 1.75 m (with the wall's points in the slack: 1.78 m here, and 1.89 m in the paper
-    suite's docking seen by one sensor, which turned its car's yaw 2.5 deg)."""
+    body only, 1.75 m (with the wall's points in the slack: 1.78 m)."""
     model = VehicleModel.from_config("twizy", PARAMS.vehicles["twizy"])
     axle, sensors = (2.0, 3.0), ((0.0, -15.0, 4.0), (0.0, 20.0, 4.0))
     rear_x = axle[0] - model.kingpin_behind_axle_m - (model.trailer.length_m - model.trailer.front_m)
@@ -765,6 +764,36 @@ def test_a_wall_beside_the_trailers_rear_is_not_its_side():
         tracker.process(frame(k), flat, 0.1 * k)
     assert track.model.trailer.length_m == pytest.approx(2.5, abs=0.02) and len(track.widths[1].values) >= 10
     assert track.model.trailer.width_m == pytest.approx(1.75, abs=0.015)
+
+
+def test_a_wall_beyond_the_far_side_seen_by_one_sensor_is_no_side():
+    """A Twizy standing beside a 3 m tall wall 0.3 m beyond its trailer's far side, seen by one
+    sensor: the wall's points above and past the trailer lie where its far side would be, but one
+    sensor faces one side of a box at most: no width is measured (1.75 m stays; seen by `l3` alone,
+    a dock shelter's wall made the paper suite's Twizy's trailer 1.95 m wide)."""
+    model = VehicleModel.from_config("twizy", PARAMS.vehicles["twizy"])
+    axle, sensors = (2.0, 3.0), ((0.0, -12.0, 4.0),)
+    centre = model.box_centers(*axle, 0.0, 0.0)[1]
+    wall_xy = np.array([centre[0], axle[1] + model.trailer.width_m / 2 + 0.3 + 0.1])
+    wall = WorldBox(wall_xy, 0.0, Box(3.0, 6.0, 0.2, 0.0, 3.0), 2)
+    wall_model, boxes = VehicleModel.rigid("wall", 6.0, 0.2, 3.0), world_boxes(model, *axle, 0.0)
+    rays = cast_rays([*boxes, wall], sensors)
+    widths = {}
+    for with_rays in (True, False):
+        tracker = VehicleTracker(PARAMS.articulated, PARAMS.vehicles)
+        first = vehicle_points(model, *axle, 0.0, sensors=sensors, spacing=0.1, seed=0)
+        tracker.tracks = [
+            track := tracker._track(
+                1, model, fit(first, Prior(*axle, 0.0, 0.0, model), PARAMS.articulated), 0.0, 0.0, 0.0
+            )
+        ]
+        for k in range(1, 11):
+            vehicle = vehicle_points(model, *axle, 0.0, sensors=sensors, spacing=0.1, seed=k)
+            beyond = vehicle_points(wall_model, *wall_xy, 0.0, sensors=sensors, spacing=0.1, others=boxes, seed=k)
+            tracker.process(np.vstack([vehicle, beyond]), flat, 0.1 * k, rays=rays if with_rays else None)
+        widths[with_rays] = track.model.trailer.width_m
+    assert widths[True] == model.trailer.width_m
+    assert widths[False] > model.trailer.width_m + 0.1  # without the sensors' places: the wall taken for a side
 
 
 def pulling_out_lengths(trailer_length_m: float, shelter: bool) -> list[float]:

@@ -86,6 +86,7 @@ END_SEEN_LENGTH_M = 2.0
 END_SEEN_MIN_RAYS = 2
 END_SEEN_REACH_M = 1.0
 END_TRAVEL_M = 0.3  # a moving trailer's end counts once it has gone this far with it (not stayed put)
+END_HISTORY = 50  # frames of ends kept to judge that by
 ANYWHERE = (-np.inf, np.inf)  # no bound along a unit
 FACE_SEEN_SPAN = 0.6  # an end face is seen when its points span this share of the unit's width
 END_BAND_M = 0.4
@@ -275,7 +276,7 @@ class _Track:
     reach: _Extent | None = None  # the trailer's front face ahead of the rear axle (seen straight)
     frames: int = 0  # measured frames
     at_wall: bool = False  # this frame: a wall ran across its trailer's body (its rear end is not seen)
-    ends: dict = field(default_factory=dict)  # per kind of end, the last seen moving: (yard xy, x, kingpin xy)
+    ends: dict = field(default_factory=dict)  # per kind of end, those seen moving: deque of (yard xy, x, kingpin xy)
 
     def report(self, measured: bool) -> VehicleReport:
         s = self.filter.state
@@ -423,14 +424,15 @@ class VehicleTracker:
         model = track.model
         local = unit_frames(m.points, m.vector, model)
         widths = []
+        faced = self._sides_faced(m, model)
         for u, box in enumerate(model.boxes):
             (n_left, left), (n_right, right) = (
                 kernels.face_median(local[u], 1, m.unit, m.face, u, f, (box.rear_m, box.front_m)) for f in (LEFT, RIGHT)
             )
-            # both sides seen along the body, a trailer's once its length is settled: the width between
-            # them (the trailer's box reaches a slack on behind its rear, where a dock shelter's wall
-            # beside a Twizy made its trailer 1.89 m wide, 1.75)
-            if min(n_left, n_right) >= SIDE_MIN_POINTS and (u == 0 or track.trailer_length.settled):
+            # both sides seen along the body (the trailer's box reaches a slack on behind its rear, where
+            # a dock shelter's wall beside a Twizy made its trailer 1.89 m wide, 1.75), each by a sensor
+            # it faces: the width between them
+            if min(n_left, n_right) >= SIDE_MIN_POINTS and faced[u]:
                 track.widths[u].add(left - right)
             widths.append(track.widths[u].estimate)
         tractor = {"width_m": widths[0]}
@@ -465,6 +467,19 @@ class VehicleTracker:
         again = fit(m.points, replace(_at_pose(prior, m), model=track.model), self.params)
         if again is not None:
             track.filter.move_pose(again.vector - m.vector)
+
+    def _sides_faced(self, m: Measurement, model: VehicleModel) -> list[bool]:
+        """Per unit, whether both its sides face a sensor of the frame (each is outside one of its
+        side planes; all, without rays). One sensor sees one side of a box at most: what lies where
+        the other would be is something else (seen by `l3` alone, a dock shelter's wall beyond the
+        Twizy's trailer made it 1.95 m wide, 1.75)."""
+        if self._rays is None:
+            return [True] * len(model.boxes)
+        local = unit_frames(self._rays.origins @ self._rays.to_level.T, m.vector, model)
+        return [
+            bool(np.any(q[:, 1] > box.width_m / 2) and np.any(q[:, 1] < -box.width_m / 2))
+            for q, box in zip(local, model.boxes)
+        ]
 
     def _learn_cab_length(self, track: _Track, m: Measurement, q: np.ndarray) -> None:
         """The cab's length: between the middles of its front and rear faces' points, when both are
@@ -583,7 +598,7 @@ class VehicleTracker:
     def _end_went_along(self, track: _Track, m: Measurement, kind: str, end_m: float) -> bool:
         """Whether an end of the trailer's points (``end_m``, its frame; ``kind``: which) is the
         trailer's: standing, it is; moving, once it went along with the trailer (its place in the
-        trailer's frame kept better than its place in the yard) since the end of its kind seen
+        trailer's frame kept better than its place in the yard) since the last end of its kind seen
         ``END_TRAVEL_M`` of travel before. A dock shelter's walls beside a Twizy pulling out stayed
         put in the yard and ran on 1-3 m past its trailer's rear (3.0-3.7 m long, 2.5)."""
         kingpin = track.model.kingpin_xy(m.x_m, m.y_m, m.yaw_rad)
@@ -592,10 +607,9 @@ class VehicleTracker:
         if abs(track.filter.speed_m_s) < STILL_END_MIN_SPEED_M_S:
             track.ends.pop(kind, None)
             return True
-        before = track.ends.get(kind)
-        if before is not None and np.hypot(*(kingpin - before[2])) < END_TRAVEL_M:
-            return False
-        track.ends[kind] = (place, end_m, kingpin)
+        seen = track.ends.setdefault(kind, deque(maxlen=END_HISTORY))
+        before = next((e for e in reversed(seen) if np.hypot(*(kingpin - e[2])) >= END_TRAVEL_M), None)
+        seen.append((place, end_m, kingpin))
         return before is not None and abs(end_m - before[1]) < np.hypot(*(place - before[0]))
 
     def _side_end(self, track: _Track, m: Measurement, points: np.ndarray, side: np.ndarray, width_m: float) -> float:
