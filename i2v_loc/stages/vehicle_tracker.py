@@ -276,7 +276,9 @@ class _Track:
     reach: _Extent | None = None  # the trailer's front face ahead of the rear axle (seen straight)
     frames: int = 0  # measured frames
     at_wall: bool = False  # this frame: a wall ran across its trailer's body (its rear end is not seen)
-    ends: dict = field(default_factory=dict)  # per kind of end, those seen moving: deque of (yard xy, x, kingpin xy)
+    ends: dict[str, deque] = field(
+        default_factory=dict
+    )  # per kind of end, those seen moving: deque of (yard xy, x, kingpin xy)
 
     def report(self, measured: bool) -> VehicleReport:
         s = self.filter.state
@@ -601,12 +603,10 @@ class VehicleTracker:
         trailer's frame kept better than its place in the yard) since the last end of its kind seen
         ``END_TRAVEL_M`` of travel before. A dock shelter's walls beside a Twizy pulling out stayed
         put in the yard and ran on 1-3 m past its trailer's rear (3.0-3.7 m long, 2.5)."""
-        kingpin = track.model.kingpin_xy(m.x_m, m.y_m, m.yaw_rad)
-        yaw = m.yaw_rad + m.hitch_rad
-        place = kingpin + end_m * np.array([np.cos(yaw), np.sin(yaw)])
         if abs(track.filter.speed_m_s) < STILL_END_MIN_SPEED_M_S:
             track.ends.pop(kind, None)
             return True
+        kingpin, place = (_on_trailer_axis(m, track.model, x_m) for x_m in (0.0, end_m))
         seen = track.ends.setdefault(kind, deque(maxlen=END_HISTORY))
         before = next((e for e in reversed(seen) if np.hypot(*(kingpin - e[2])) >= END_TRAVEL_M), None)
         seen.append((place, end_m, kingpin))
@@ -657,7 +657,7 @@ class VehicleTracker:
         model, inset = track.model, SOLID_INSET_M
         yaw = m.yaw_rad + m.hitch_rad
         middle = end_m - END_SEEN_OFFSET_M - END_SEEN_LENGTH_M / 2
-        centre = model.kingpin_xy(m.x_m, m.y_m, m.yaw_rad) + middle * np.array([np.cos(yaw), np.sin(yaw)])
+        centre = _on_trailer_axis(m, model, middle)
         floor, top = track.ground_z_m + model.trailer.floor_m, track.ground_z_m + model.trailer.top_m
         crossed, ended, front = self._rays.through(
             tuple(centre),
@@ -1148,6 +1148,12 @@ def _free_length_at(
     return Prior(
         m.x_m, m.y_m, m.yaw_rad, m.hitch_rad, sized, ground_z_m, free_trailer_length=True, hypothesis=hypothesis
     )
+
+
+def _on_trailer_axis(m: Measurement, model: VehicleModel, x_m: float) -> np.ndarray:
+    """The yard xy of the point ``x_m`` along the trailer's axis from the kingpin, at the fit ``m``."""
+    yaw = m.yaw_rad + m.hitch_rad
+    return model.kingpin_xy(m.x_m, m.y_m, m.yaw_rad) + x_m * np.array([np.cos(yaw), np.sin(yaw)])
 
 
 def _own_body(points: np.ndarray, owner: np.ndarray, i: int, prior: Prior) -> tuple[Prior, bool]:
