@@ -19,7 +19,7 @@ from i2v_loc.results import FrameResult, StageTimer, UnitResult, VehicleResult, 
 from i2v_loc.stages.background import BackgroundMap, ProtectedBox, region_box
 from i2v_loc.stages.concatenation import Concatenation, MotionHint
 from i2v_loc.stages.level_frame import LevelFrame
-from i2v_loc.stages.primitives import voxel_centroids
+from i2v_loc.stages.primitives import Rect, voxel_centroids
 from i2v_loc.stages.region import Region
 from i2v_loc.stages.vehicle_model import Box
 from i2v_loc.stages.vehicle_tracker import VehicleReport, VehicleTracker
@@ -202,13 +202,22 @@ class ArticulatedPipeline(ParameterHandoff):
 
     def _protected_boxes(self, units) -> list[ProtectedBox]:
         """Every articulated vehicle's boxes (one standing from the start is no background), a rigid
-        one's once it travelled (a parked container that fooled the start becomes background)."""
+        one's once it travelled (a parked container that fooled the start becomes background), and
+        every seed's that moved before it started."""
         min_travel = self._active.background.protect_min_travel_m
-        return [
+        tracked = [
             ProtectedBox(tuple(c), yaw, box.length_m / 2, box.width_m / 2)
             for c, yaw, box, _, _, travel, articulated in units
             if articulated or travel >= min_travel
         ]
+        return tracked + [self._yard_box(rect) for rect in self.tracker.moving_seeds()]
+
+    def _yard_box(self, rect: Rect) -> ProtectedBox:
+        x, y = rect.center_xy
+        center = self.level.to_yard(np.array([x, y, self._ground(x, y)]))
+        return ProtectedBox(
+            tuple(center[:2]), self.level.yaw_to_yard(rect.yaw_rad), rect.length_m / 2, rect.width_m / 2
+        )
 
     def _motion_hints(self, units, age_s: float) -> list[MotionHint]:
         """The last frame's units, ``age_s`` before this frame's reference time: each point is tested

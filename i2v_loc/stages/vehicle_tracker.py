@@ -151,6 +151,8 @@ class Seed:
     failed: _Shape | None = None  # its shape when it was last fitted and was no vehicle
     failed_frame: int = 0  # its frame count then
     moving: bool = False  # known to move (a tracked vehicle's probe), however short its travel
+    travelled: bool = False  # it once moved (``moved``): no background, whether it stands now or not
+    rect: Rect | None = None  # this frame's footprint
     first_points: np.ndarray = field(default_factory=lambda: np.empty((0, 3)))  # thinned, when first seen
     points: np.ndarray = field(default_factory=lambda: np.empty((0, 3)))  # this frame's
 
@@ -718,7 +720,8 @@ class VehicleTracker:
             else:
                 seed = Seed(center, center, first_points=thin(cluster, SEED_FIRST_POINTS))
                 self.seeds.append(seed)
-            seed.points = cluster
+            seed.points, seed.rect = cluster, rect
+            seed.travelled = seed.travelled or seed.moved(self.params.start_travel_m)
             shape = _Shape(len(cluster), rect.length_m, rect.width_m, center, rigid_allowed)
             if (
                 seed.frames >= self.params.start_frames
@@ -738,6 +741,13 @@ class VehicleTracker:
             self.tracks.append(track)
             reports.append(track.report(True))
         return reports
+
+    def moving_seeds(self) -> list[Rect]:
+        """The footprints of the seeds that moved (``Seed.moved``), standing now or not: a trailer that
+        drove off while the background was learned, its tractor out of reach, had become background
+        along its sides (they stay in place as it moves along them) and was cut out of its points
+        for 13 s once it stopped and reversed into a dock."""
+        return [s.rect for s in self.seeds if s.travelled and s.rect is not None]
 
     def _fit_moved(self, seed: Seed, m: Measurement) -> bool:
         """A rigid seed's fitted pose moved ``start_travel_m`` since its first rigid fit (its points'
