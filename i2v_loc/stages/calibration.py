@@ -10,7 +10,11 @@ that does not see the reference enough is chained through its neighbours.
 
 The registration is one plane-to-plane (GICP) Gauss-Newton over all windows at once (Cauchy
 weights; correspondences only within a window; each point's surface covariance from a >= 2 m
-radius: 1 m normals diverge on sparse 32-beam rings), coarse then fine. The ground (target normal within STRUCTURE_TILT_DEG
+radius: 1 m normals diverge on sparse 32-beam rings), coarse then fine. A correspondence joins two
+points of the same side of a surface: their normals, each turned towards the sensor that saw it,
+agree within 60 degrees. Two sensors see other faces of an object (one a parked trailer's side,
+the other its end); near its corners a point of one face lay within reach of the other face, and
+those matches pulled sensors along a row of three 12-16 cm off (0.2-0.6 cm without them). The ground (target normal within STRUCTURE_TILT_DEG
 of vertical) moves only z, roll and pitch, and the structure only x, y and yaw. Why: the ground
 fills most of every cloud, and a few millimetres of disagreement between two sensors' grounds
 (ring sampling, range noise) pushed the horizontal directions, which the ground does not
@@ -51,6 +55,7 @@ LEVER_M = 10.0  # a rotation's information is compared with a translation's as t
 LEVER_SCALE = np.array([LEVER_M] * 3 + [1.0] * 3)  # of a step (rotation vector, translation)
 SINGULAR = 1e-12  # a direction with no information at all (no structure in view) keeps its value
 PLANE_FLATNESS = 1e-3  # GICP's: a surface's covariance along its normal, relative to along it
+SAME_SIDE_COS = 0.5  # a correspondence's two normals (each towards its sensor) agree this well: one side of a surface
 
 
 @dataclass
@@ -66,7 +71,8 @@ class SensorCalibration:
 @dataclass
 class WindowCloud:
     """One window's points in the yard frame, each with the local surface covariance of the sensor
-    that saw it (GICP's: the surface's spread, flattened to PLANE_FLATNESS along its normal)."""
+    that saw it (GICP's: the surface's spread, flattened to PLANE_FLATNESS along its normal) and
+    that normal turned towards the sensor (the side of the surface it saw)."""
 
     points: np.ndarray
     covariances: np.ndarray  # (n, 3, 3)
@@ -136,7 +142,8 @@ class Calibrator:
             raise ValueError(f"reference sensor {ref!r} is not among the sensors {', '.join(names)}")
         guess = {s.name: extrinsics_matrix(s.extrinsics) for s in sensors}
         clouds = {
-            name: [self._cloud(self._still_points(w.get(name, []), guess[name])) for w in windows] for name in names
+            name: [self._cloud(self._still_points(w.get(name, []), guess[name]), guess[name][:3, 3]) for w in windows]
+            for name in names
         }
         results = [SensorCalibration(ref, sensors[names.index(ref)].extrinsics, 1.0, 0.0, "reference")]
         targets, done = clouds[ref], [ref]
@@ -160,7 +167,7 @@ class Calibrator:
         points = transform_points(to_yard, still_points(sweeps))
         return voxel_centroids(points, self.params.voxel_size_m, float64=True)[0] if len(points) else points
 
-    def _cloud(self, points: np.ndarray) -> WindowCloud:
+    def _cloud(self, points: np.ndarray, viewpoint: np.ndarray) -> WindowCloud:
         import open3d as o3d
 
         if len(points) < 3:
@@ -170,7 +177,9 @@ class Calibrator:
         cloud.estimate_covariances(o3d.geometry.KDTreeSearchParamHybrid(radius=self.params.normal_radius_m, max_nn=50))
         _, axes = np.linalg.eigh(np.asarray(cloud.covariances))  # ascending: the normal first
         covariances = np.einsum("nij,j,nkj->nik", axes, [PLANE_FLATNESS, 1.0, 1.0], axes)
-        return WindowCloud(points, covariances, axes[:, :, 0])
+        normals = axes[:, :, 0]
+        normals *= np.where(np.einsum("ij,ij->i", normals, viewpoint - points) < 0, -1.0, 1.0)[:, None]
+        return WindowCloud(points, covariances, normals)
 
     def _overlap(self, clouds: list[WindowCloud], targets: list[WindowCloud]) -> int:
         reach = self.params.max_correspondence_m
@@ -201,6 +210,11 @@ class Calibrator:
                 continue
             moved = transform_points(transform, source.points)
             rows, nearest = target.match(moved, reach)
+            # a thin pole or wall seen from its two sides by two sensors shows two surfaces apart: not one
+            same_side = (
+                np.einsum("ij,ij->i", source.normals[rows] @ rotation.T, target.normals[nearest]) > SAME_SIDE_COS
+            )
+            rows, nearest = rows[same_side], nearest[same_side]
             moved, residual = moved[rows], moved[rows] - target.points[nearest]
             combined = target.covariances[nearest] + rotation @ source.covariances[rows] @ rotation.T
             information = np.linalg.inv(combined)
