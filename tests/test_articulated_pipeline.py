@@ -4,6 +4,7 @@ length, two vehicles, reversing) and the ``default`` method end to end."""
 from __future__ import annotations
 
 from dataclasses import replace
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -1192,3 +1193,23 @@ def test_a_trailer_longer_than_every_catalogue_one_starts_with_the_cab_on_its_ca
     assert len(reports) == 1 and reports[0].model.articulated
     position, yaw, hitch = errors(reports[0], state)
     assert position < 0.3 and abs(yaw) < 1.0 and abs(hitch) < 1.0
+
+
+def _hypothesis(model, sign, cost, yaw_rad=0.0):
+    return model, sign, SimpleNamespace(cost=cost, hitch_rad=0.0, yaw_rad=yaw_rad)
+
+
+def test_both_directions_are_checked_when_they_cost_alike():
+    """The start checks its choice (a gap filled by a wall, ...) and needs another frame if it fails:
+    when the model's two directions fit alike, the other one is checked too, the direction of
+    travel first; a clearly cheaper direction is the only one."""
+    tracker = VehicleTracker(PARAMS.articulated, PARAMS.vehicles)
+    volvo, man = tracker.catalogue["volvo_fh"], tracker.catalogue["man_tgx"]
+    seed = Seed(np.array([0.0, 0.0]), np.array([0.0, 0.0]))
+    alike = [_hypothesis(volvo, 1.0, 0.0054), _hypothesis(volvo, -1.0, 0.0053, np.pi), _hypothesis(man, 1.0, 0.0055)]
+    chosen = tracker._choose(alike, seed)
+    assert [(m.name, h.cost) for m, h in chosen] == [("volvo_fh", 0.0053), ("volvo_fh", 0.0054)]
+    seed.center_xy = np.array([1.0, 0.0])  # it moved along +x: the direction facing +x first
+    assert [h.cost for _, h in tracker._choose(alike, seed)] == [0.0054, 0.0053]
+    clear = [_hypothesis(volvo, 1.0, 0.0080), _hypothesis(volvo, -1.0, 0.0040, np.pi)]
+    assert [h.cost for _, h in tracker._choose(clear, seed)] == [0.0040]

@@ -836,7 +836,7 @@ class VehicleTracker:
         choices = self._articulated_choices(hypotheses)
         if may_be_rigid:
             two = self._two_units(hypotheses, cluster, seed, ground_z_m)
-            choices = [two] if two is not None else [c for c in [self._choose(hypotheses, seed)] if c is not None]
+            choices = [two] if two is not None else self._choose(hypotheses, seed)
         for model, m in choices:
             seed.rigid = not model.articulated
             fit_moved = self._fit_moved(seed, m)  # its first rigid fit is remembered
@@ -1059,29 +1059,30 @@ class VehicleTracker:
                 out.append((rigid, sign, m))
         return out
 
-    def _choose(self, hypotheses, seed: Seed) -> tuple[VehicleModel, Measurement] | None:
-        """The best-explaining model; between its two directions the cheaper fit, or the direction of
-        travel when both cost alike."""
+    def _choose(self, hypotheses, seed: Seed) -> list[tuple[VehicleModel, Measurement]]:
+        """The best-explaining model, in the order its two directions are to be checked: the cheaper
+        fit alone, or, when both cost alike, the direction of travel first and then the other (the
+        start's checks decide then: a Volvo beside a dock's wall, its cheaper direction's gap
+        filled by the wall, waited 44 frames for its other direction to come out cheaper)."""
         articulated = [h for h in hypotheses if h[0].articulated]
         rigid = [h for h in hypotheses if not h[0].articulated]
         best_art = min(articulated, key=lambda h: h[2].cost, default=None)
         best_rigid = min(rigid, key=lambda h: h[2].cost, default=None)
         if best_art is not None and (best_rigid is None or best_art[2].cost < RIGID_COST_RATIO * best_rigid[2].cost):
             if abs(best_art[2].hitch_rad) > np.radians(self.params.start_max_hitch_deg):
-                return None  # it looks jack-knifed: a parked trailer beside a container, more likely
+                return []  # it looks jack-knifed: a parked trailer beside a container, more likely
             pool = [h for h in articulated if h[0].name == best_art[0].name]
         else:
             pool = [h for h in rigid if h[0].tractor.length_m >= self.params.rigid_min_length_m]
-            if not pool:
-                return None
         pool.sort(key=lambda h: h[2].cost)
-        chosen = pool[0]
-        if len(pool) > 1 and pool[0][2].cost > DIRECTION_COST_RATIO * pool[1][2].cost:
-            travel = seed.center_xy - seed.first_xy
-            if np.hypot(*travel) > 0.3:
-                heading = [np.array([np.cos(h[2].yaw_rad), np.sin(h[2].yaw_rad)]) @ travel for h in pool[:2]]
-                chosen = pool[int(np.argmax(heading))]
-        return chosen[0], chosen[2]
+        if len(pool) < 2 or pool[0][2].cost <= DIRECTION_COST_RATIO * pool[1][2].cost:
+            return [(h[0], h[2]) for h in pool[:1]]
+        pair = pool[:2]
+        travel = seed.center_xy - seed.first_xy
+        if np.hypot(*travel) > 0.3:
+            heading = [np.array([np.cos(h[2].yaw_rad), np.sin(h[2].yaw_rad)]) @ travel for h in pair]
+            pair = pair[::-1] if heading[1] > heading[0] else pair
+        return [(h[0], h[2]) for h in pair]
 
 
 def _tractor_around(prior: Prior) -> list[Prior]:
