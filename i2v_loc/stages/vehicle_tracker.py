@@ -918,17 +918,19 @@ class VehicleTracker:
 
     def _gap_seen_empty(self, m: Measurement, model: VehicleModel, ground_z_m: float) -> bool:
         """At least ``GAP_SEEN_MIN_RAYS`` rays crossed the middle of the model's gap (``_gap_counts``'
-        box, within the cab's width) and ended ``GAP_SEEN_BEYOND_M`` beyond it: the gap is empty, not
-        hidden (a standing seed's hole may be a pole's shadow on a trailer's side)."""
+        box, ``SOLID_INSET_M`` inside the narrower unit's sides) and ended ``GAP_SEEN_BEYOND_M``
+        beyond it: the gap is empty, not hidden (a standing seed's hole may be a pole's shadow on a
+        trailer's side). Within the cab's width, three rays running along a parked trailer's side,
+        0.1 m out, showed a gap in it: it started as a MAN, 20 false vehicle-s."""
         if self._rays is None:
             return False
         start, length = _gap_middle(model)
         centre = np.array([m.x_m, m.y_m]) + (start + length / 2) * np.array([np.cos(m.yaw_rad), np.sin(m.yaw_rad)])
         low, high = _gap_band(model)
+        half_width = min(box.width_m for box in model.boxes) / 2 - SOLID_INSET_M
         seen, _, _ = self._rays.through(
-            tuple(centre), m.yaw_rad, length / 2, model.tractor.width_m / 2,
-            (ground_z_m + low, ground_z_m + high), GAP_SEEN_BEYOND_M,
-        )  # fmt: skip
+            tuple(centre), m.yaw_rad, length / 2, half_width, (ground_z_m + low, ground_z_m + high), GAP_SEEN_BEYOND_M
+        )
         return seen >= GAP_SEEN_MIN_RAYS
 
     def _articulated_choices(self, hypotheses) -> list[tuple[VehicleModel, Measurement]]:
