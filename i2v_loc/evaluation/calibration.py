@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-CACHE_VERSION = 3  # 3: correspondences on one side of a surface (stages/calibration.py)
+CACHE_VERSION = 4  # 4: structure correspondences on one side of a surface (stages/calibration.py)
 
 CALIBRATED = "calibrated"
 REFUSED = "refused"  # fitness too low: evaluated with the guess
