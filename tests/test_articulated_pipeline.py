@@ -28,7 +28,6 @@ from i2v_loc.stages.vehicle_tracker import (
     _Extent,
     _face_seen,
     _gap_filled,
-    _gap_middle,
     _gap_open,
     _own_body,
     _shift_along_m,
@@ -400,22 +399,6 @@ def test_a_parked_trailer_alone_is_no_vehicle():
         for k in range(40):
             points = vehicle_points(trailer, 0.0, 3.0, 0.4, sensors=sensors, seed=k)
             assert tracker.process(points, flat, 0.1 * k, background_ready=k >= 20) == []
-
-
-def test_rays_along_a_parked_trailers_side_show_no_gap_in_it():
-    """A sensor in line with a parked trailer's side, just outside it: its rays run along the side
-    to the ground beyond. A MAN placed on the trailer has its gap between cab and trailer inside
-    the trailer's body: no ray crosses that (it ran through the cab's width, 0.11 m wider than the
-    trailer on each side, where 2-3 rays passed)."""
-    trailer = VehicleModel.rigid("rigid", 13.6, 2.55, 2.6, 1.2)
-    man = VehicleModel.from_config("man_tgx", PARAMS.vehicles["man_tgx"])
-    tracker = VehicleTracker(PARAMS.articulated, PARAMS.vehicles)
-    start, length = _gap_middle(man)
-    for sensor in ((25.0, 4.33, 5.0), (-25.0, 1.67, 5.0)):  # 0.055 m outside either side
-        tracker._rays = cast_rays([WorldBox(np.array([0.0, 3.0]), 0.0, trailer.boxes[0], 0)], [sensor])
-        for gap_x in (-4.0, 0.0, 4.0):
-            placed = SimpleNamespace(x_m=gap_x - (start + length / 2), y_m=3.0, yaw_rad=0.0)
-            assert not tracker._gap_seen_empty(placed, man, 0.0)
 
 
 def test_two_vehicles_side_by_side_keep_their_units():

@@ -71,9 +71,6 @@ GAP_OPEN_RATIO = 0.1  # a moving seed with so few points in its gap is two units
 GAP_OPEN_MIN_POINTS = 10
 GAP_SEEN_MIN_RAYS = 1  # a solid side stops every ray: one through a seed's gap shows it empty, not hidden
 GAP_SEEN_BEYOND_M = 0.3  # past the gap: a ray ending on a side running through it did not cross it
-GAP_SEEN_INSET_M = (
-    0.3  # inside the narrower unit's sides: a catalogue width exceeds a real body's by up to 0.15 m a side
-)
 SOLID_INSET_M = 0.5  # a unit's box this far inside its faces is crossed by no ray (a sweep's motion blurs them)
 SEEN_THROUGH_RATIO = 0.1  # of the rays ending on a unit, at most this many cross it (real ones: under 0.01)
 CAB_SLICE_MIN_M = 1.0
@@ -921,21 +918,17 @@ class VehicleTracker:
 
     def _gap_seen_empty(self, m: Measurement, model: VehicleModel, ground_z_m: float) -> bool:
         """At least ``GAP_SEEN_MIN_RAYS`` rays crossed the middle of the model's gap (``_gap_counts``'
-        box, ``GAP_SEEN_INSET_M`` inside the narrower unit's sides) and ended ``GAP_SEEN_BEYOND_M``
-        beyond it: the gap is empty, not hidden (a standing seed's hole may be a pole's shadow on a
-        trailer's side). Within the cab's width, three rays running along a parked trailer's side,
-        0.1 m out, showed a gap in it: it started as a MAN, 20 false vehicle-s. (Tried 0.5 m in:
-        real gaps whose model gap lay partly on the cab or trailer, an unknown tractor's, showed no
-        ray there: a 16 m docking waited for its travel, 19 % success.)"""
+        box, within the cab's width) and ended ``GAP_SEEN_BEYOND_M`` beyond it: the gap is empty, not
+        hidden (a standing seed's hole may be a pole's shadow on a trailer's side)."""
         if self._rays is None:
             return False
         start, length = _gap_middle(model)
         centre = np.array([m.x_m, m.y_m]) + (start + length / 2) * np.array([np.cos(m.yaw_rad), np.sin(m.yaw_rad)])
         low, high = _gap_band(model)
-        half_width = min(box.width_m for box in model.boxes) / 2 - GAP_SEEN_INSET_M
         seen, _, _ = self._rays.through(
-            tuple(centre), m.yaw_rad, length / 2, half_width, (ground_z_m + low, ground_z_m + high), GAP_SEEN_BEYOND_M
-        )
+            tuple(centre), m.yaw_rad, length / 2, model.tractor.width_m / 2,
+            (ground_z_m + low, ground_z_m + high), GAP_SEEN_BEYOND_M,
+        )  # fmt: skip
         return seen >= GAP_SEEN_MIN_RAYS
 
     def _articulated_choices(self, hypotheses) -> list[tuple[VehicleModel, Measurement]]:
