@@ -172,9 +172,13 @@ class ArticulatedPipeline(ParameterHandoff):
         """(centre xy, yaw, box, centre velocity xy, yaw rate, travel, articulated) of every unit of
         the vehicles of the last frame, in the yard frame."""
         for center, yaw, box, velocity, rate, travel, articulated in self._level_unit_boxes():
-            on_ground = self.level.to_yard(np.array([center[0], center[1], self._ground(*center)]))
             velocity = self.level.vector_to_yard(velocity)
-            yield on_ground[:2], self.level.yaw_to_yard(yaw), box, velocity, rate, travel, articulated
+            yield self._yard_xy(center), self.level.yaw_to_yard(yaw), box, velocity, rate, travel, articulated
+
+    def _yard_xy(self, center_xy) -> np.ndarray:
+        """The yard xy of a level-frame place on the ground."""
+        x, y = center_xy
+        return self.level.to_yard(np.array([x, y, self._ground(x, y)]))[:2]
 
     def _level_unit_boxes(self):
         for r in self._reports:
@@ -213,11 +217,8 @@ class ArticulatedPipeline(ParameterHandoff):
         return tracked + [self._yard_box(rect) for rect in self.tracker.moving_seeds()]
 
     def _yard_box(self, rect: Rect) -> ProtectedBox:
-        x, y = rect.center_xy
-        center = self.level.to_yard(np.array([x, y, self._ground(x, y)]))
-        return ProtectedBox(
-            tuple(center[:2]), self.level.yaw_to_yard(rect.yaw_rad), rect.length_m / 2, rect.width_m / 2
-        )
+        center, yaw = self._yard_xy(rect.center_xy), self.level.yaw_to_yard(rect.yaw_rad)
+        return ProtectedBox(tuple(center), yaw, rect.length_m / 2, rect.width_m / 2)
 
     def _motion_hints(self, units, age_s: float) -> list[MotionHint]:
         """The last frame's units, ``age_s`` before this frame's reference time: each point is tested

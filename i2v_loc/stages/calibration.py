@@ -233,7 +233,7 @@ class Calibrator:
         turned towards its sensor) agree: two faces of an object seen by two sensors are not one
         surface. (The ground's normals are not compared: on sparse rings far out a 2 m radius holds
         one ring, a line whose smallest axis is any direction across it; compared, a 1.5 s
-        recording's l3 ended 6.9 cm off in height and pitch, 1.4 cm without.)"""
+        recording's l3 ended 6.9 cm off in height and pitch, 1.2 cm not compared.)"""
         agree = np.einsum("ij,ij->i", source.normals[rows] @ rotation.T, target.normals[nearest]) > SAME_SIDE_COS
         keep = agree | ~is_structure(target.normals[nearest])
         return rows[keep], nearest[keep]

@@ -746,7 +746,7 @@ class VehicleTracker:
         """The footprints of the seeds that moved (``Seed.moved``), standing now or not: a trailer that
         drove off while the background was learned, its tractor out of reach, had become background
         along its sides (they stay in place as it moves along them) and was cut out of its points
-        for 13 s once it stopped and reversed into a dock."""
+        for 5 s once it stopped and reversed into a dock."""
         return [s.rect for s in self.seeds if s.travelled and s.rect is not None]
 
     def _fit_moved(self, seed: Seed, m: Measurement) -> bool:
