@@ -159,6 +159,21 @@ def test_jackknife_warning_from_rate_when_reversing():
     assert not f.state.jackknife
 
 
+def test_the_first_two_fits_give_a_new_vehicles_speed_and_curvature():
+    """First seen in a steady turn at 3 m/s and 0.2 1/m, started without a speed: after its second
+    fit the filter has the speed and the curvature their difference shows (the UKF alone cannot
+    learn a curvature at speed 0: the yaw rate is their product)."""
+    steer = np.arctan(0.2 * ART.wheelbase_m)
+    truth = np.zeros(4)
+    for _ in range(100):  # 10 s into the turn: its hitch settled
+        truth = step(truth, 3.0, steer, ART, 0.1)
+    f = new_filter(truth)
+    truth = step(truth, 3.0, steer, ART, 0.1)
+    f.predict(0.1)
+    assert f.update(np.array([truth[0], truth[1], truth[2], truth[3] - truth[2]]), R)
+    assert abs(f.state.speed_m_s - 3.0) < 0.1 and abs(f.state.curvature_1_m - 0.2) < 0.02
+
+
 def test_far_measurement_is_gated_then_taken_after_repeats():
     truth = np.array([0.0, 0.0, 0.0, 0.0])
     f = new_filter(truth)

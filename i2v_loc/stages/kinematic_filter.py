@@ -29,6 +29,10 @@ _ANGLES_X = np.array([YAW, HITCH])
 _ANGLES_Z = {4: np.array([2, 3]), 3: np.array([2])}  # of (x, y, yaw, hitch) and (x, y, yaw)
 INITIAL_SPEED_SIGMA_M_S = 3.0
 INITIAL_CURVATURE_SIGMA_1_M = 0.05
+TWO_FIT_MIN_SPEED_M_S = 1.0  # slower, two fits' yaw difference is noise, not a turn
+TWO_FIT_SPEED_SIGMA_M_S = 1.0  # two fits 0.1 s apart, a few centimetres each
+MAX_START_SPEED_M_S = 25.0  # 90 km/h, a truck's top speed
+MAX_CURVATURE_1_M = 0.5  # a turning circle of 2 m: tighter than any road vehicle's
 MAX_STEP_S = 0.1  # the kinematics are integrated in midpoint steps no longer than this
 
 
@@ -149,6 +153,10 @@ class KinematicFilter:
         self.ukf.x, self.ukf.P = x, p
         self.rejected = 0  # measurements outside the innovation gate
         self._in_a_row = 0
+        # without a speed, the second fit gives the motion (``_motion_of_two_fits``) from the state
+        # before the first prediction (the start's sizes may have moved it since)
+        self._two_fits = speed_m_s == 0.0
+        self._first: tuple[np.ndarray, np.ndarray, float] | None = None
 
     def restart(self, z: np.ndarray, r: np.ndarray) -> None:
         """The pose and hitch restart from the fit ``z`` (covariance ``r``); speed and curvature are
@@ -162,6 +170,8 @@ class KinematicFilter:
         p[CURVATURE, CURVATURE] = max(p[CURVATURE, CURVATURE], INITIAL_CURVATURE_SIGMA_1_M**2)
         self.ukf.P = p
         self._in_a_row = 0
+        if self._first is not None:  # no longer the first fit's state
+            self._first, self._two_fits = None, False
 
     def _q(self, dt_s: float) -> np.ndarray:
         p = self.params
@@ -176,6 +186,8 @@ class KinematicFilter:
 
     def predict(self, stamp_s: float) -> FilterState:
         dt = stamp_s - self.stamp_s if np.isfinite(stamp_s) else 0.1
+        if self._two_fits and self._first is None:
+            self._first = (self.ukf.x.copy(), self.ukf.P.copy(), self.stamp_s)
         if dt > 0:
             self.ukf.predict(
                 dt, self._q(dt), self.kingpin_m, self.trailer_axle_m, self.articulated, self.params.reverse_hold_m
@@ -189,8 +201,10 @@ class KinematicFilter:
         innovation gate. After ``reset_after_rejections`` rejections in a row the fits are right and
         the prediction is not: the pose and hitch restart from the fit (speed and curvature kept,
         their variance reset)."""
-        x, p = self.ukf.x.copy(), self.ukf.P.copy()
         z = np.asarray(z, dtype=float)
+        if self._first is not None:
+            self._motion_of_two_fits(z)
+        x, p = self.ukf.x.copy(), self.ukf.P.copy()
         if observed is None:
             self.ukf.update(z, r)
         else:
@@ -205,6 +219,30 @@ class KinematicFilter:
         self._in_a_row = 0
         self.ukf.x[YAW], self.ukf.x[HITCH] = wrap_rad(self.ukf.x[YAW]), wrap_rad(self.ukf.x[HITCH])
         return True
+
+    def _motion_of_two_fits(self, z: np.ndarray) -> None:
+        """A new vehicle's speed and curvature from its first two fits (their difference over the
+        time between them), before the second is fused. Started at speed 0, the filter cannot
+        learn the curvature from the yaw (the yaw rate is their product, and each sigma point
+        moves one of them): a Twizy first seen by one LiDAR at 3.1 m/s in a roundabout (0.28 1/m)
+        had 0.96 m/s and 0.02 1/m after its second fit, and its fits fell outside the gate. The
+        first two fits' points are alike not yet moved to the frame's time: their difference is
+        the motion. Implausible differences (a jump between two objects) are left to the filter."""
+        (x, p, stamp), self._first, self._two_fits = self._first, None, False
+        dt = self.stamp_s - stamp
+        if dt <= 0:
+            return
+        turn = wrap_rad(z[YAW] - x[YAW])
+        heading = x[YAW] + turn / 2
+        speed = float((z[:2] - x[:2]) @ np.array([np.cos(heading), np.sin(heading)])) / dt
+        curvature = turn / dt / speed if abs(speed) >= TWO_FIT_MIN_SPEED_M_S else 0.0
+        if abs(speed) > MAX_START_SPEED_M_S or abs(curvature) > MAX_CURVATURE_1_M:
+            return
+        x[SPEED], x[CURVATURE] = speed, curvature
+        p[SPEED, SPEED] = TWO_FIT_SPEED_SIGMA_M_S**2
+        self.ukf.x, self.ukf.P = x, p  # predicted again from the start, with the motion
+        self.stamp_s = stamp
+        self.predict(stamp + dt)
 
     def move_pose(self, delta: np.ndarray) -> None:
         """Move the pose (x, y, yaw[, hitch]) by ``delta`` without touching the motion or the

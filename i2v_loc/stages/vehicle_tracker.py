@@ -51,6 +51,7 @@ TRACTOR_LOST_SIGMA_DEG = 1.0  # tracked, the hitch's is 0.2-0.4 deg; the cab hid
 MAX_TRAILER_LENGTH_M = TRAILER_LENGTH_RANGE_M[1]
 REAR_FACE_MIN_POINTS = 3
 SIDE_MIN_POINTS = 5
+SIDE_MAX_SLOPE = np.tan(np.radians(5.0))  # a side's points run along its unit's axis (the fits' yaw: within 2 deg)
 LOW_SEED_SLACK_M = 0.5  # a seed shorter than a rigid vehicle and this much lower than every articulated one is none
 MAX_VEHICLE_HEIGHT_M = 4.6  # 4.0 m in the EU, 4.3 m in the US, plus the roof's clutter and noise
 TALL_COLUMN_MIN_POINTS = 2  # points above a vehicle's height that make a column a structure (not one noise point)
@@ -437,7 +438,7 @@ class VehicleTracker:
             # both sides seen along the body (the trailer's box reaches a slack on behind its rear, where
             # a dock shelter's wall beside a Twizy made its trailer 1.89 m wide, 1.75), each by a sensor
             # it faces: the width between them
-            if min(n_left, n_right) >= SIDE_MIN_POINTS and faced[u]:
+            if min(n_left, n_right) >= SIDE_MIN_POINTS and faced[u] and _sides_along(local[u], m, u, box):
                 track.widths[u].add(left - right)
             widths.append(track.widths[u].estimate)
         tractor = {"width_m": widths[0]}
@@ -1274,6 +1275,20 @@ def _beyond_gap(q: np.ndarray, prior: Prior) -> tuple[Prior, np.ndarray | None]:
     reach = float(chain[gaps[0]] if len(gaps) else chain[-1])
     slack = min(reach + SETTLED_SLACK_M, prior.trailer_slack_m)
     return replace(prior, trailer_slack_m=slack), behind > slack
+
+
+def _sides_along(q: np.ndarray, m: Measurement, unit: int, box: Box) -> bool:
+    """Whether the points of the unit's left and right faces (``q``: the unit's frame) within its
+    length run along its axis, within ``SIDE_MAX_SLOPE``: a docked Twizy's trailer, a dock's wall
+    crossing its middle at 37 deg, had the wall's points beside its front counted as its left side
+    (1.98 m wide for 1.75, its hitch 3-4 deg off for 2 s)."""
+    within = (m.unit == unit) & (q[:, 0] >= box.rear_m) & (q[:, 0] <= box.front_m)
+    for face in (LEFT, RIGHT):
+        x, y = q[within & (m.face == face), 0], q[within & (m.face == face), 1]
+        x = x - x.mean()
+        if abs(float(x @ (y - y.mean()))) > SIDE_MAX_SLOPE * float(x @ x):
+            return False
+    return True
 
 
 def _face_seen(m: Measurement, model: VehicleModel, unit: int, face: int) -> bool:
