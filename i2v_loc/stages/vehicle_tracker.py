@@ -1284,7 +1284,7 @@ def _sides_along(q: np.ndarray, m: Measurement, unit: int, box: Box) -> bool:
     (1.98 m wide for 1.75, its hitch 3-4 deg off for 2 s)."""
     within = (m.unit == unit) & (q[:, 0] >= box.rear_m) & (q[:, 0] <= box.front_m)
     for face in (LEFT, RIGHT):
-        x, y = q[within & (m.face == face), 0], q[within & (m.face == face), 1]
+        x, y = q[within & (m.face == face), :2].T
         x = x - x.mean()
         if abs(float(x @ (y - y.mean()))) > SIDE_MAX_SLOPE * float(x @ x):
             return False
@@ -1390,7 +1390,7 @@ def _sides_at_gap(m: Measurement, model: VehicleModel, start_m: float, length_m:
     """The extent across (tractor frame, within the cab's width) of the fit's explained points within
     ``GAP_SIDES_REACH_M`` ahead of and behind the gap's middle: the body's sides there. Rays running
     along a parked trailer's side 0.1 m outside it, inside the wider box of the MAN cab fitted to its
-    front, had shown the "gap" behind that cab empty (a false vehicle for 20 s, held-out seeds)."""
+    front, had shown the "gap" behind that cab empty (a false vehicle for 20 s, generalization suite)."""
     (q,) = unit_frames(m.points, m.vector, model.with_boxes(model.tractor, None))
     half = model.tractor.width_m / 2
     near = (
