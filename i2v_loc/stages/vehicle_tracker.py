@@ -21,6 +21,7 @@ from itertools import count
 import numpy as np
 from scipy.spatial import cKDTree
 
+from i2v_loc.geometry import rotate_xy
 from i2v_loc.params import ArticulatedParams, VehicleConfig
 from i2v_loc.stages import kernels
 from i2v_loc.stages.hinged_fit import (
@@ -929,9 +930,7 @@ class VehicleTracker:
         sides = _sides_at_gap(m, model, start, length)
         if sides is None:
             return False
-        along = np.array([np.cos(m.yaw_rad), np.sin(m.yaw_rad)])
-        across = np.array([-along[1], along[0]])
-        centre = np.array([m.x_m, m.y_m]) + (start + length / 2) * along + (sides[0] + sides[1]) / 2 * across
+        centre = np.array([m.x_m, m.y_m]) + rotate_xy((start + length / 2, (sides[0] + sides[1]) / 2), m.yaw_rad)
         low, high = _gap_band(model)
         seen, _, _ = self._rays.through(
             tuple(centre), m.yaw_rad, length / 2, (sides[1] - sides[0]) / 2,
