@@ -33,15 +33,19 @@ class UnitResult:
     yaw_deg: float | None
     dimensions: tuple[float, float, float]
     points: int
+    dimensions_seen: tuple[bool, bool, bool] | None = None  # default method: measured, or a prior
 
     def to_json(self) -> dict:
-        return {
+        out = {
             "track_id": self.track_id,
             "center": [_r(v) for v in self.center],
             "yaw_deg": None if self.yaw_deg is None else _r(self.yaw_deg, 3),
             "dimensions": [_r(v, 3) for v in self.dimensions],
             "points": int(self.points),
         }
+        if self.dimensions_seen is not None:
+            out["dimensions_seen"] = [bool(v) for v in self.dimensions_seen]
+        return out
 
 
 @dataclass

@@ -228,6 +228,7 @@ def test_unknown_trailer_length_converges():
         if reports and t >= 10.0:
             assert abs(reports[0].model.trailer.length_m - 10.5) < 0.3
             assert reports[0].model.name == "unknown"
+            assert reports[0].dimensions_seen[1][0] and not reports[0].dimensions_seen[1][2]  # heights: the catalogue's
             hitch_err.append(errors(reports[0], truth)[2])
     assert len(hitch_err) >= 15 and np.sqrt(np.mean(np.square(hitch_err))) < 0.5
 
@@ -1097,10 +1098,10 @@ def test_two_units_are_judged_on_the_cheapest_supported_fit():
     assert not _supported(wrong, model, 0.0) and not _gap_open(points, wrong, model, 0.0)
     tracker = VehicleTracker(PARAMS.articulated, PARAMS.vehicles)
     moving = _seed_that_moved(points, 2.0)
-    assert tracker._two_units([(model, -1.0, wrong), (model, 1.0, right)], points, moving, 0.0) == (model, right)
-    assert tracker._two_units([(model, -1.0, wrong)], points, moving, 0.0) is None
+    assert tracker._two_units([(model, -1.0, wrong), (model, 1.0, right)], points, moving, 0.0, True) == (model, right)
+    assert tracker._two_units([(model, -1.0, wrong)], points, moving, 0.0, True) is None
     standing = Seed(np.array([0.0, 5.0]), np.array([0.0, 5.0]))
-    assert tracker._two_units([(model, 1.0, right)], points, standing, 0.0) is None
+    assert tracker._two_units([(model, 1.0, right)], points, standing, 0.0, True) is None
 
 
 def test_a_moving_seed_that_fitted_one_box_is_fitted_again_before_the_map_is_ready():

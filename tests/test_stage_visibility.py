@@ -125,3 +125,21 @@ def test_the_level_frames_read_only_rotation_compiles_no_kernel_in_a_frame():
     assert not LEVEL.flags.writeable
     rays(row(0.0, 1.5, np.linspace(-3, 3, 5)), to_level=LEVEL).through(**BOX)
     assert set(kernels.rays_through_box.signatures) == before
+
+
+def test_the_top_of_a_sensors_view_is_its_sweeps_highest_return():
+    """Sensor 3 m up; its highest return lies 1 m above it 10 m away (5.71 deg up). A point 20 m away
+    2 m above it (5.71 deg) is at the top of the view; one 1.5 m above it (4.29 deg) is not, nor is
+    any point of a sweep whose sensor is not known. The points are asked in the level frame: a
+    level frame tilted 1 deg along x turns them back first."""
+    sweep = np.array([[0.0, 10.0, 4.0], [0.0, 10.0, 2.0], [5.0, 5.0, 0.0]], dtype=np.float32)
+    at_top, below = np.array([[20.0, 0.0, 5.0]]), np.array([[20.0, 0.0, 4.5]])
+    seen = rays(sweep, origins=[[0.0, 0.0, 3.0]])
+    assert seen.top_elevations == pytest.approx([np.arctan2(1.0, 10.0)])
+    assert seen.at_view_top(at_top, np.radians(0.1)) and not seen.at_view_top(below, np.radians(0.5))
+    unknown = rays(sweep, origins=[[np.nan, np.nan, np.nan]])
+    assert not unknown.at_view_top(at_top, np.radians(0.5))
+    tilt = _rotation_onto_up(np.array([np.sin(np.radians(1.0)), 0.0, np.cos(np.radians(1.0))]))
+    tilted = rays(sweep, origins=[[0.0, 0.0, 3.0]], to_level=tilt)
+    assert tilted.at_view_top(at_top @ tilt.T, np.radians(0.1))
+    assert not tilted.at_view_top(below @ tilt.T, np.radians(0.5))

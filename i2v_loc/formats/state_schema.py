@@ -22,6 +22,13 @@ class UnitState(_Strict):
     yaw_deg: float | None = Field(description="Counter-clockwise from +x, (-180, 180]")
     dimensions: Vector3 = Field(min_length=3, max_length=3, description="Length, width, height, m")
     points: int = Field(ge=0)
+    # the default (articulated) method adds this; the paper's method does not
+    dimensions_seen: list[bool] | None = Field(
+        None,
+        min_length=3,
+        max_length=3,
+        description="Whether length, width, height were measured from the points (else the catalogue's or a stand-in)",
+    )
 
 
 class VehicleState(_Strict):

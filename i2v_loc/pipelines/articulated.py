@@ -137,13 +137,14 @@ class ArticulatedPipeline(ParameterHandoff):
     def _result(self, report: VehicleReport, ground) -> ArticulatedVehicleResult:
         s, model = report.state, report.model
         tractor_xy, trailer_xy = model.box_centers(s.x_m, s.y_m, s.yaw_rad, s.hitch_rad)
-        truck = self._unit(report.id, tractor_xy, s.yaw_rad, model.tractor, report.tractor_points, ground)
+        seen = report.dimensions_seen
+        truck = self._unit(report.id, tractor_xy, s.yaw_rad, model.tractor, report.tractor_points, ground, seen[0])
         if model.trailer is None:
             return ArticulatedVehicleResult(
                 report.id, model.name, truck, None, None, None, "rigid", None, False, s.speed_m_s
             )
         trailer = self._unit(
-            report.id, trailer_xy, s.yaw_rad + s.hitch_rad, model.trailer, report.trailer_points, ground
+            report.id, trailer_xy, s.yaw_rad + s.hitch_rad, model.trailer, report.trailer_points, ground, seen[1]
         )
         t_truck, t_trailer = box_poses([truck.center, trailer.center], [truck.yaw_deg, trailer.yaw_deg])
         return ArticulatedVehicleResult(
@@ -160,13 +161,13 @@ class ArticulatedPipeline(ParameterHandoff):
         )
 
     def _unit(
-        self, vehicle_id: int, center_xy: np.ndarray, yaw_rad: float, box: Box, points: int, ground
+        self, vehicle_id: int, center_xy: np.ndarray, yaw_rad: float, box: Box, points: int, ground, seen
     ) -> UnitResult:
         """A unit's box in the yard frame from its level-frame centre and yaw."""
         z = ground(*center_xy) + box.floor_m + box.height_m / 2
         center = self.level.to_yard(np.array([center_xy[0], center_xy[1], z]))
         yaw_deg = float(np.degrees(self.level.yaw_to_yard(yaw_rad)))
-        return UnitResult(vehicle_id, center, yaw_deg, box.dims, points)
+        return UnitResult(vehicle_id, center, yaw_deg, box.dims, points, seen)
 
     def _unit_boxes(self):
         """(centre xy, yaw, box, centre velocity xy, yaw rate, travel, articulated) of every unit of

@@ -58,6 +58,21 @@ MAX_VEHICLE_HEIGHT_M = 4.6  # 4.0 m in the EU, 4.3 m in the US, plus the roof's 
 TALL_COLUMN_MIN_POINTS = 2  # points above a vehicle's height that make a column a structure (not one noise point)
 RIGID_MAX_LENGTH_M = 15.0  # the longest rigid vehicles: three-axle coaches (EU 15 m; rigid trucks 12 m)
 RIGID_MIN_WIDTH_M = 1.6  # a rigid vehicle starts once its width is seen (an end face or both sides)
+# a vehicle's end seen alone: a van's to the widest catalogue trailer's (2.77 m), with noise
+END_FACE_WIDTH_M = (1.8, 3.0)
+ONE_SIDE_WIDTH_M = 2.5  # the width behind a side seen alone (coaches and trucks: 2.55 m)
+FACE_MAX_DEPTH_M = 0.25  # a face: most of its points this close to its line, in each band of height
+FACE_BAND_M = 0.3
+FACE_BAND_MIN_POINTS = 5
+FACE_BAND_SHARE = 0.8
+FACE_FILLED_HEIGHT = 0.5  # bands of this share of its height hold a face (scattered points are none)
+FACE_MAX_FOOT_M = 1.5  # its points reach this low (a trailer's floor: 1.0-1.3 m; a sign hangs above 2 m)
+FACE_FOOT_SHARE = 0.5  # along this share of its length (a board's posts reach the ground)
+UNDER_BODY_TOP_M = 0.6  # a body on wheels has rays through its foot up to here, a wall or a hedge none
+UNDER_BODY_DEPTH_M = 1.0  # the foot looked under, behind the face (rays ending on the face never enter it)
+UNDER_BODY_INSET_M = 0.3  # (rays past a wall's end cross no foot)
+UNDER_BODY_MIN_RAYS = 5
+VIEW_TOP_TOLERANCE_RAD = np.radians(0.5)  # about one beam's spacing
 KINGPIN_MIN_HITCH_RAD = np.radians(20.0)  # the kingpin's offset shows only at a hitch angle
 KINGPIN_SETTLED = 50  # observations of the kingpin's offset: learned
 REACH_MAX_HITCH_RAD = np.radians(5.0)  # nearly straight: the trailer's front reach ahead of the rear axle shows
@@ -118,6 +133,7 @@ class VehicleReport:
     trailer_points: int
     measured: bool  # a fit was fused this frame
     travel_m: float  # tractor reference point's distance from where the vehicle started
+    dimensions_seen: tuple[tuple[bool, bool, bool], ...]  # per unit: length, width, height measured (else a prior)
 
 
 @dataclass(frozen=True)
@@ -284,13 +300,26 @@ class _Track:
     ends: dict[str, deque] = field(
         default_factory=dict
     )  # per kind of end, those seen moving: deque of (yard xy, x, kingpin xy)
+    rigid_seen: tuple[bool, bool, bool] = (True, True, True)  # a rigid one's sizes came from its points
 
     def report(self, measured: bool) -> VehicleReport:
         s = self.filter.state
         n0 = int(np.count_nonzero(self.last.unit == 0)) if measured else 0
         n1 = int(np.count_nonzero(self.last.unit == 1)) if measured else 0
         travel = float(np.hypot(s.x_m - self.first_xy[0], s.y_m - self.first_xy[1]))
-        return VehicleReport(self.id, self.model, s, n0, n1, measured, travel)
+        return VehicleReport(self.id, self.model, s, n0, n1, measured, travel, self.dimensions_seen())
+
+    def dimensions_seen(self) -> tuple[tuple[bool, bool, bool], ...]:
+        """Per unit, which of its length, width and height its points measured: a rigid one's as it
+        started (one face shows one of its length and width) and its width once both sides showed;
+        an articulated one's lengths and widths once observed, its heights never (the catalogue's)."""
+        width = [w.median is not None for w in self.widths]
+        if self.trailer_length is None:
+            return ((self.rigid_seen[0], self.rigid_seen[1] or width[0], self.rigid_seen[2]),)
+        return (
+            (self.cab_length.median is not None, width[0], False),
+            (self.trailer_length.median is not None, width[1], False),
+        )
 
 
 class VehicleTracker:
@@ -766,7 +795,8 @@ class VehicleTracker:
         ready too: driving straight, a tractor and trailer seen from one side fit one box, and their
         hinge shows as an open gap only in motion (``_two_units``); ``_candidate`` starts it then
         only as articulated."""
-        return not seed.rigid or seed.moved(self.params.start_travel_m)
+        travel_m = self.params.start_travel_m
+        return not seed.rigid or travel_m <= 0.0 or seed.moved(travel_m)  # 0: one sweep, no motion to wait for
 
     def _may_start(self, seed: Seed, rigid_allowed: bool) -> bool:
         """A rigid seed once the background is learned and it moved."""
@@ -786,10 +816,13 @@ class VehicleTracker:
             p.start_min_height_m,
             p.fit_min_points,
             p.start_join_m,
-            p.start_min_length_m,
+            min(p.start_min_length_m, END_FACE_WIDTH_M[0]),
         ):
             rect = min_area_rect(cluster[:, :2])
-            if p.start_min_length_m <= rect.length_m <= p.start_max_length_m and rect.width_m >= p.start_min_width_m:
+            seen_wide = (
+                p.start_min_length_m <= rect.length_m <= p.start_max_length_m and rect.width_m >= p.start_min_width_m
+            )
+            if seen_wide or _one_face_sized(rect, p):
                 out.append((cluster, rect))
         return out
 
@@ -801,6 +834,7 @@ class VehicleTracker:
             return None
         model, m = chosen
         track = self._track(next(self._ids), model, m, ground_z_m, stamp_s, 0.0)
+        track.rigid_seen = _rigid_seen(rect, self.params, not self._at_view_top(cluster))
         self._learn_at_start(track, cluster, m)
         return track
 
@@ -830,15 +864,18 @@ class VehicleTracker:
         cluster's minimum-area rectangle). A seed longer than any rigid vehicle is articulated: the
         catalogue models are tried cheapest first (an unknown tractor's cab puts a model's gap on
         the real trailer's front)."""
+        top_seen = not self._at_view_top(cluster)
+        if _one_face_sized(rect, self.params):
+            return self._one_face(cluster, rect, seed, ground_z_m, rigid_allowed, top_seen)
         may_be_rigid = rect.length_m <= RIGID_MAX_LENGTH_M
-        if rect.length_m < self.params.rigid_min_length_m and not self._tall_enough(cluster, ground_z_m):
+        if rect.length_m < self.params.rigid_min_length_m and not self._tall_enough(cluster, ground_z_m, top_seen):
             return None  # a car or a person: no fit needed (the start's fits cost 40-80 ms)
-        hypotheses = self._hypotheses(cluster, rect, ground_z_m, may_be_rigid)
+        hypotheses = self._hypotheses(cluster, rect, ground_z_m, may_be_rigid, top_seen)
         if not hypotheses:
             return None
         choices = self._articulated_choices(hypotheses)
         if may_be_rigid:
-            two = self._two_units(hypotheses, cluster, seed, ground_z_m)
+            two = self._two_units(hypotheses, cluster, seed, ground_z_m, top_seen)
             choices = [two] if two is not None else self._choose(hypotheses, seed)
         for model, m in choices:
             seed.rigid = not model.articulated
@@ -847,7 +884,7 @@ class VehicleTracker:
                 return None
             if (
                 float(np.mean(m.unit >= 0)) >= self.params.start_min_explained
-                and _supported(m, model, ground_z_m)
+                and _supported(m, model, ground_z_m, top_seen)
                 and not _gap_filled(cluster, m, model, ground_z_m)
                 # without rays a hole and a gap look alike: the points alone decide
                 and (self._rays is None or self._hinge_shown(seed, m, model, ground_z_m))
@@ -855,6 +892,77 @@ class VehicleTracker:
             ):
                 return model, m
         return None
+
+    def _one_face(
+        self, cluster: np.ndarray, rect: Rect, seed: Seed, ground_z_m: float, rigid_allowed: bool, top_seen: bool
+    ) -> tuple[VehicleModel, Measurement] | None:
+        """A seed that is one upright face (no roof, one side or one end: a vehicle-mounted sensor sees
+        a truck so) is a rigid vehicle when the face is a vehicle's (``_vehicle_face``) and stands on
+        wheels: rays cross under it (``_raised``; a wall stands on the ground). Its body lies behind
+        the face, away from the sensor: as long as the shortest rigid vehicle behind an end, as
+        wide as ``ONE_SIDE_WIDTH_M`` behind a side, until more of it shows. Never without rays."""
+        if self._rays is None or not (
+            _vehicle_face(cluster, rect, ground_z_m) and self._tall_enough(cluster, ground_z_m, top_seen)
+        ):
+            return None
+        face, away = self._face_line(cluster, rect)
+        if not self._raised(rect, face, away, ground_z_m):
+            return None
+        model, prior = self._behind_face(cluster, rect, face, away, seed, ground_z_m)
+        m = fit(thin(cluster, self.params.fit_max_points), prior, self.params, START_ITERATIONS, START_SCALE_M)
+        if m is None:
+            return None
+        seed.rigid = True
+        if not (self._fit_moved(seed, m) and self._may_start(seed, rigid_allowed)):
+            return None
+        if float(np.mean(m.unit >= 0)) < self.params.start_min_explained or self._seen_through(m, model, ground_z_m):
+            return None
+        return model, m
+
+    def _face_line(self, cluster: np.ndarray, rect: Rect) -> tuple[np.ndarray, np.ndarray]:
+        """A point on a one-face seed's nearest face (its footprint's long side's direction) and the
+        direction across it away from the nearest sensor."""
+        origins = (self._rays.origins @ self._rays.to_level.T)[:, :2]
+        sensor = origins[np.argmin(np.hypot(*(origins - rect.center_xy).T))]
+        away = np.array([-np.sin(rect.yaw_rad), np.cos(rect.yaw_rad)])
+        away = away if (rect.center_xy - sensor) @ away >= 0 else -away
+        depth = float(np.percentile((cluster[:, :2] - rect.center_xy) @ away, 10))
+        return rect.center_xy + away * depth, away
+
+    def _raised(self, rect: Rect, face: np.ndarray, away: np.ndarray, ground_z_m: float) -> bool:
+        """At least ``UNDER_BODY_MIN_RAYS`` rays crossed the foot of the body behind its face (from
+        ``FACE_MAX_DEPTH_M`` to ``UNDER_BODY_DEPTH_M`` behind it, up to ``UNDER_BODY_TOP_M`` above the
+        ground, ``UNDER_BODY_INSET_M`` inside its ends) and ended beyond: a body on wheels, not a
+        wall or a hedge. The foot reaches below the ground: a ray that leaves it through its bottom
+        ends in it, on the ground."""
+        middle = face + away * (FACE_MAX_DEPTH_M + UNDER_BODY_DEPTH_M) / 2
+        crossed, _, _ = self._rays.through(
+            tuple(middle), rect.yaw_rad, rect.length_m / 2 - UNDER_BODY_INSET_M,
+            (UNDER_BODY_DEPTH_M - FACE_MAX_DEPTH_M) / 2, (ground_z_m - UNDER_BODY_TOP_M, ground_z_m + UNDER_BODY_TOP_M),
+            GAP_SEEN_BEYOND_M,
+        )  # fmt: skip
+        return crossed >= UNDER_BODY_MIN_RAYS
+
+    def _behind_face(
+        self, cluster: np.ndarray, rect: Rect, face: np.ndarray, away: np.ndarray, seed: Seed, ground_z_m: float
+    ) -> tuple[VehicleModel, Prior]:
+        """The rigid model of a one-face seed and its placement behind the face (``_face_line``),
+        along its travel if it moved (else facing the sensor from its end; along the face's line
+        from its side)."""
+        along = np.array([np.cos(rect.yaw_rad), np.sin(rect.yaw_rad)])
+        floor = _face_foot(cluster, rect, ground_z_m)
+        height = float(cluster[:, 2].max() - ground_z_m) - floor
+        if _end_face(rect):
+            model = VehicleModel.rigid("rigid", self.params.rigid_min_length_m, rect.length_m, height, floor)
+            axis, behind_m = -away, model.tractor.length_m / 2
+        else:
+            model = VehicleModel.rigid("rigid", rect.length_m, ONE_SIDE_WIDTH_M, height, floor)
+            axis, behind_m = along, ONE_SIDE_WIDTH_M / 2
+        travel = seed.center_xy - seed.first_xy
+        if np.hypot(*travel) > 0.3 and axis @ travel < 0:
+            axis = -axis
+        centre = face + away * behind_m
+        return model, Prior(*centre, float(np.arctan2(axis[1], axis[0])), 0.0, model, ground_z_m)
 
     def _seen_through(self, m: Measurement, model: VehicleModel, ground_z_m: float) -> bool:
         """Whether some unit of the fit is no solid body: more than ``SEEN_THROUGH_RATIO`` as many
@@ -899,14 +1007,20 @@ class VehicleTracker:
             return True
         return seed.moved(self.params.start_travel_m) or self._gap_seen_empty(m, model, ground_z_m)
 
-    def _tall_enough(self, cluster: np.ndarray, ground_z_m: float) -> bool:
+    def _tall_enough(self, cluster: np.ndarray, ground_z_m: float, top_seen: bool) -> bool:
         """As tall as some catalogue vehicle's higher unit, less ``LOW_SEED_SLACK_M`` (a Twizy is
-        car-sized, but its box trailer stands 2.85 m high)."""
+        car-sized, but its box trailer stands 2.85 m high), or its top not seen (``_at_view_top``)."""
         tops = [max(box.top_m for box in model.boxes) for model in self.catalogue.values() if model.articulated]
-        return not tops or float(cluster[:, 2].max()) - ground_z_m >= min(tops) - LOW_SEED_SLACK_M
+        return not top_seen or not tops or float(cluster[:, 2].max()) - ground_z_m >= min(tops) - LOW_SEED_SLACK_M
+
+    def _at_view_top(self, points: np.ndarray) -> bool:
+        """Whether some of ``points`` lie at the top of a sensor's view (within ``VIEW_TOP_TOLERANCE_RAD``
+        of the elevation of its sweep's highest return): what stands higher there is not seen, and
+        their height is a lower bound. Never without rays."""
+        return self._rays is not None and self._rays.at_view_top(points, VIEW_TOP_TOLERANCE_RAD)
 
     def _two_units(
-        self, hypotheses, cluster: np.ndarray, seed: Seed, ground_z_m: float
+        self, hypotheses, cluster: np.ndarray, seed: Seed, ground_z_m: float, top_seen: bool
     ) -> tuple[VehicleModel, Measurement] | None:
         """The cheapest supported articulated fit (either direction) if it shows an open gap between
         cab and trailer and its hinge is shown (``_hinge_shown``: moving, or the gap seen empty):
@@ -914,7 +1028,7 @@ class VehicleTracker:
         their measured size better than any catalogue model, and started rigid; the model the wrong
         way round, its cab on a few trailer points, may cost less."""
         fits = sorted((h for h in hypotheses if h[0].articulated and self._unfolded(h[2])), key=lambda h: h[2].cost)
-        model, _, m = next((h for h in fits if _supported(h[2], h[0], ground_z_m)), (None, None, None))
+        model, _, m = next((h for h in fits if _supported(h[2], h[0], ground_z_m, top_seen)), (None, None, None))
         if model is None or not _gap_open(cluster, m, model, ground_z_m):
             return None
         return (model, m) if self._hinge_shown(seed, m, model, ground_z_m) else None
@@ -1001,18 +1115,19 @@ class VehicleTracker:
         heading = np.array([np.cos(s.yaw_rad), np.sin(s.yaw_rad)]) * np.sign(s.speed_m_s)
         here = np.array([s.x_m, s.y_m])
         probe = Seed(here, here - heading, moving=True)  # the direction of travel, for a tie between the two ends
-        chosen = self._candidate(points, min_area_rect(points[:, :2]), probe, track.ground_z_m, rigid_allowed=False)
+        rect = min_area_rect(points[:, :2])
+        chosen = self._candidate(points, rect, probe, track.ground_z_m, rigid_allowed=False)
         if chosen is None:
             return track
         model, m = chosen
         new = self._track(track.id, model, m, track.ground_z_m, stamp_s, s.speed_m_s)
-        new.first_xy = track.first_xy
+        new.first_xy, new.rigid_seen = track.first_xy, _rigid_seen(rect, self.params, not self._at_view_top(points))
         self._learn_at_start(new, points, m)
         self.tracks[self.tracks.index(track)] = new
         return new
 
     def _hypotheses(
-        self, cluster: np.ndarray, rect: Rect, ground_z_m: float, may_be_rigid: bool
+        self, cluster: np.ndarray, rect: Rect, ground_z_m: float, may_be_rigid: bool, top_seen: bool
     ) -> list[tuple[VehicleModel, float, Measurement]]:
         """(model, direction sign, fit) of every catalogue vehicle in both directions (best start hitch
         each) and, if ``may_be_rigid``, of one rigid box of the cluster's measured size. All are
@@ -1039,7 +1154,7 @@ class VehicleTracker:
                 if coarse:  # the best start hitch, refined, the trailer's length fitted too
                     m = min(coarse, key=lambda m: m.cost)
                     m = fit(sample, _sized_start(m, model, ground_z_m), self.params, START_ITERATIONS, START_SCALE_M)
-                    if not _supported(m, _with_trailer_length(model, m.trailer_length_m), ground_z_m):
+                    if not _supported(m, _with_trailer_length(model, m.trailer_length_m), ground_z_m, top_seen):
                         # once more on a sample that keeps its tractor's points (thin_by_unit): the
                         # even sample of a reversing MAN whose cab hid behind its trailer kept 3 of
                         # its 60 cab points, and the fit at the right hitch was not supported for
@@ -1317,9 +1432,77 @@ def _shift_along_m(before: VehicleModel, after: VehicleModel) -> float:
     return max(shifts)
 
 
-def _supported(m: Measurement, model: VehicleModel, ground_z_m: float) -> bool:
+def _one_face_sized(rect: Rect, params: ArticulatedParams) -> bool:
+    """A footprint of one face: as long as a rigid vehicle's side and narrower than
+    ``start_min_width_m``, or as wide as a vehicle's end and shorter than ``start_min_length_m`` (an
+    oncoming tractor's cab face and its trailer's front above it stand 1-2 m apart)."""
+    end = END_FACE_WIDTH_M[0] <= rect.length_m <= END_FACE_WIDTH_M[1] and rect.width_m < params.start_min_length_m
+    side = params.rigid_min_length_m <= rect.length_m <= RIGID_MAX_LENGTH_M and rect.width_m < params.start_min_width_m
+    return end or side
+
+
+def _rigid_seen(rect: Rect, params: ArticulatedParams, top_seen: bool) -> tuple[bool, bool, bool]:
+    """Whether a rigid vehicle started from the footprint ``rect`` has its length, width and height
+    measured: one end face shows its width, one side its length (``_behind_face``); its top, if the
+    sensors' view reached above it."""
+    if not _one_face_sized(rect, params):
+        return True, True, top_seen
+    return not _end_face(rect), _end_face(rect), top_seen
+
+
+def _face_foot(cluster: np.ndarray, rect: Rect, ground_z_m: float) -> float:
+    """The height of a face's lower edge: the median over its ``FACE_BAND_M`` columns of their lowest
+    point (its body's floor; the wheels below show in a few columns only). The rays that pass
+    under a body on wheels cross no box of it."""
+    along = (cluster[:, :2] - rect.center_xy) @ np.array([np.cos(rect.yaw_rad), np.sin(rect.yaw_rad)])
+    columns = np.floor((along - along.min()) / FACE_BAND_M).astype(np.int64)
+    lowest = np.full(columns.max() + 1, np.inf)
+    np.minimum.at(lowest, columns, cluster[:, 2] - ground_z_m)
+    return max(float(np.median(lowest[np.isfinite(lowest)])), 0.0)
+
+
+def _end_face(rect: Rect) -> bool:
+    """A one-face footprint (``_one_face_sized``) that is a vehicle's end, not its side."""
+    return rect.length_m <= END_FACE_WIDTH_M[1]
+
+
+def _vehicle_face(cluster: np.ndarray, rect: Rect, ground_z_m: float) -> bool:
+    """Whether a one-face seed (``_one_face_sized``) stands upright from below ``FACE_MAX_FOOT_M``
+    (along ``FACE_FOOT_SHARE`` of its length, in columns ``FACE_BAND_M`` wide) up to at most a
+    vehicle's height, flat in every ``FACE_BAND_M`` of height above ``UNDER_BODY_TOP_M`` (the wheels'
+    and axles' band: a tractor's front wheels show under its bumper) that holds ``FACE_BAND_MIN_POINTS``
+    (``FACE_BAND_SHARE`` of the band's points within ``FACE_MAX_DEPTH_M`` of its middle: a tree's
+    crown is round), those bands holding ``FACE_BAND_SHARE`` of its points and filling
+    ``FACE_FILLED_HEIGHT`` of its height (a pole and a few low points beside it are no face)."""
+    z_rel = cluster[:, 2] - ground_z_m
+    if z_rel.max() > MAX_VEHICLE_HEIGHT_M:
+        return False
+    along = (cluster[:, :2] - rect.center_xy) @ np.array([np.cos(rect.yaw_rad), np.sin(rect.yaw_rad)])
+    columns = np.floor((along - along.min()) / FACE_BAND_M).astype(np.int64)
+    if np.unique(columns[z_rel <= FACE_MAX_FOOT_M]).size < FACE_FOOT_SHARE * (columns.max() + 1):
+        return False  # a board on posts
+    depth = (cluster[:, :2] - rect.center_xy) @ np.array([-np.sin(rect.yaw_rad), np.cos(rect.yaw_rad)])
+    band = np.floor(z_rel / FACE_BAND_M).astype(np.int64)
+    order = np.lexsort((depth, band))
+    band, depth = band[order], depth[order]
+    starts = np.flatnonzero(np.r_[True, np.diff(band) > 0])
+    counts = np.diff(np.r_[starts, len(band)])
+    middle = np.repeat(depth[starts + counts // 2], counts)  # each band's median
+    share_near = np.add.reduceat((np.abs(depth - middle) <= FACE_MAX_DEPTH_M).astype(np.int64), starts) / counts
+    body = (band[starts] + 1) * FACE_BAND_M > UNDER_BODY_TOP_M  # not the wheels' band
+    filled = body & (counts >= FACE_BAND_MIN_POINTS)
+    flat = filled & (share_near >= FACE_BAND_SHARE)
+    return bool(
+        np.array_equal(flat, filled)
+        and counts[flat].sum() >= FACE_BAND_SHARE * counts[body].sum()
+        and np.count_nonzero(flat) * FACE_BAND_M >= FACE_FILLED_HEIGHT * z_rel.max()
+    )
+
+
+def _supported(m: Measurement, model: VehicleModel, ground_z_m: float, top_seen: bool = True) -> bool:
     """Each unit's explained points span at least ``UNIT_SUPPORT`` of its length, reach
-    ``UNIT_SUPPORT`` of its height above its floor (a car's side on a trailer's faces is no truck)
+    ``UNIT_SUPPORT`` of its height above its floor (a car's side on a trailer's faces is no truck;
+    unless the sensors' view ends below: ``top_seen`` False)
     and are at least ``UNIT_SUPPORT`` of the unit's share of the side area (a parked trailer's
     landing gear is no tractor), and at most ``UNIT_SUPPORT`` of them lie below its floor (a row of
     kerbs and parked cars with a lamp post among them is no trailer)."""
@@ -1333,7 +1516,7 @@ def _supported(m: Measurement, model: VehicleModel, ground_z_m: float) -> bool:
             mine.sum() < 3
             or mine.sum() / explained < UNIT_SUPPORT * areas[u] / areas.sum()
             or np.ptp(q[mine, 0]) < UNIT_SUPPORT * box.length_m
-            or z_rel[mine].max() < box.floor_m + UNIT_SUPPORT * box.height_m
+            or (top_seen and z_rel[mine].max() < box.floor_m + UNIT_SUPPORT * box.height_m)
             or np.mean(z_rel[mine] < box.floor_m) > UNIT_SUPPORT
         ):
             return False

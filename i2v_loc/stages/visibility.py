@@ -8,13 +8,14 @@ over the frame's rays."""
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
 from i2v_loc.stages import kernels
 
 
-@dataclass
+@dataclass(eq=False)
 class Rays:
     """A frame's rays: each sweep's returns (yard frame) and its sensor's origin; ``to_level`` turns
     the yard frame into the frame the questions are asked in (the tracker's level frame)."""
@@ -40,3 +41,29 @@ class Rays:
             self.points, self.origins, self.bounds, rotation, box, float(beyond_m)
         )
         return int(through), int(ended), float(front)
+
+    def at_view_top(self, points: np.ndarray, tolerance_rad: float) -> bool:
+        """Whether any of ``points`` (level frame) lies within ``tolerance_rad`` of the elevation of
+        the highest return of some sweep, seen from its sensor: the top of that sensor's view, where
+        what is higher is not seen (a car's sensor whose beams reach 2 deg up sees a trailer's side
+        up to 2.1 m at 10 m)."""
+        yard = points @ np.asarray(self.to_level)  # a sensor's view is in its own frame, not the ground's
+        elevation = _elevations(yard, self.origins)  # (sweeps, points)
+        with np.errstate(invalid="ignore"):
+            return bool(np.any(elevation >= (self.top_elevations - tolerance_rad)[:, None]))
+
+    @cached_property
+    def top_elevations(self) -> np.ndarray:
+        """Per sweep, the elevation of its highest return from its sensor (NaN: no sensor known)."""
+        return np.array(
+            [
+                np.max(_elevations(self.points[a:b], origin[None]), initial=-np.inf)
+                for origin, a, b in zip(self.origins, self.bounds[:-1], self.bounds[1:])
+            ]
+        )
+
+
+def _elevations(points: np.ndarray, origins: np.ndarray) -> np.ndarray:
+    """(origins, points) elevation angles of ``points`` seen from each of ``origins``."""
+    d = points[None, :, :] - origins[:, None, :]
+    return np.arctan2(d[..., 2], np.hypot(d[..., 0], d[..., 1]))

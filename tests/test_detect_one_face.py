@@ -1,0 +1,93 @@
+"""``detect`` on one sweep of a car-mounted sensor (tests/car_mounted.py): a vehicle seen by one
+face only (a bus's side, a trailer's rear, an oncoming tractor's front; no roof) is one rigid
+vehicle behind that face; walls, trees and signs of the same size are none."""
+
+from __future__ import annotations
+
+import json
+
+import car_mounted as cm
+import numpy as np
+import pytest
+
+from i2v_loc.cli import main
+from i2v_loc.params import Params
+from i2v_loc.sim.meshes import box_center_in_axle_frame
+
+
+def _detect(tmp_path, capsys, parts, top_deg: float | None = None) -> list[dict]:
+    np.save(tmp_path / "sweep.npy", cm.sweep(parts, top_deg))
+    (tmp_path / "roof.yaml").write_text(cm.params_yaml())
+    args = ["detect", str(tmp_path / "sweep.npy"), "--params", str(tmp_path / "roof.yaml"), "--sensor", "roof"]
+    assert main(args) == 0
+    return json.loads(capsys.readouterr().out)["vehicles"]
+
+
+def _yaw_error_deg(yaw_deg: float, true_deg: float) -> float:
+    """Modulo 180 deg: one face does not show which end is the front."""
+    return abs((yaw_deg - true_deg + 90.0) % 180.0 - 90.0)
+
+
+def test_a_buss_side_seen_alone_is_one_rigid_vehicle_of_its_length(tmp_path, capsys):
+    (v,) = _detect(tmp_path, capsys, cm.bus(3.0, 8.0, 0.0))
+    assert v["kind"] == "rigid" and v["trailer"] is None
+    length, width, height = v["truck"]["dimensions"]
+    assert abs(length - 12.0) < 0.2
+    # the box stands on its body's lower edge, 0.3 m up (the rays under it cross no box)
+    assert abs(height - 2.9) < 0.1 and abs(v["truck"]["center"][2] - (0.3 + 2.9 / 2)) < 0.1
+    # its far side is not seen: the body is placed behind the near one, as wide as a coach
+    assert np.hypot(v["truck"]["center"][0] - 3.0, v["truck"]["center"][1] - 8.0) < 0.15
+    assert _yaw_error_deg(v["truck"]["yaw_deg"], 0.0) < 1.0
+    assert v["truck"]["dimensions_seen"] == [True, False, True]  # its width is a stand-in
+
+
+@pytest.mark.parametrize("x", [30.0, -22.0], ids=["rear_of_a_trailer_ahead", "front_of_an_oncoming_tractor"])
+def test_a_tractor_and_trailer_seen_end_on_is_one_rigid_vehicle_behind_its_end(tmp_path, capsys, x):
+    """Straight ahead, or coming straight at the car: its end face (and the trailer's front above
+    the cab) is all that shows. It is reported rigid (no hinge is seen), as wide as the end, inside
+    the vehicle's true extent, its axis along the road."""
+    parts = cm.articulated("man_tgx", x, 0.0, 0.0)
+    (v,) = _detect(tmp_path, capsys, parts)
+    assert v["kind"] == "rigid" and v["hitch_deg"] is None
+    vehicle = Params().vehicles["man_tgx"]
+    xs = np.concatenate([p.vertices[:, 0] for p in parts])
+    assert xs.min() + 1.0 < v["truck"]["center"][0] < xs.max() - 1.0
+    assert abs(v["truck"]["center"][1]) < 0.3
+    assert abs(v["truck"]["dimensions"][1] - max(vehicle.truck.width_m, vehicle.trailer.width_m)) < 0.15
+    assert _yaw_error_deg(v["truck"]["yaw_deg"], 0.0) < 2.0
+    assert v["truck"]["dimensions_seen"] == [False, True, True]  # its length is a stand-in
+
+
+def test_vehicles_whose_tops_the_sensor_does_not_see_are_found(tmp_path, capsys):
+    """Beams reaching 2 deg up (an HDL-64E's) see a truck's side 8-16 m away up to 2.0-2.3 m, below
+    the heights a start asks of a tractor-trailer or a face; the highest return of the sweep tells
+    where its view ends. A Volvo FH at 20 deg and a bus's side are found, the bus's height marked
+    as not seen."""
+    volvo, bus = Params().vehicles["volvo_fh"], cm.bus(3.0, -8.0, 0.0)
+    found = _detect(tmp_path, capsys, cm.articulated("volvo_fh", 8.0, 15.0, np.radians(20.0)) + bus, top_deg=2.0)
+    assert sorted(v["kind"] for v in found) == ["articulated", "rigid"]
+    (truck,) = [v for v in found if v["kind"] == "articulated"]
+    assert truck["vehicle"] == "volvo_fh" and abs(truck["hitch_deg"]) < 1.0
+    assert _yaw_error_deg(truck["truck"]["yaw_deg"], 20.0) < 1.0
+    yaw = np.radians(20.0)
+    cab = box_center_in_axle_frame(volvo.truck, is_truck=True)[:2]
+    cab_centre = np.array([8.0, 15.0]) + [cab[0] * np.cos(yaw) - cab[1] * np.sin(yaw), cab[0] * np.sin(yaw)]
+    assert np.hypot(*(np.array(truck["truck"]["center"][:2]) - cab_centre)) < 0.15
+    (rigid,) = [v for v in found if v["kind"] == "rigid"]
+    assert np.hypot(rigid["truck"]["center"][0] - 3.0, rigid["truck"]["center"][1] + 8.0) < 0.15
+    assert rigid["truck"]["dimensions_seen"] == [True, False, False]
+
+
+@pytest.mark.parametrize("top_deg", [None, 2.0], ids=["os1_64", "fan_to_2_deg"])
+def test_walls_trees_and_signs_of_a_vehicles_size_are_no_vehicles(tmp_path, capsys, top_deg):
+    """A 10 m wall 3 m tall and a 2.5 m wide one (both stand on the ground: no ray passes under
+    them), a round crown 2.6 m across on a trunk (not flat), a 2.5 m wide board on posts (its foot
+    2.2 m up): each passes the size and height of a one-face vehicle (with the fan to 2 deg, no
+    top is seen: any height passes)."""
+    parts = (
+        cm.wall(-5.0, -12.0, 5.0, -12.0, 3.0)
+        + cm.wall(14.0, 9.0, 14.0, 11.5, 3.5)
+        + cm.tree(-15.0, -6.0)
+        + cm.sign(-12.0, 7.0, 0.3)
+    )
+    assert _detect(tmp_path, capsys, parts, top_deg) == []
