@@ -41,6 +41,19 @@ def test_a_buss_side_seen_alone_is_one_rigid_vehicle_of_its_length(tmp_path, cap
     assert v["truck"]["dimensions_seen"] == [True, False, True]  # its width is a stand-in
 
 
+def test_a_rigid_truck_seen_from_a_side_and_an_end_is_fitted_on_its_own_axes(tmp_path, capsys):
+    """A 9 m body seen at a slant shows one side and one end: an L, whose hull's smallest rectangle
+    lies along the hypotenuse (15 deg off). Its box is fitted on the axes the points hug, and a
+    16.5 m MAN, whose faces the L also fits but whose points would not cover it, is not chosen."""
+    yaw = np.radians(-126.26)
+    (v,) = _detect(tmp_path, capsys, cm.bus(-6.93, 12.90, yaw, length_m=9.0, width_m=2.5))
+    assert v["kind"] == "rigid"
+    assert np.hypot(v["truck"]["center"][0] + 6.93, v["truck"]["center"][1] - 12.90) < 0.1
+    assert _yaw_error_deg(v["truck"]["yaw_deg"], np.degrees(yaw)) < 1.0
+    assert np.allclose(v["truck"]["dimensions"][:2], [9.0, 2.5], atol=0.1)
+    assert v["truck"]["dimensions_seen"] == [True, True, True]
+
+
 @pytest.mark.parametrize("x", [30.0, -22.0], ids=["rear_of_a_trailer_ahead", "front_of_an_oncoming_tractor"])
 def test_a_tractor_and_trailer_seen_end_on_is_one_rigid_vehicle_behind_its_end(tmp_path, capsys, x):
     """Straight ahead, or coming straight at the car: its end face (and the trailer's front above
@@ -83,11 +96,14 @@ def test_walls_trees_and_signs_of_a_vehicles_size_are_no_vehicles(tmp_path, caps
     """A 10 m wall 3 m tall and a 2.5 m wide one (both stand on the ground: no ray passes under
     them), a round crown 2.6 m across on a trunk (not flat), a 2.5 m wide board on posts (its foot
     2.2 m up): each passes the size and height of a one-face vehicle (with the fan to 2 deg, no
-    top is seen: any height passes)."""
+    top is seen: any height passes); and a 13.4 m wall with a 2.3 m one across it fits a rigid
+    vehicle's box, which stands on the ground."""
     parts = (
         cm.wall(-5.0, -12.0, 5.0, -12.0, 3.0)
         + cm.wall(14.0, 9.0, 14.0, 11.5, 3.5)
         + cm.tree(-15.0, -6.0)
         + cm.sign(-12.0, 7.0, 0.3)
+        + cm.wall(30.29, -16.94, 21.23, -6.99, 2.83)  # a wall and a short one across it: a box
+        + cm.wall(26.26, -11.67, 28.30, -10.60, 3.69)  # of a rigid vehicle's size
     )
     assert _detect(tmp_path, capsys, parts, top_deg) == []

@@ -37,7 +37,7 @@ from i2v_loc.stages.hinged_fit import (
     thin,
 )
 from i2v_loc.stages.kinematic_filter import FilterState, KinematicFilter
-from i2v_loc.stages.primitives import Rect, min_area_rect, voxel_keys
+from i2v_loc.stages.primitives import Rect, l_shape_yaw, min_area_rect, rect_along, voxel_keys
 from i2v_loc.stages.vehicle_model import Box, VehicleModel
 from i2v_loc.stages.visibility import Rays
 
@@ -69,10 +69,11 @@ FACE_FILLED_HEIGHT = 0.5  # bands of this share of its height hold a face (scatt
 FACE_MAX_FOOT_M = 1.5  # its points reach this low (a trailer's floor: 1.0-1.3 m; a sign hangs above 2 m)
 FACE_FOOT_SHARE = 0.5  # along this share of its length (a board's posts reach the ground)
 UNDER_BODY_TOP_M = 0.6  # a body on wheels has rays through its foot up to here, a wall or a hedge none
-UNDER_BODY_DEPTH_M = 1.0  # the foot looked under, behind the face (rays ending on the face never enter it)
-UNDER_BODY_INSET_M = 0.3  # (rays past a wall's end cross no foot)
+UNDER_BODY_INSET_M = 0.3  # (a face's end blurs by a column's spacing)
 UNDER_BODY_MIN_RAYS = 5
 VIEW_TOP_TOLERANCE_RAD = np.radians(0.5)  # about one beam's spacing
+L_SHAPE_MIN_TURN_RAD = np.radians(3.0)
+L_SHAPE_AREA_RATIO = 1.05
 KINGPIN_MIN_HITCH_RAD = np.radians(20.0)  # the kingpin's offset shows only at a hitch angle
 KINGPIN_SETTLED = 50  # observations of the kingpin's offset: learned
 REACH_MAX_HITCH_RAD = np.radians(5.0)  # nearly straight: the trailer's front reach ahead of the rear axle shows
@@ -876,7 +877,7 @@ class VehicleTracker:
         choices = self._articulated_choices(hypotheses)
         if may_be_rigid:
             two = self._two_units(hypotheses, cluster, seed, ground_z_m, top_seen)
-            choices = [two] if two is not None else self._choose(hypotheses, seed)
+            choices = [two] if two is not None else self._choose(hypotheses, seed, ground_z_m, top_seen)
         for model, m in choices:
             seed.rigid = not model.articulated
             fit_moved = self._fit_moved(seed, m)  # its first rigid fit is remembered
@@ -889,6 +890,7 @@ class VehicleTracker:
                 # without rays a hole and a gap look alike: the points alone decide
                 and (self._rays is None or self._hinge_shown(seed, m, model, ground_z_m))
                 and not self._seen_through(m, model, ground_z_m)
+                and self._box_raised(cluster, m, model, ground_z_m)
             ):
                 return model, m
         return None
@@ -905,10 +907,10 @@ class VehicleTracker:
             _vehicle_face(cluster, rect, ground_z_m) and self._tall_enough(cluster, ground_z_m, top_seen)
         ):
             return None
-        face, away = self._face_line(cluster, rect)
-        if not self._raised(rect, face, away, ground_z_m):
+        face, along, away = self._face_line(cluster, rect)
+        if not self._raised(cluster, face, along, rect.length_m / 2, ground_z_m):
             return None
-        model, prior = self._behind_face(cluster, rect, face, away, seed, ground_z_m)
+        model, prior = self._behind_face(cluster, rect, face, along, away, seed, ground_z_m)
         m = fit(thin(cluster, self.params.fit_max_points), prior, self.params, START_ITERATIONS, START_SCALE_M)
         if m is None:
             return None
@@ -919,38 +921,89 @@ class VehicleTracker:
             return None
         return model, m
 
-    def _face_line(self, cluster: np.ndarray, rect: Rect) -> tuple[np.ndarray, np.ndarray]:
-        """A point on a one-face seed's nearest face (its footprint's long side's direction) and the
-        direction across it away from the nearest sensor."""
+    def _box_raised(self, cluster: np.ndarray, m: Measurement, model: VehicleModel, ground_z_m: float) -> bool:
+        """Whether a rigid fit's box stands on wheels: rays pass under one of its faces that face the
+        nearest sensor (``_raised``, on the points within ``FACE_MAX_DEPTH_M`` of it). One sweep of
+        a shed's or a garden wall's corner is a box of a van's size too. Articulated fits, and any
+        without rays: not asked."""
+        if model.articulated or self._rays is None:
+            return True
+        box = model.tractor
+        (centre, _) = model.box_centers(m.x_m, m.y_m, m.yaw_rad)
+        origins = (self._rays.origins @ self._rays.to_level.T)[:, :2]
+        sensor = origins[np.argmin(np.hypot(*(origins - centre).T))]
+        for turn, depth, half_length in (
+            (0.0, box.length_m / 2, box.width_m / 2),
+            (np.pi, box.length_m / 2, box.width_m / 2),
+            (np.pi / 2, box.width_m / 2, box.length_m / 2),
+            (-np.pi / 2, box.width_m / 2, box.length_m / 2),
+        ):
+            normal = np.array([np.cos(m.yaw_rad + turn), np.sin(m.yaw_rad + turn)])
+            face = centre + normal * depth
+            on_face = np.abs((cluster[:, :2] - face) @ normal) <= FACE_MAX_DEPTH_M
+            if (sensor - face) @ normal <= 0 or np.count_nonzero(on_face) < FACE_BAND_MIN_POINTS:
+                continue
+            along = np.array([-normal[1], normal[0]])
+            if self._raised(cluster[on_face], face, along, half_length, ground_z_m):
+                return True
+        return False
+
+    def _face_line(self, cluster: np.ndarray, rect: Rect) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """A one-face seed's nearest face: a point on it, its direction and the direction across it
+        away from the nearest sensor. The line fitted (least squares) through each ``FACE_BAND_M``
+        column's nearest point: a footprint's side is off by a degree or two, and 0.3 m at a
+        wall's end put the wall's own returns behind the line."""
         origins = (self._rays.origins @ self._rays.to_level.T)[:, :2]
         sensor = origins[np.argmin(np.hypot(*(origins - rect.center_xy).T))]
-        away = np.array([-np.sin(rect.yaw_rad), np.cos(rect.yaw_rad)])
+        along = np.array([np.cos(rect.yaw_rad), np.sin(rect.yaw_rad)])
+        away = np.array([-along[1], along[0]])
         away = away if (rect.center_xy - sensor) @ away >= 0 else -away
-        depth = float(np.percentile((cluster[:, :2] - rect.center_xy) @ away, 10))
-        return rect.center_xy + away * depth, away
+        u, v = ((cluster[:, :2] - rect.center_xy) @ np.column_stack([along, away])).T
+        columns = np.floor((u - u.min()) / FACE_BAND_M).astype(np.int64)
+        nearest = np.full(columns.max() + 1, np.inf)
+        np.minimum.at(nearest, columns, v)
+        filled = np.isfinite(nearest)
+        middles = u.min() + (np.flatnonzero(filled) + 0.5) * FACE_BAND_M
+        slope, offset = np.polyfit(middles, nearest[filled], 1) if filled.sum() >= 2 else (0.0, nearest[filled][0])
+        direction = (along + slope * away) / np.hypot(1.0, slope)
+        normal = np.array([-direction[1], direction[0]])
+        return rect.center_xy + away * offset, direction, normal if normal @ away >= 0 else -normal
 
-    def _raised(self, rect: Rect, face: np.ndarray, away: np.ndarray, ground_z_m: float) -> bool:
-        """At least ``UNDER_BODY_MIN_RAYS`` rays crossed the foot of the body behind its face (from
-        ``FACE_MAX_DEPTH_M`` to ``UNDER_BODY_DEPTH_M`` behind it, up to ``UNDER_BODY_TOP_M`` above the
-        ground, ``UNDER_BODY_INSET_M`` inside its ends) and ended beyond: a body on wheels, not a
-        wall or a hedge. The foot reaches below the ground: a ray that leaves it through its bottom
-        ends in it, on the ground."""
-        middle = face + away * (FACE_MAX_DEPTH_M + UNDER_BODY_DEPTH_M) / 2
-        crossed, _, _ = self._rays.through(
-            tuple(middle), rect.yaw_rad, rect.length_m / 2 - UNDER_BODY_INSET_M,
-            (UNDER_BODY_DEPTH_M - FACE_MAX_DEPTH_M) / 2, (ground_z_m - UNDER_BODY_TOP_M, ground_z_m + UNDER_BODY_TOP_M),
-            GAP_SEEN_BEYOND_M,
-        )  # fmt: skip
-        return crossed >= UNDER_BODY_MIN_RAYS
+    def _raised(
+        self, points: np.ndarray, face: np.ndarray, along: np.ndarray, half_length_m: float, ground_z_m: float
+    ) -> bool:
+        """At least ``UNDER_BODY_MIN_RAYS`` rays passed under a face (its ``points``, its line through
+        ``face`` along ``along``): crossed the line below ``UNDER_BODY_TOP_M`` above the ground and
+        below the face's lowest point in that ``FACE_BAND_M`` column (``UNDER_BODY_INSET_M`` inside
+        ``half_length_m``), and ended ``GAP_SEEN_BEYOND_M`` or more behind it. A body on wheels lets
+        them pass; a wall, a hedge or a shed reaches the ground in every column (a ray passing a
+        wall's end, seen at a slant, crosses its line before the end)."""
+        hits = self._rays.crossings(
+            face, along, half_length_m - UNDER_BODY_INSET_M, ground_z_m + UNDER_BODY_TOP_M, GAP_SEEN_BEYOND_M
+        )
+        lowest, first = _column_lowest(points, face, along, ground_z_m)
+        columns = np.floor((hits[:, 0] - first) / FACE_BAND_M).astype(np.int64)
+        inside = (columns >= 0) & (columns < len(lowest))
+        below = hits[inside, 1] - ground_z_m < lowest[columns[inside]]
+        return int(np.count_nonzero(below)) >= UNDER_BODY_MIN_RAYS
 
     def _behind_face(
-        self, cluster: np.ndarray, rect: Rect, face: np.ndarray, away: np.ndarray, seed: Seed, ground_z_m: float
+        self,
+        cluster: np.ndarray,
+        rect: Rect,
+        face: np.ndarray,
+        along: np.ndarray,
+        away: np.ndarray,
+        seed: Seed,
+        ground_z_m: float,
     ) -> tuple[VehicleModel, Prior]:
         """The rigid model of a one-face seed and its placement behind the face (``_face_line``),
         along its travel if it moved (else facing the sensor from its end; along the face's line
         from its side)."""
-        along = np.array([np.cos(rect.yaw_rad), np.sin(rect.yaw_rad)])
-        floor = _face_foot(cluster, rect, ground_z_m)
+        floor = _face_foot(cluster, face, along, ground_z_m)
+        face = face + along * float(
+            np.ptp((cluster[:, :2] - face) @ along) / 2 + ((cluster[:, :2] - face) @ along).min()
+        )
         height = float(cluster[:, 2].max() - ground_z_m) - floor
         if _end_face(rect):
             model = VehicleModel.rigid("rigid", self.params.rigid_min_length_m, rect.length_m, height, floor)
@@ -1130,44 +1183,67 @@ class VehicleTracker:
         self, cluster: np.ndarray, rect: Rect, ground_z_m: float, may_be_rigid: bool, top_seen: bool
     ) -> list[tuple[VehicleModel, float, Measurement]]:
         """(model, direction sign, fit) of every catalogue vehicle in both directions (best start hitch
-        each) and, if ``may_be_rigid``, of one rigid box of the cluster's measured size. All are
-        fitted to the same thinned points (their costs are compared)."""
+        each) and, if ``may_be_rigid``, of one rigid box of the cluster's measured size, placed on
+        its footprint and on the footprint its points hug when that differs (``_l_shaped``). All
+        are fitted to the same thinned points (their costs are compared)."""
         sample = thin(cluster, self.params.fit_max_points)
         out = []
-        for model in self.catalogue.values():
-            starts = [(model, h) for h in START_HITCHES_DEG]
-            longer = _as_long_as(model, rect.length_m)
-            if longer is not model:  # a longer trailer centred would put the cab on its front
-                starts.append((longer, 0.0))
-            for sign in (1.0, -1.0):
-                coarse = [
-                    fit(
-                        sample,
-                        _placed(placed_model, rect, sign, np.radians(h), ground_z_m),
-                        self.params,
-                        COARSE_ITERATIONS,
-                        START_SCALE_M,
-                    )
-                    for placed_model, h in starts
-                ]
-                coarse = [m for m in coarse if m is not None]
-                if coarse:  # the best start hitch, refined, the trailer's length fitted too
-                    m = min(coarse, key=lambda m: m.cost)
-                    m = fit(sample, _sized_start(m, model, ground_z_m), self.params, START_ITERATIONS, START_SCALE_M)
-                    if not _supported(m, _with_trailer_length(model, m.trailer_length_m), ground_z_m, top_seen):
-                        # once more on a sample that keeps its tractor's points (thin_by_unit): the
-                        # even sample of a reversing MAN whose cab hid behind its trailer kept 3 of
-                        # its 60 cab points, and the fit at the right hitch was not supported for
-                        # 80 frames
-                        again = fit(
-                            cluster, _sized_start(m, model, ground_z_m), self.params, START_ITERATIONS, START_SCALE_M
-                        )
-                        m = m if again is None else again
-                    out.append((_with_trailer_length(model, m.trailer_length_m), sign, m))
-        height = float(cluster[:, 2].max() - ground_z_m)
-        if not (may_be_rigid and RIGID_MIN_WIDTH_M <= rect.width_m and height <= MAX_VEHICLE_HEIGHT_M):
-            return out  # a wall, a hedge or a building is no rigid vehicle, nor anything longer than a coach
-        rigid = VehicleModel.rigid("rigid", rect.length_m, rect.width_m, height)
+        for footprint in [rect, *_l_shaped(cluster, rect)]:
+            for model in self.catalogue.values():
+                out += self._catalogue_fits(sample, cluster, footprint, model, ground_z_m, top_seen)
+            height = float(cluster[:, 2].max() - ground_z_m)
+            # a wall, a hedge or a building is no rigid vehicle, nor anything longer than a coach
+            if may_be_rigid and RIGID_MIN_WIDTH_M <= footprint.width_m and height <= MAX_VEHICLE_HEIGHT_M:
+                out += self._rigid_fits(sample, footprint, height, ground_z_m)
+        return out
+
+    def _catalogue_fits(
+        self,
+        sample: np.ndarray,
+        cluster: np.ndarray,
+        rect: Rect,
+        model: VehicleModel,
+        ground_z_m: float,
+        top_seen: bool,
+    ) -> list[tuple[VehicleModel, float, Measurement]]:
+        """``model`` placed on the footprint ``rect`` in both directions: per direction the best of the
+        start hitches, refined with the trailer's length fitted too."""
+        starts = [(model, h) for h in START_HITCHES_DEG]
+        longer = _as_long_as(model, rect.length_m)
+        if longer is not model:  # a longer trailer centred would put the cab on its front
+            starts.append((longer, 0.0))
+        out = []
+        for sign in (1.0, -1.0):
+            coarse = [
+                fit(
+                    sample,
+                    _placed(placed, rect, sign, np.radians(h), ground_z_m),
+                    self.params,
+                    COARSE_ITERATIONS,
+                    START_SCALE_M,
+                )
+                for placed, h in starts
+            ]
+            coarse = [m for m in coarse if m is not None]
+            if not coarse:
+                continue
+            m = min(coarse, key=lambda m: m.cost)
+            m = fit(sample, _sized_start(m, model, ground_z_m), self.params, START_ITERATIONS, START_SCALE_M)
+            if not _supported(m, _with_trailer_length(model, m.trailer_length_m), ground_z_m, top_seen):
+                # once more on a sample that keeps its tractor's points (thin_by_unit): the even sample
+                # of a reversing MAN whose cab hid behind its trailer kept 3 of its 60 cab points, and
+                # the fit at the right hitch was not supported for 80 frames
+                again = fit(cluster, _sized_start(m, model, ground_z_m), self.params, START_ITERATIONS, START_SCALE_M)
+                m = m if again is None else again
+            out.append((_with_trailer_length(model, m.trailer_length_m), sign, m))
+        return out
+
+    def _rigid_fits(
+        self, sample: np.ndarray, rect: Rect, height_m: float, ground_z_m: float
+    ) -> list[tuple[VehicleModel, float, Measurement]]:
+        """One rigid box of the footprint's size, in both directions."""
+        rigid = VehicleModel.rigid("rigid", rect.length_m, rect.width_m, height_m)
+        out = []
         for sign in (1.0, -1.0):
             yaw = rect.yaw_rad + (0.0 if sign > 0 else np.pi)
             m = fit(
@@ -1181,13 +1257,22 @@ class VehicleTracker:
                 out.append((rigid, sign, m))
         return out
 
-    def _choose(self, hypotheses, seed: Seed) -> list[tuple[VehicleModel, Measurement]]:
+    def _choose(
+        self, hypotheses, seed: Seed, ground_z_m: float, top_seen: bool
+    ) -> list[tuple[VehicleModel, Measurement]]:
         """The best-explaining model, in the order its two directions are to be checked: the cheaper
         fit alone, or, when both cost alike, the direction of travel first and then the other (the
         start's checks decide then: a Volvo beside a dock's wall, its cheaper direction's gap
-        filled by the wall, waited 44 frames for its other direction to come out cheaper)."""
+        filled by the wall, waited 44 frames for its other direction to come out cheaper). Where a
+        rigid box explains the points (``start_min_explained``), an articulated fit they do not
+        support (``_supported``) is no contender: the side and end of a 9 m bus lie on the faces of
+        a 16.5 m MAN as well as on its own box's. (Where none does, the cheapest fit decides, as
+        before: a round crown beside a short wall, its cheapest fit unsupported, had started as the
+        next catalogue vehicle.)"""
         articulated = [h for h in hypotheses if h[0].articulated]
         rigid = [h for h in hypotheses if not h[0].articulated]
+        if any(np.mean(h[2].unit >= 0) >= self.params.start_min_explained for h in rigid):
+            articulated = [h for h in articulated if _supported(h[2], h[0], ground_z_m, top_seen)]
         best_art = min(articulated, key=lambda h: h[2].cost, default=None)
         best_rigid = min(rigid, key=lambda h: h[2].cost, default=None)
         if best_art is not None and (best_rigid is None or best_art[2].cost < RIGID_COST_RATIO * best_rigid[2].cost):
@@ -1432,6 +1517,21 @@ def _shift_along_m(before: VehicleModel, after: VehicleModel) -> float:
     return max(shifts)
 
 
+def _l_shaped(cluster: np.ndarray, rect: Rect) -> list[Rect]:
+    """The footprint along the axis the points hug (``l_shape_yaw``) if it is another one about as
+    small (within ``L_SHAPE_AREA_RATIO``): seen from one side and one end and no roof (a sensor on a
+    car), the hull is a right triangle, and the smallest rectangle may lie along its hypotenuse
+    (a 9 m bus seen so: 15 deg off, its fit stuck 20 deg off)."""
+    yaw = l_shape_yaw(cluster[:, :2])
+    off = abs((yaw - rect.yaw_rad + np.pi / 4) % (np.pi / 2) - np.pi / 4)
+    if off < L_SHAPE_MIN_TURN_RAD:
+        return []
+    along = rect_along(cluster[:, :2], yaw)
+    if along.width_m > along.length_m:
+        along = rect_along(cluster[:, :2], yaw + np.pi / 2)
+    return [along] if along.area_m2 <= L_SHAPE_AREA_RATIO * rect.area_m2 else []
+
+
 def _one_face_sized(rect: Rect, params: ArticulatedParams) -> bool:
     """A footprint of one face: as long as a rigid vehicle's side and narrower than
     ``start_min_width_m``, or as wide as a vehicle's end and shorter than ``start_min_length_m`` (an
@@ -1450,14 +1550,25 @@ def _rigid_seen(rect: Rect, params: ArticulatedParams, top_seen: bool) -> tuple[
     return not _end_face(rect), _end_face(rect), top_seen
 
 
-def _face_foot(cluster: np.ndarray, rect: Rect, ground_z_m: float) -> float:
-    """The height of a face's lower edge: the median over its ``FACE_BAND_M`` columns of their lowest
-    point (its body's floor; the wheels below show in a few columns only). The rays that pass
-    under a body on wheels cross no box of it."""
-    along = (cluster[:, :2] - rect.center_xy) @ np.array([np.cos(rect.yaw_rad), np.sin(rect.yaw_rad)])
-    columns = np.floor((along - along.min()) / FACE_BAND_M).astype(np.int64)
+def _column_lowest(
+    cluster: np.ndarray, point_xy: np.ndarray, direction_xy: np.ndarray, ground_z_m: float
+) -> tuple[np.ndarray, float]:
+    """The lowest point above the ground in each ``FACE_BAND_M`` column along a face's line (through
+    ``point_xy`` along ``direction_xy``; inf: none), and where along it (from the point) the first
+    column starts."""
+    along = (cluster[:, :2] - point_xy) @ direction_xy
+    first = float(along.min())
+    columns = np.floor((along - first) / FACE_BAND_M).astype(np.int64)
     lowest = np.full(columns.max() + 1, np.inf)
     np.minimum.at(lowest, columns, cluster[:, 2] - ground_z_m)
+    return lowest, first
+
+
+def _face_foot(cluster: np.ndarray, point_xy: np.ndarray, direction_xy: np.ndarray, ground_z_m: float) -> float:
+    """The height of a face's lower edge: the median over its columns of their lowest point
+    (``_column_lowest``: its body's floor; the wheels below show in a few columns only). The rays
+    that pass under a body on wheels cross no box of it."""
+    lowest, _ = _column_lowest(cluster, point_xy, direction_xy, ground_z_m)
     return max(float(np.median(lowest[np.isfinite(lowest)])), 0.0)
 
 

@@ -42,6 +42,31 @@ class Rays:
         )
         return int(through), int(ended), float(front)
 
+    def crossings(
+        self, point_xy: np.ndarray, direction_xy: np.ndarray, half_length_m: float, top_z_m: float, beyond_m: float
+    ) -> np.ndarray:
+        """Where rays cross the upright plane through ``point_xy`` along ``direction_xy`` (level
+        frame) within ``half_length_m`` of the point and below ``top_z_m``, having come from their
+        sensor's side and ending ``beyond_m`` or more behind it: (n, 2) along the line from the
+        point, and height."""
+        normal = np.array([-direction_xy[1], direction_xy[0]])
+        start, end = self._level_segments
+        before, after = (start[:, :2] - point_xy) @ normal, (end[:, :2] - point_xy) @ normal
+        with np.errstate(invalid="ignore", divide="ignore"):
+            crosses = (np.sign(before) * np.sign(after) < 0) & (np.abs(after) >= beyond_m)
+            t = before[crosses] / (before[crosses] - after[crosses])
+        at = start[crosses] + t[:, None] * (end[crosses] - start[crosses])
+        along = (at[:, :2] - point_xy) @ np.asarray(direction_xy)
+        keep = (np.abs(along) <= half_length_m) & (at[:, 2] <= top_z_m)
+        return np.column_stack([along[keep], at[keep, 2]])
+
+    @cached_property
+    def _level_segments(self) -> tuple[np.ndarray, np.ndarray]:
+        """Each ray's origin and return, level frame (origins NaN where the sensor is not known)."""
+        to_level = np.asarray(self.to_level)
+        origins = np.repeat(self.origins @ to_level.T, np.diff(self.bounds), axis=0)
+        return origins, self.points @ to_level.T
+
     def at_view_top(self, points: np.ndarray, tolerance_rad: float) -> bool:
         """Whether any of ``points`` (level frame) lies within ``tolerance_rad`` of the elevation of
         the highest return of some sweep, seen from its sensor: the top of that sensor's view, where
