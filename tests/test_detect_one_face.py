@@ -107,3 +107,10 @@ def test_walls_trees_and_signs_of_a_vehicles_size_are_no_vehicles(tmp_path, caps
         + cm.wall(26.26, -11.67, 28.30, -10.60, 3.69)  # of a rigid vehicle's size
     )
     assert _detect(tmp_path, capsys, parts, top_deg) == []
+
+
+def test_a_board_beside_a_wall_is_no_vehicle(tmp_path, capsys):
+    """A 7.4 m wall and a board on posts at its end form one face of a coach's length; rays pass
+    under the board, in 4 of the face's 29 columns: a body's clearance runs along it, a board's does not."""
+    parts = cm.wall(1.41, -13.85, 5.47, -7.68, 2.81) + cm.sign(1.23, -13.62, 2.695)
+    assert _detect(tmp_path, capsys, parts) == []

@@ -71,6 +71,7 @@ FACE_FOOT_SHARE = 0.5  # along this share of its length (a board's posts reach t
 UNDER_BODY_TOP_M = 0.6  # a body on wheels has rays through its foot up to here, a wall or a hedge none
 UNDER_BODY_INSET_M = 0.3  # (a face's end blurs by a column's spacing)
 UNDER_BODY_MIN_RAYS = 5
+UNDER_BODY_SHARE = 0.5  # of a face's columns: a body's clearance runs along it (a board beside a wall: 4 of 29)
 VIEW_TOP_TOLERANCE_RAD = np.radians(0.5)  # about one beam's spacing
 L_SHAPE_MIN_TURN_RAD = np.radians(3.0)
 L_SHAPE_AREA_RATIO = 1.05
@@ -890,7 +891,7 @@ class VehicleTracker:
                 # without rays a hole and a gap look alike: the points alone decide
                 and (self._rays is None or self._hinge_shown(seed, m, model, ground_z_m))
                 and not self._seen_through(m, model, ground_z_m)
-                and self._box_raised(cluster, m, model, ground_z_m)
+                and self._stands_on_wheels(cluster, m, model, ground_z_m, top_seen)
             ):
                 return model, m
         return None
@@ -921,32 +922,52 @@ class VehicleTracker:
             return None
         return model, m
 
-    def _box_raised(self, cluster: np.ndarray, m: Measurement, model: VehicleModel, ground_z_m: float) -> bool:
-        """Whether a rigid fit's box stands on wheels: rays pass under one of its faces that face the
-        nearest sensor (``_raised``, on the points within ``FACE_MAX_DEPTH_M`` of it). One sweep of
-        a shed's or a garden wall's corner is a box of a van's size too. Articulated fits, and any
-        without rays: not asked."""
-        if model.articulated or self._rays is None:
+    def _stands_on_wheels(
+        self, cluster: np.ndarray, m: Measurement, model: VehicleModel, ground_z_m: float, top_seen: bool
+    ) -> bool:
+        """Whether a start's fit stands on wheels where that is asked (``_unit_raised``): a rigid box
+        always (one sweep of a 13 m wall with a short one across it is a box of a coach's size; in
+        a yard a rigid start also needs its seed to have moved), an articulated one's trailer when
+        the sensors' view ends below its top (the heights that tell a trailer from a wall are not
+        seen then: a round crown beside a wall, seen with beams reaching 2 deg up, had started as a
+        Volvo). Never without rays."""
+        if self._rays is None:
             return True
-        box = model.tractor
-        (centre, _) = model.box_centers(m.x_m, m.y_m, m.yaw_rad)
+        if not model.articulated:
+            return self._unit_raised(cluster, m, model, 0, ground_z_m)
+        return top_seen or self._unit_raised(cluster, m, model, 1, ground_z_m)
+
+    def _unit_raised(
+        self, cluster: np.ndarray, m: Measurement, model: VehicleModel, unit: int, ground_z_m: float
+    ) -> bool:
+        """Whether rays pass under one of the unit's faces that face the nearest sensor (``_raised``,
+        on the points within ``FACE_MAX_DEPTH_M`` of it, spanning ``UNIT_SUPPORT`` of its length);
+        True if none of them shows."""
+        box = model.boxes[unit]
+        centre = model.box_centers(m.x_m, m.y_m, m.yaw_rad, m.hitch_rad or 0.0)[unit]
+        yaw = m.yaw_rad + (m.hitch_rad or 0.0) * unit
         origins = (self._rays.origins @ self._rays.to_level.T)[:, :2]
         sensor = origins[np.argmin(np.hypot(*(origins - centre).T))]
+        shown = False
         for turn, depth, half_length in (
             (0.0, box.length_m / 2, box.width_m / 2),
             (np.pi, box.length_m / 2, box.width_m / 2),
             (np.pi / 2, box.width_m / 2, box.length_m / 2),
             (-np.pi / 2, box.width_m / 2, box.length_m / 2),
         ):
-            normal = np.array([np.cos(m.yaw_rad + turn), np.sin(m.yaw_rad + turn)])
+            normal = np.array([np.cos(yaw + turn), np.sin(yaw + turn)])
             face = centre + normal * depth
-            on_face = np.abs((cluster[:, :2] - face) @ normal) <= FACE_MAX_DEPTH_M
+            along = np.array([-normal[1], normal[0]])
+            local = (cluster[:, :2] - face) @ np.column_stack([normal, along])
+            on_face = (np.abs(local[:, 0]) <= FACE_MAX_DEPTH_M) & (np.abs(local[:, 1]) <= half_length)
             if (sensor - face) @ normal <= 0 or np.count_nonzero(on_face) < FACE_BAND_MIN_POINTS:
                 continue
-            along = np.array([-normal[1], normal[0]])
+            if np.ptp(local[on_face, 1]) < UNIT_SUPPORT * 2 * half_length:
+                continue  # a few columns of something else across its line are no face of it
+            shown = True
             if self._raised(cluster[on_face], face, along, half_length, ground_z_m):
                 return True
-        return False
+        return not shown
 
     def _face_line(self, cluster: np.ndarray, rect: Rect) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """A one-face seed's nearest face: a point on it, its direction and the direction across it
@@ -975,8 +996,8 @@ class VehicleTracker:
         """At least ``UNDER_BODY_MIN_RAYS`` rays passed under a face (its ``points``, its line through
         ``face`` along ``along``): crossed the line below ``UNDER_BODY_TOP_M`` above the ground and
         below the face's lowest point in that ``FACE_BAND_M`` column (``UNDER_BODY_INSET_M`` inside
-        ``half_length_m``), and ended ``GAP_SEEN_BEYOND_M`` or more behind it. A body on wheels lets
-        them pass; a wall, a hedge or a shed reaches the ground in every column (a ray passing a
+        ``half_length_m``), and ended ``GAP_SEEN_BEYOND_M`` or more behind it, in ``UNDER_BODY_SHARE``
+        of its columns. A body on wheels lets them pass along its length; a wall, a hedge or a shed reaches the ground in every column (a ray passing a
         wall's end, seen at a slant, crosses its line before the end)."""
         hits = self._rays.crossings(
             face, along, half_length_m - UNDER_BODY_INSET_M, ground_z_m + UNDER_BODY_TOP_M, GAP_SEEN_BEYOND_M
@@ -984,8 +1005,10 @@ class VehicleTracker:
         lowest, first = _column_lowest(points, face, along, ground_z_m)
         columns = np.floor((hits[:, 0] - first) / FACE_BAND_M).astype(np.int64)
         inside = (columns >= 0) & (columns < len(lowest))
-        below = hits[inside, 1] - ground_z_m < lowest[columns[inside]]
-        return int(np.count_nonzero(below)) >= UNDER_BODY_MIN_RAYS
+        inside[inside] = np.isfinite(lowest[columns[inside]])  # under the face: where it shows
+        columns = columns[inside][hits[inside, 1] - ground_z_m < lowest[columns[inside]]]
+        spread = np.unique(columns).size >= UNDER_BODY_SHARE * np.count_nonzero(np.isfinite(lowest))
+        return len(columns) >= UNDER_BODY_MIN_RAYS and spread
 
     def _behind_face(
         self,
