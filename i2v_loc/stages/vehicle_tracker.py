@@ -928,14 +928,16 @@ class VehicleTracker:
         """Whether a start's fit stands on wheels where that is asked (``_unit_raised``): a rigid box
         always (one sweep of a 13 m wall with a short one across it is a box of a coach's size; in
         a yard a rigid start also needs its seed to have moved), an articulated one's trailer when
-        the sensors' view ends below its top (the heights that tell a trailer from a wall are not
-        seen then: a round crown beside a wall, seen with beams reaching 2 deg up, had started as a
-        Volvo). Never without rays."""
+        the sensors' view ends below its top and its points do not reach the heights ``_supported``
+        asks anyway (the heights that tell a trailer from a wall are not seen then: a round crown
+        beside a wall, seen with beams reaching 2 deg up, had started as a Volvo). Never without
+        rays."""
         if self._rays is None:
             return True
         if not model.articulated:
             return self._unit_raised(cluster, m, model, 0, ground_z_m)
-        return top_seen or self._unit_raised(cluster, m, model, 1, ground_z_m)
+        heights_shown = top_seen or _supported(m, model, ground_z_m)
+        return heights_shown or self._unit_raised(cluster, m, model, 1, ground_z_m)
 
     def _unit_raised(
         self, cluster: np.ndarray, m: Measurement, model: VehicleModel, unit: int, ground_z_m: float
