@@ -71,6 +71,9 @@ FACE_FOOT_SHARE = 0.5  # along this share of its length (a board's posts reach t
 UNDER_BODY_TOP_M = 0.6  # a body on wheels has rays through its foot up to here, a wall or a hedge none
 UNDER_BODY_INSET_M = 0.3  # (a face's end blurs by a column's spacing)
 UNDER_BODY_MIN_RAYS = 5
+ROOF_BAND_M = 0.4  # a rigid box's roof: its points this close to its top
+ROOF_CELL_M = 0.5
+ROOF_SHOWN_SHARE = 0.25  # of its cells (a van half hidden, from a pole 7.5 m up: 0.28; walls seen from below: 0.05)
 UNDER_BODY_SHARE = 0.5  # of a face's columns: a body's clearance runs along it (a board beside a wall: 4 of 29)
 VIEW_TOP_TOLERANCE_RAD = np.radians(0.5)  # about one beam's spacing
 L_SHAPE_MIN_TURN_RAD = np.radians(3.0)
@@ -926,8 +929,9 @@ class VehicleTracker:
         self, cluster: np.ndarray, m: Measurement, model: VehicleModel, ground_z_m: float, top_seen: bool
     ) -> bool:
         """Whether a start's fit stands on wheels where that is asked (``_unit_raised``): a rigid box
-        always (one sweep of a 13 m wall with a short one across it is a box of a coach's size; in
-        a yard a rigid start also needs its seed to have moved), an articulated one's trailer when
+        unless its roof shows (``_roof_shown``: one sweep of a 13 m wall with a short one across it
+        is a box of a coach's size, its top two lines; from a pole 7.5 m up, rays pass under a van
+        in a few columns only; in a yard a rigid start also needs its seed to have moved), an articulated one's trailer when
         the sensors' view ends below its top and its points do not reach the heights ``_supported``
         asks anyway (the heights that tell a trailer from a wall are not seen then: a round crown
         beside a wall, seen with beams reaching 2 deg up, had started as a Volvo). Never without
@@ -935,7 +939,7 @@ class VehicleTracker:
         if self._rays is None:
             return True
         if not model.articulated:
-            return self._unit_raised(cluster, m, model, 0, ground_z_m)
+            return _roof_shown(cluster, m, model, ground_z_m) or self._unit_raised(cluster, m, model, 0, ground_z_m)
         heights_shown = top_seen or _supported(m, model, ground_z_m)
         return heights_shown or self._unit_raised(cluster, m, model, 1, ground_z_m)
 
@@ -1540,6 +1544,21 @@ def _shift_along_m(before: VehicleModel, after: VehicleModel) -> float:
         shifts.append(abs(after.kingpin_behind_axle_m - before.kingpin_behind_axle_m))
         shifts.append(abs(after.trailer.front_m - before.trailer.front_m))
     return max(shifts)
+
+
+def _roof_shown(cluster: np.ndarray, m: Measurement, model: VehicleModel, ground_z_m: float) -> bool:
+    """Whether a rigid fit's box has points within ``ROOF_BAND_M`` of its top in ``ROOF_SHOWN_SHARE``
+    of its ``ROOF_CELL_M`` cells: a body's roof, not the tops of walls across its footprint."""
+    box = model.tractor
+    (centre, _) = model.box_centers(m.x_m, m.y_m, m.yaw_rad)
+    local = (cluster[:, :2] - centre) @ np.array(
+        [[np.cos(m.yaw_rad), -np.sin(m.yaw_rad)], [np.sin(m.yaw_rad), np.cos(m.yaw_rad)]]
+    )
+    top = (cluster[:, 2] - ground_z_m >= box.top_m - ROOF_BAND_M) & (np.abs(local[:, 0]) <= box.length_m / 2)
+    top &= np.abs(local[:, 1]) <= box.width_m / 2
+    cells = np.floor((local[top] + [box.length_m / 2, box.width_m / 2]) / ROOF_CELL_M).astype(np.int64)
+    total = np.ceil(box.length_m / ROOF_CELL_M) * np.ceil(box.width_m / ROOF_CELL_M)
+    return len(np.unique(cells, axis=0)) >= ROOF_SHOWN_SHARE * total
 
 
 def _l_shaped(cluster: np.ndarray, rect: Rect) -> list[Rect]:
