@@ -939,6 +939,8 @@ class VehicleTracker:
         if self._rays is None:
             return True
         if not model.articulated:
+            if np.ptp(cluster[:, 2]) < UNIT_SUPPORT * model.tractor.height_m:
+                return False  # a plate of points at one height (a canopy, a gantry's deck) is no body
             return _roof_shown(cluster, m, model, ground_z_m) or self._unit_raised(cluster, m, model, 0, ground_z_m)
         heights_shown = top_seen or _supported(m, model, ground_z_m)
         return heights_shown or self._unit_raised(cluster, m, model, 1, ground_z_m)
