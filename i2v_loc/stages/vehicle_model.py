@@ -16,6 +16,9 @@ import numpy as np
 
 from i2v_loc.params import VehicleConfig
 
+MAX_VEHICLE_HEIGHT_M = 4.6  # 4.0 m in the EU, 4.3 m in the US, plus the roof's clutter and noise
+RIGID_MAX_LENGTH_M = 15.0  # the longest rigid vehicles: three-axle coaches (EU 15 m; rigid trucks 12 m)
+
 
 @dataclass(frozen=True)
 class Box:

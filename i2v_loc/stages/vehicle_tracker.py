@@ -24,6 +24,20 @@ from scipy.spatial import cKDTree
 from i2v_loc.geometry import rotate_xy
 from i2v_loc.params import ArticulatedParams, VehicleConfig
 from i2v_loc.stages import kernels
+from i2v_loc.stages.faces import (
+    END_FACE_WIDTH_M,
+    ONE_SIDE_WIDTH_M,
+    end_face,
+    face_foot,
+    face_line,
+    l_shaped,
+    one_face_sized,
+    passes_under,
+    rigid_seen,
+    roof_shown,
+    unit_raised,
+    vehicle_face,
+)
 from i2v_loc.stages.hinged_fit import (
     FRONT,
     LEFT,
@@ -37,8 +51,8 @@ from i2v_loc.stages.hinged_fit import (
     thin,
 )
 from i2v_loc.stages.kinematic_filter import FilterState, KinematicFilter
-from i2v_loc.stages.primitives import Rect, l_shape_yaw, min_area_rect, rect_along, voxel_keys
-from i2v_loc.stages.vehicle_model import Box, VehicleModel
+from i2v_loc.stages.primitives import Rect, min_area_rect, voxel_keys
+from i2v_loc.stages.vehicle_model import MAX_VEHICLE_HEIGHT_M, RIGID_MAX_LENGTH_M, Box, VehicleModel
 from i2v_loc.stages.visibility import Rays
 
 START_HITCHES_DEG = (-90.0, -60.0, -30.0, 0.0, 30.0, 60.0, 90.0)
@@ -54,30 +68,8 @@ REAR_FACE_MIN_POINTS = 3
 SIDE_MIN_POINTS = 5
 SIDE_MAX_SLOPE = np.tan(np.radians(5.0))  # a side's points run along its unit's axis (the fits' yaw: within 2 deg)
 LOW_SEED_SLACK_M = 0.5  # a seed shorter than a rigid vehicle and this much lower than every articulated one is none
-MAX_VEHICLE_HEIGHT_M = 4.6  # 4.0 m in the EU, 4.3 m in the US, plus the roof's clutter and noise
 TALL_COLUMN_MIN_POINTS = 2  # points above a vehicle's height that make a column a structure (not one noise point)
-RIGID_MAX_LENGTH_M = 15.0  # the longest rigid vehicles: three-axle coaches (EU 15 m; rigid trucks 12 m)
 RIGID_MIN_WIDTH_M = 1.6  # a rigid vehicle starts once its width is seen (an end face or both sides)
-# a vehicle's end seen alone: a van's to the widest catalogue trailer's (2.77 m), with noise
-END_FACE_WIDTH_M = (1.8, 3.0)
-ONE_SIDE_WIDTH_M = 2.5  # the width behind a side seen alone (coaches and trucks: 2.55 m)
-FACE_MAX_DEPTH_M = 0.25  # a face: most of its points this close to its line, in each band of height
-FACE_BAND_M = 0.3
-FACE_BAND_MIN_POINTS = 5
-FACE_BAND_SHARE = 0.8
-FACE_FILLED_HEIGHT = 0.5  # bands of this share of its height hold a face (scattered points are none)
-FACE_MAX_FOOT_M = 1.5  # its points reach this low (a trailer's floor: 1.0-1.3 m; a sign hangs above 2 m)
-FACE_FOOT_SHARE = 0.5  # along this share of its length (a board's posts reach the ground)
-UNDER_BODY_TOP_M = 0.6  # a body on wheels has rays through its foot up to here, a wall or a hedge none
-UNDER_BODY_INSET_M = 0.3  # (a face's end blurs by a column's spacing)
-UNDER_BODY_MIN_RAYS = 5
-ROOF_BAND_M = 0.4  # a rigid box's roof: its points this close to its top
-ROOF_CELL_M = 0.5
-ROOF_SHOWN_SHARE = 0.25  # of its cells (a van half hidden, from a pole 7.5 m up: 0.28; walls seen from below: 0.05)
-UNDER_BODY_SHARE = 0.5  # of a face's columns: a body's clearance runs along it (a board beside a wall: 4 of 29)
-VIEW_TOP_TOLERANCE_RAD = np.radians(0.5)  # about one beam's spacing
-L_SHAPE_MIN_TURN_RAD = np.radians(3.0)
-L_SHAPE_AREA_RATIO = 1.05
 KINGPIN_MIN_HITCH_RAD = np.radians(20.0)  # the kingpin's offset shows only at a hitch angle
 KINGPIN_SETTLED = 50  # observations of the kingpin's offset: learned
 REACH_MAX_HITCH_RAD = np.radians(5.0)  # nearly straight: the trailer's front reach ahead of the rear axle shows
@@ -116,6 +108,7 @@ END_BAND_M = 0.4
 MAX_BODY_GAP_M = 1.0
 WALL_BESIDE_M = (0.35, 0.8)  # a face with points this far out past a trailer's side is wider than it
 UNIT_SUPPORT = 0.5
+VIEW_TOP_TOLERANCE_RAD = np.radians(0.5)  # about one beam's spacing
 RECHECK_MIN_SPEED_M_S = 0.5  # a rigid track is fitted again as every model while it moves this fast
 RECHECK_FRAMES = 20  # a moving rigid track is fitted as every model every this many frames (the fits cost ~0.1 s)
 VACATED_M = 0.5  # a first point this far from all of a seed's points now: its place was left
@@ -827,7 +820,7 @@ class VehicleTracker:
             seen_wide = (
                 p.start_min_length_m <= rect.length_m <= p.start_max_length_m and rect.width_m >= p.start_min_width_m
             )
-            if seen_wide or _one_face_sized(rect, p):
+            if seen_wide or one_face_sized(rect, p):
                 out.append((cluster, rect))
         return out
 
@@ -839,7 +832,7 @@ class VehicleTracker:
             return None
         model, m = chosen
         track = self._track(next(self._ids), model, m, ground_z_m, stamp_s, 0.0)
-        track.rigid_seen = _rigid_seen(rect, self.params, not self._at_view_top(cluster))
+        track.rigid_seen = rigid_seen(rect, self.params, not self._at_view_top(cluster))
         self._learn_at_start(track, cluster, m)
         return track
 
@@ -870,7 +863,7 @@ class VehicleTracker:
         catalogue models are tried cheapest first (an unknown tractor's cab puts a model's gap on
         the real trailer's front)."""
         top_seen = not self._at_view_top(cluster)
-        if _one_face_sized(rect, self.params):
+        if one_face_sized(rect, self.params):
             return self._one_face(cluster, rect, seed, ground_z_m, rigid_allowed, top_seen)
         may_be_rigid = rect.length_m <= RIGID_MAX_LENGTH_M
         if rect.length_m < self.params.rigid_min_length_m and not self._tall_enough(cluster, ground_z_m, top_seen):
@@ -903,16 +896,16 @@ class VehicleTracker:
         self, cluster: np.ndarray, rect: Rect, seed: Seed, ground_z_m: float, rigid_allowed: bool, top_seen: bool
     ) -> tuple[VehicleModel, Measurement] | None:
         """A seed that is one upright face (no roof, one side or one end: a vehicle-mounted sensor sees
-        a truck so) is a rigid vehicle when the face is a vehicle's (``_vehicle_face``) and stands on
-        wheels: rays cross under it (``_raised``; a wall stands on the ground). Its body lies behind
+        a truck so) is a rigid vehicle when the face is a vehicle's (``faces.vehicle_face``) and stands on
+        wheels: rays cross under it (``faces.passes_under``; a wall stands on the ground). Its body lies behind
         the face, away from the sensor: as long as the shortest rigid vehicle behind an end, as
         wide as ``ONE_SIDE_WIDTH_M`` behind a side, until more of it shows. Never without rays."""
         if self._rays is None or not (
-            _vehicle_face(cluster, rect, ground_z_m) and self._tall_enough(cluster, ground_z_m, top_seen)
+            vehicle_face(cluster, rect, ground_z_m) and self._tall_enough(cluster, ground_z_m, top_seen)
         ):
             return None
-        face, along, away = self._face_line(cluster, rect)
-        if not self._raised(cluster, face, along, rect.length_m / 2, ground_z_m):
+        face, along, away = face_line(self._rays, cluster, rect)
+        if not passes_under(self._rays, cluster, face, along, rect.length_m / 2, ground_z_m):
             return None
         model, prior = self._behind_face(cluster, rect, face, along, away, seed, ground_z_m)
         m = fit(thin(cluster, self.params.fit_max_points), prior, self.params, START_ITERATIONS, START_SCALE_M)
@@ -928,8 +921,8 @@ class VehicleTracker:
     def _stands_on_wheels(
         self, cluster: np.ndarray, m: Measurement, model: VehicleModel, ground_z_m: float, top_seen: bool
     ) -> bool:
-        """Whether a start's fit stands on wheels where that is asked (``_unit_raised``): a rigid box
-        unless its roof shows (``_roof_shown``: one sweep of a 13 m wall with a short one across it
+        """Whether a start's fit stands on wheels where that is asked (``faces.unit_raised``): a rigid box
+        unless its roof shows (``faces.roof_shown``: one sweep of a 13 m wall with a short one across it
         is a box of a coach's size, its top two lines; from a pole 7.5 m up, rays pass under a van
         in a few columns only; in a yard a rigid start also needs its seed to have moved), an articulated one's trailer when
         the sensors' view ends below its top and its points do not reach the heights ``_supported``
@@ -941,82 +934,11 @@ class VehicleTracker:
         if not model.articulated:
             if np.ptp(cluster[:, 2]) < UNIT_SUPPORT * model.tractor.height_m:
                 return False  # a plate of points at one height (a canopy, a gantry's deck) is no body
-            return _roof_shown(cluster, m, model, ground_z_m) or self._unit_raised(cluster, m, model, 0, ground_z_m)
+            return roof_shown(cluster, m, model, ground_z_m) or unit_raised(
+                self._rays, cluster, m, model, 0, ground_z_m
+            )
         heights_shown = top_seen or _supported(m, model, ground_z_m)
-        return heights_shown or self._unit_raised(cluster, m, model, 1, ground_z_m)
-
-    def _unit_raised(
-        self, cluster: np.ndarray, m: Measurement, model: VehicleModel, unit: int, ground_z_m: float
-    ) -> bool:
-        """Whether rays pass under one of the unit's faces that face the nearest sensor (``_raised``,
-        on the points within ``FACE_MAX_DEPTH_M`` of it, spanning ``UNIT_SUPPORT`` of its length);
-        True if none of them shows."""
-        box = model.boxes[unit]
-        centre = model.box_centers(m.x_m, m.y_m, m.yaw_rad, m.hitch_rad or 0.0)[unit]
-        yaw = m.yaw_rad + (m.hitch_rad or 0.0) * unit
-        origins = (self._rays.origins @ self._rays.to_level.T)[:, :2]
-        sensor = origins[np.argmin(np.hypot(*(origins - centre).T))]
-        shown = False
-        for turn, depth, half_length in (
-            (0.0, box.length_m / 2, box.width_m / 2),
-            (np.pi, box.length_m / 2, box.width_m / 2),
-            (np.pi / 2, box.width_m / 2, box.length_m / 2),
-            (-np.pi / 2, box.width_m / 2, box.length_m / 2),
-        ):
-            normal = np.array([np.cos(yaw + turn), np.sin(yaw + turn)])
-            face = centre + normal * depth
-            along = np.array([-normal[1], normal[0]])
-            local = (cluster[:, :2] - face) @ np.column_stack([normal, along])
-            on_face = (np.abs(local[:, 0]) <= FACE_MAX_DEPTH_M) & (np.abs(local[:, 1]) <= half_length)
-            if (sensor - face) @ normal <= 0 or np.count_nonzero(on_face) < FACE_BAND_MIN_POINTS:
-                continue
-            if np.ptp(local[on_face, 1]) < UNIT_SUPPORT * 2 * half_length:
-                continue  # a few columns of something else across its line are no face of it
-            shown = True
-            if self._raised(cluster[on_face], face, along, half_length, ground_z_m):
-                return True
-        return not shown
-
-    def _face_line(self, cluster: np.ndarray, rect: Rect) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """A one-face seed's nearest face: a point on it, its direction and the direction across it
-        away from the nearest sensor. The line fitted (least squares) through each ``FACE_BAND_M``
-        column's nearest point: a footprint's side is off by a degree or two, and 0.3 m at a
-        wall's end put the wall's own returns behind the line."""
-        origins = (self._rays.origins @ self._rays.to_level.T)[:, :2]
-        sensor = origins[np.argmin(np.hypot(*(origins - rect.center_xy).T))]
-        along = np.array([np.cos(rect.yaw_rad), np.sin(rect.yaw_rad)])
-        away = np.array([-along[1], along[0]])
-        away = away if (rect.center_xy - sensor) @ away >= 0 else -away
-        u, v = ((cluster[:, :2] - rect.center_xy) @ np.column_stack([along, away])).T
-        columns = np.floor((u - u.min()) / FACE_BAND_M).astype(np.int64)
-        nearest = np.full(columns.max() + 1, np.inf)
-        np.minimum.at(nearest, columns, v)
-        filled = np.isfinite(nearest)
-        middles = u.min() + (np.flatnonzero(filled) + 0.5) * FACE_BAND_M
-        slope, offset = np.polyfit(middles, nearest[filled], 1) if filled.sum() >= 2 else (0.0, nearest[filled][0])
-        direction = (along + slope * away) / np.hypot(1.0, slope)
-        normal = np.array([-direction[1], direction[0]])
-        return rect.center_xy + away * offset, direction, normal if normal @ away >= 0 else -normal
-
-    def _raised(
-        self, points: np.ndarray, face: np.ndarray, along: np.ndarray, half_length_m: float, ground_z_m: float
-    ) -> bool:
-        """At least ``UNDER_BODY_MIN_RAYS`` rays passed under a face (its ``points``, its line through
-        ``face`` along ``along``): crossed the line below ``UNDER_BODY_TOP_M`` above the ground and
-        below the face's lowest point in that ``FACE_BAND_M`` column (``UNDER_BODY_INSET_M`` inside
-        ``half_length_m``), and ended ``GAP_SEEN_BEYOND_M`` or more behind it, in ``UNDER_BODY_SHARE``
-        of its columns. A body on wheels lets them pass along its length; a wall, a hedge or a shed reaches the ground in every column (a ray passing a
-        wall's end, seen at a slant, crosses its line before the end)."""
-        hits = self._rays.crossings(
-            face, along, half_length_m - UNDER_BODY_INSET_M, ground_z_m + UNDER_BODY_TOP_M, GAP_SEEN_BEYOND_M
-        )
-        lowest, first = _column_lowest(points, face, along, ground_z_m)
-        columns = np.floor((hits[:, 0] - first) / FACE_BAND_M).astype(np.int64)
-        inside = (columns >= 0) & (columns < len(lowest))
-        inside[inside] = np.isfinite(lowest[columns[inside]])  # under the face: where it shows
-        columns = columns[inside][hits[inside, 1] - ground_z_m < lowest[columns[inside]]]
-        spread = np.unique(columns).size >= UNDER_BODY_SHARE * np.count_nonzero(np.isfinite(lowest))
-        return len(columns) >= UNDER_BODY_MIN_RAYS and spread
+        return heights_shown or unit_raised(self._rays, cluster, m, model, 1, ground_z_m)
 
     def _behind_face(
         self,
@@ -1028,15 +950,15 @@ class VehicleTracker:
         seed: Seed,
         ground_z_m: float,
     ) -> tuple[VehicleModel, Prior]:
-        """The rigid model of a one-face seed and its placement behind the face (``_face_line``),
+        """The rigid model of a one-face seed and its placement behind the face (``faces.face_line``),
         along its travel if it moved (else facing the sensor from its end; along the face's line
         from its side)."""
-        floor = _face_foot(cluster, face, along, ground_z_m)
+        floor = face_foot(cluster, face, along, ground_z_m)
         face = face + along * float(
             np.ptp((cluster[:, :2] - face) @ along) / 2 + ((cluster[:, :2] - face) @ along).min()
         )
         height = float(cluster[:, 2].max() - ground_z_m) - floor
-        if _end_face(rect):
+        if end_face(rect):
             model = VehicleModel.rigid("rigid", self.params.rigid_min_length_m, rect.length_m, height, floor)
             axis, behind_m = -away, model.tractor.length_m / 2
         else:
@@ -1205,7 +1127,7 @@ class VehicleTracker:
             return track
         model, m = chosen
         new = self._track(track.id, model, m, track.ground_z_m, stamp_s, s.speed_m_s)
-        new.first_xy, new.rigid_seen = track.first_xy, _rigid_seen(rect, self.params, not self._at_view_top(points))
+        new.first_xy, new.rigid_seen = track.first_xy, rigid_seen(rect, self.params, not self._at_view_top(points))
         self._learn_at_start(new, points, m)
         self.tracks[self.tracks.index(track)] = new
         return new
@@ -1215,11 +1137,11 @@ class VehicleTracker:
     ) -> list[tuple[VehicleModel, float, Measurement]]:
         """(model, direction sign, fit) of every catalogue vehicle in both directions (best start hitch
         each) and, if ``may_be_rigid``, of one rigid box of the cluster's measured size, placed on
-        its footprint and on the footprint its points hug when that differs (``_l_shaped``). All
+        its footprint and on the footprint its points hug when that differs (``faces.l_shaped``). All
         are fitted to the same thinned points (their costs are compared)."""
         sample = thin(cluster, self.params.fit_max_points)
         out = []
-        for footprint in [rect, *_l_shaped(cluster, rect)]:
+        for footprint in [rect, *l_shaped(cluster, rect)]:
             for model in self.catalogue.values():
                 out += self._catalogue_fits(sample, cluster, footprint, model, ground_z_m, top_seen)
             height = float(cluster[:, 2].max() - ground_z_m)
@@ -1546,114 +1468,6 @@ def _shift_along_m(before: VehicleModel, after: VehicleModel) -> float:
         shifts.append(abs(after.kingpin_behind_axle_m - before.kingpin_behind_axle_m))
         shifts.append(abs(after.trailer.front_m - before.trailer.front_m))
     return max(shifts)
-
-
-def _roof_shown(cluster: np.ndarray, m: Measurement, model: VehicleModel, ground_z_m: float) -> bool:
-    """Whether a rigid fit's box has points within ``ROOF_BAND_M`` of its top in ``ROOF_SHOWN_SHARE``
-    of its ``ROOF_CELL_M`` cells: a body's roof, not the tops of walls across its footprint."""
-    box = model.tractor
-    (centre, _) = model.box_centers(m.x_m, m.y_m, m.yaw_rad)
-    local = (cluster[:, :2] - centre) @ np.array(
-        [[np.cos(m.yaw_rad), -np.sin(m.yaw_rad)], [np.sin(m.yaw_rad), np.cos(m.yaw_rad)]]
-    )
-    top = (cluster[:, 2] - ground_z_m >= box.top_m - ROOF_BAND_M) & (np.abs(local[:, 0]) <= box.length_m / 2)
-    top &= np.abs(local[:, 1]) <= box.width_m / 2
-    cells = np.floor((local[top] + [box.length_m / 2, box.width_m / 2]) / ROOF_CELL_M).astype(np.int64)
-    total = np.ceil(box.length_m / ROOF_CELL_M) * np.ceil(box.width_m / ROOF_CELL_M)
-    return len(np.unique(cells, axis=0)) >= ROOF_SHOWN_SHARE * total
-
-
-def _l_shaped(cluster: np.ndarray, rect: Rect) -> list[Rect]:
-    """The footprint along the axis the points hug (``l_shape_yaw``) if it is another one about as
-    small (within ``L_SHAPE_AREA_RATIO``): seen from one side and one end and no roof (a sensor on a
-    car), the hull is a right triangle, and the smallest rectangle may lie along its hypotenuse
-    (a 9 m bus seen so: 15 deg off, its fit stuck 20 deg off)."""
-    yaw = l_shape_yaw(cluster[:, :2])
-    off = abs((yaw - rect.yaw_rad + np.pi / 4) % (np.pi / 2) - np.pi / 4)
-    if off < L_SHAPE_MIN_TURN_RAD:
-        return []
-    along = rect_along(cluster[:, :2], yaw)
-    if along.width_m > along.length_m:
-        along = rect_along(cluster[:, :2], yaw + np.pi / 2)
-    return [along] if along.area_m2 <= L_SHAPE_AREA_RATIO * rect.area_m2 else []
-
-
-def _one_face_sized(rect: Rect, params: ArticulatedParams) -> bool:
-    """A footprint of one face: as long as a rigid vehicle's side and narrower than
-    ``start_min_width_m``, or as wide as a vehicle's end and shorter than ``start_min_length_m`` (an
-    oncoming tractor's cab face and its trailer's front above it stand 1-2 m apart)."""
-    end = END_FACE_WIDTH_M[0] <= rect.length_m <= END_FACE_WIDTH_M[1] and rect.width_m < params.start_min_length_m
-    side = params.rigid_min_length_m <= rect.length_m <= RIGID_MAX_LENGTH_M and rect.width_m < params.start_min_width_m
-    return end or side
-
-
-def _rigid_seen(rect: Rect, params: ArticulatedParams, top_seen: bool) -> tuple[bool, bool, bool]:
-    """Whether a rigid vehicle started from the footprint ``rect`` has its length, width and height
-    measured: one end face shows its width, one side its length (``_behind_face``); its top, if the
-    sensors' view reached above it."""
-    if not _one_face_sized(rect, params):
-        return True, True, top_seen
-    return not _end_face(rect), _end_face(rect), top_seen
-
-
-def _column_lowest(
-    cluster: np.ndarray, point_xy: np.ndarray, direction_xy: np.ndarray, ground_z_m: float
-) -> tuple[np.ndarray, float]:
-    """The lowest point above the ground in each ``FACE_BAND_M`` column along a face's line (through
-    ``point_xy`` along ``direction_xy``; inf: none), and where along it (from the point) the first
-    column starts."""
-    along = (cluster[:, :2] - point_xy) @ direction_xy
-    first = float(along.min())
-    columns = np.floor((along - first) / FACE_BAND_M).astype(np.int64)
-    lowest = np.full(columns.max() + 1, np.inf)
-    np.minimum.at(lowest, columns, cluster[:, 2] - ground_z_m)
-    return lowest, first
-
-
-def _face_foot(cluster: np.ndarray, point_xy: np.ndarray, direction_xy: np.ndarray, ground_z_m: float) -> float:
-    """The height of a face's lower edge: the median over its columns of their lowest point
-    (``_column_lowest``: its body's floor; the wheels below show in a few columns only). The rays
-    that pass under a body on wheels cross no box of it."""
-    lowest, _ = _column_lowest(cluster, point_xy, direction_xy, ground_z_m)
-    return max(float(np.median(lowest[np.isfinite(lowest)])), 0.0)
-
-
-def _end_face(rect: Rect) -> bool:
-    """A one-face footprint (``_one_face_sized``) that is a vehicle's end, not its side."""
-    return rect.length_m <= END_FACE_WIDTH_M[1]
-
-
-def _vehicle_face(cluster: np.ndarray, rect: Rect, ground_z_m: float) -> bool:
-    """Whether a one-face seed (``_one_face_sized``) stands upright from below ``FACE_MAX_FOOT_M``
-    (along ``FACE_FOOT_SHARE`` of its length, in columns ``FACE_BAND_M`` wide) up to at most a
-    vehicle's height, flat in every ``FACE_BAND_M`` of height above ``UNDER_BODY_TOP_M`` (the wheels'
-    and axles' band: a tractor's front wheels show under its bumper) that holds ``FACE_BAND_MIN_POINTS``
-    (``FACE_BAND_SHARE`` of the band's points within ``FACE_MAX_DEPTH_M`` of its middle: a tree's
-    crown is round), those bands holding ``FACE_BAND_SHARE`` of its points and filling
-    ``FACE_FILLED_HEIGHT`` of its height (a pole and a few low points beside it are no face)."""
-    z_rel = cluster[:, 2] - ground_z_m
-    if z_rel.max() > MAX_VEHICLE_HEIGHT_M:
-        return False
-    along = (cluster[:, :2] - rect.center_xy) @ np.array([np.cos(rect.yaw_rad), np.sin(rect.yaw_rad)])
-    columns = np.floor((along - along.min()) / FACE_BAND_M).astype(np.int64)
-    if np.unique(columns[z_rel <= FACE_MAX_FOOT_M]).size < FACE_FOOT_SHARE * (columns.max() + 1):
-        return False  # a board on posts
-    depth = (cluster[:, :2] - rect.center_xy) @ np.array([-np.sin(rect.yaw_rad), np.cos(rect.yaw_rad)])
-    band = np.floor(z_rel / FACE_BAND_M).astype(np.int64)
-    order = np.lexsort((depth, band))
-    band, depth = band[order], depth[order]
-    starts = np.flatnonzero(np.r_[True, np.diff(band) > 0])
-    counts = np.diff(np.r_[starts, len(band)])
-    middle = np.repeat(depth[starts + counts // 2], counts)  # each band's median
-    share_near = np.add.reduceat((np.abs(depth - middle) <= FACE_MAX_DEPTH_M).astype(np.int64), starts) / counts
-    body = (band[starts] + 1) * FACE_BAND_M > UNDER_BODY_TOP_M  # not the wheels' band
-    filled = body & (counts >= FACE_BAND_MIN_POINTS)
-    flat = filled & (share_near >= FACE_BAND_SHARE)
-    return bool(
-        np.array_equal(flat, filled)
-        and counts[flat].sum() >= FACE_BAND_SHARE * counts[body].sum()
-        and np.count_nonzero(flat) * FACE_BAND_M >= FACE_FILLED_HEIGHT * z_rel.max()
-    )
 
 
 def _supported(m: Measurement, model: VehicleModel, ground_z_m: float, top_seen: bool = True) -> bool:

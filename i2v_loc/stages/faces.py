@@ -1,0 +1,220 @@
+"""What one face of a body shows: whether a seed is one upright face of a vehicle (a sensor on a car
+sees no roof: a bus's side, a trailer's rear), where the face's line runs, whether rays pass under
+it (a body on wheels; a wall stands on the ground), whether a box's roof shows, and the footprint
+an L-shaped view's points hug (docs/pipeline.md, Articulated estimator, Start)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from i2v_loc.params import ArticulatedParams
+from i2v_loc.stages.hinged_fit import Measurement
+from i2v_loc.stages.primitives import Rect, l_shape_yaw, rect_along
+from i2v_loc.stages.vehicle_model import MAX_VEHICLE_HEIGHT_M, RIGID_MAX_LENGTH_M, VehicleModel
+from i2v_loc.stages.visibility import Rays
+
+# a vehicle's end seen alone: a van's to the widest catalogue trailer's (2.77 m), with noise
+END_FACE_WIDTH_M = (1.8, 3.0)
+ONE_SIDE_WIDTH_M = 2.5  # the width behind a side seen alone (coaches and trucks: 2.55 m)
+FACE_MAX_DEPTH_M = 0.25  # a face: most of its points this close to its line, in each band of height
+FACE_BAND_M = 0.3
+FACE_BAND_MIN_POINTS = 5
+FACE_BAND_SHARE = 0.8
+FACE_FILLED_HEIGHT = 0.5  # bands of this share of its height hold a face (scattered points are none)
+FACE_MAX_FOOT_M = 1.5  # its points reach this low (a trailer's floor: 1.0-1.3 m; a sign hangs above 2 m)
+FACE_FOOT_SHARE = 0.5  # along this share of its length (a board's posts reach the ground)
+UNDER_BODY_TOP_M = 0.6  # a body on wheels has rays through its foot up to here, a wall or a hedge none
+UNDER_BODY_INSET_M = 0.3  # (a face's end blurs by a column's spacing)
+UNDER_BODY_MIN_RAYS = 5
+UNDER_BODY_BEYOND_M = 0.3  # and end this far behind it (the ground under the body, its far side)
+ROOF_BAND_M = 0.4  # a rigid box's roof: its points this close to its top
+ROOF_CELL_M = 0.5
+ROOF_SHOWN_SHARE = 0.25  # of its cells (a van half hidden, from a pole 7.5 m up: 0.28; walls seen from below: 0.05)
+UNDER_BODY_SHARE = 0.5  # of a face's columns: a body's clearance runs along it (a board beside a wall: 4 of 29)
+L_SHAPE_MIN_TURN_RAD = np.radians(3.0)
+L_SHAPE_AREA_RATIO = 1.05
+FACE_SPAN_SHARE = 0.5  # a face's points span this share of it to be asked about
+
+
+def one_face_sized(rect: Rect, params: ArticulatedParams) -> bool:
+    """A footprint of one face: as long as a rigid vehicle's side and narrower than
+    ``start_min_width_m``, or as wide as a vehicle's end and shorter than ``start_min_length_m`` (an
+    oncoming tractor's cab face and its trailer's front above it stand 1-2 m apart)."""
+    end = END_FACE_WIDTH_M[0] <= rect.length_m <= END_FACE_WIDTH_M[1] and rect.width_m < params.start_min_length_m
+    side = params.rigid_min_length_m <= rect.length_m <= RIGID_MAX_LENGTH_M and rect.width_m < params.start_min_width_m
+    return end or side
+
+
+def end_face(rect: Rect) -> bool:
+    """A one-face footprint (``one_face_sized``) that is a vehicle's end, not its side."""
+    return rect.length_m <= END_FACE_WIDTH_M[1]
+
+
+def rigid_seen(rect: Rect, params: ArticulatedParams, top_seen: bool) -> tuple[bool, bool, bool]:
+    """Whether a rigid vehicle started from the footprint ``rect`` has its length, width and height
+    measured: one end face shows its width, one side its length (``_behind_face``); its top, if the
+    sensors' view reached above it."""
+    if not one_face_sized(rect, params):
+        return True, True, top_seen
+    return not end_face(rect), end_face(rect), top_seen
+
+
+def vehicle_face(cluster: np.ndarray, rect: Rect, ground_z_m: float) -> bool:
+    """Whether a one-face seed (``one_face_sized``) stands upright from below ``FACE_MAX_FOOT_M``
+    (along ``FACE_FOOT_SHARE`` of its length, in columns ``FACE_BAND_M`` wide) up to at most a
+    vehicle's height, flat in every ``FACE_BAND_M`` of height above ``UNDER_BODY_TOP_M`` (the wheels'
+    and axles' band: a tractor's front wheels show under its bumper) that holds ``FACE_BAND_MIN_POINTS``
+    (``FACE_BAND_SHARE`` of the band's points within ``FACE_MAX_DEPTH_M`` of its middle: a tree's
+    crown is round), those bands holding ``FACE_BAND_SHARE`` of its points and filling
+    ``FACE_FILLED_HEIGHT`` of its height (a pole and a few low points beside it are no face)."""
+    z_rel = cluster[:, 2] - ground_z_m
+    if z_rel.max() > MAX_VEHICLE_HEIGHT_M:
+        return False
+    along = (cluster[:, :2] - rect.center_xy) @ np.array([np.cos(rect.yaw_rad), np.sin(rect.yaw_rad)])
+    columns = np.floor((along - along.min()) / FACE_BAND_M).astype(np.int64)
+    if np.unique(columns[z_rel <= FACE_MAX_FOOT_M]).size < FACE_FOOT_SHARE * (columns.max() + 1):
+        return False  # a board on posts
+    depth = (cluster[:, :2] - rect.center_xy) @ np.array([-np.sin(rect.yaw_rad), np.cos(rect.yaw_rad)])
+    band = np.floor(z_rel / FACE_BAND_M).astype(np.int64)
+    order = np.lexsort((depth, band))
+    band, depth = band[order], depth[order]
+    starts = np.flatnonzero(np.r_[True, np.diff(band) > 0])
+    counts = np.diff(np.r_[starts, len(band)])
+    middle = np.repeat(depth[starts + counts // 2], counts)  # each band's median
+    share_near = np.add.reduceat((np.abs(depth - middle) <= FACE_MAX_DEPTH_M).astype(np.int64), starts) / counts
+    body = (band[starts] + 1) * FACE_BAND_M > UNDER_BODY_TOP_M  # not the wheels' band
+    filled = body & (counts >= FACE_BAND_MIN_POINTS)
+    flat = filled & (share_near >= FACE_BAND_SHARE)
+    return bool(
+        np.array_equal(flat, filled)
+        and counts[flat].sum() >= FACE_BAND_SHARE * counts[body].sum()
+        and np.count_nonzero(flat) * FACE_BAND_M >= FACE_FILLED_HEIGHT * z_rel.max()
+    )
+
+
+def face_line(rays: Rays, cluster: np.ndarray, rect: Rect) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A one-face seed's nearest face: a point on it, its direction and the direction across it
+    away from the nearest sensor. The line fitted (least squares) through each ``FACE_BAND_M``
+    column's nearest point: a footprint's side is off by a degree or two, and 0.3 m at a
+    wall's end put the wall's own returns behind the line."""
+    origins = (rays.origins @ rays.to_level.T)[:, :2]
+    sensor = origins[np.argmin(np.hypot(*(origins - rect.center_xy).T))]
+    along = np.array([np.cos(rect.yaw_rad), np.sin(rect.yaw_rad)])
+    away = np.array([-along[1], along[0]])
+    away = away if (rect.center_xy - sensor) @ away >= 0 else -away
+    u, v = ((cluster[:, :2] - rect.center_xy) @ np.column_stack([along, away])).T
+    columns = np.floor((u - u.min()) / FACE_BAND_M).astype(np.int64)
+    nearest = np.full(columns.max() + 1, np.inf)
+    np.minimum.at(nearest, columns, v)
+    filled = np.isfinite(nearest)
+    middles = u.min() + (np.flatnonzero(filled) + 0.5) * FACE_BAND_M
+    slope, offset = np.polyfit(middles, nearest[filled], 1) if filled.sum() >= 2 else (0.0, nearest[filled][0])
+    direction = (along + slope * away) / np.hypot(1.0, slope)
+    normal = np.array([-direction[1], direction[0]])
+    return rect.center_xy + away * offset, direction, normal if normal @ away >= 0 else -normal
+
+
+def passes_under(
+    rays: Rays, points: np.ndarray, face: np.ndarray, along: np.ndarray, half_length_m: float, ground_z_m: float
+) -> bool:
+    """At least ``UNDER_BODY_MIN_RAYS`` rays passed under a face (its ``points``, its line through
+    ``face`` along ``along``): crossed the line below ``UNDER_BODY_TOP_M`` above the ground and
+    below the face's lowest point in that ``FACE_BAND_M`` column (``UNDER_BODY_INSET_M`` inside
+    ``half_length_m``), and ended ``UNDER_BODY_BEYOND_M`` or more behind it, in ``UNDER_BODY_SHARE``
+    of its columns. A body on wheels lets them pass along its length; a wall, a hedge or a shed reaches the ground in every column (a ray passing a
+    wall's end, seen at a slant, crosses its line before the end)."""
+    hits = rays.crossings(
+        face, along, half_length_m - UNDER_BODY_INSET_M, ground_z_m + UNDER_BODY_TOP_M, UNDER_BODY_BEYOND_M
+    )
+    lowest, first = column_lowest(points, face, along, ground_z_m)
+    columns = np.floor((hits[:, 0] - first) / FACE_BAND_M).astype(np.int64)
+    inside = (columns >= 0) & (columns < len(lowest))
+    inside[inside] = np.isfinite(lowest[columns[inside]])  # under the face: where it shows
+    columns = columns[inside][hits[inside, 1] - ground_z_m < lowest[columns[inside]]]
+    spread = np.unique(columns).size >= UNDER_BODY_SHARE * np.count_nonzero(np.isfinite(lowest))
+    return len(columns) >= UNDER_BODY_MIN_RAYS and spread
+
+
+def unit_raised(
+    rays: Rays, cluster: np.ndarray, m: Measurement, model: VehicleModel, unit: int, ground_z_m: float
+) -> bool:
+    """Whether rays pass under one of the unit's faces that face the nearest sensor (``passes_under``,
+    on the points within ``FACE_MAX_DEPTH_M`` of it, spanning ``FACE_SPAN_SHARE`` of its length);
+    True if none of them shows."""
+    box = model.boxes[unit]
+    centre = model.box_centers(m.x_m, m.y_m, m.yaw_rad, m.hitch_rad or 0.0)[unit]
+    yaw = m.yaw_rad + (m.hitch_rad or 0.0) * unit
+    origins = (rays.origins @ rays.to_level.T)[:, :2]
+    sensor = origins[np.argmin(np.hypot(*(origins - centre).T))]
+    shown = False
+    for turn, depth, half_length in (
+        (0.0, box.length_m / 2, box.width_m / 2),
+        (np.pi, box.length_m / 2, box.width_m / 2),
+        (np.pi / 2, box.width_m / 2, box.length_m / 2),
+        (-np.pi / 2, box.width_m / 2, box.length_m / 2),
+    ):
+        normal = np.array([np.cos(yaw + turn), np.sin(yaw + turn)])
+        face = centre + normal * depth
+        along = np.array([-normal[1], normal[0]])
+        local = (cluster[:, :2] - face) @ np.column_stack([normal, along])
+        on_face = (np.abs(local[:, 0]) <= FACE_MAX_DEPTH_M) & (np.abs(local[:, 1]) <= half_length)
+        if (sensor - face) @ normal <= 0 or np.count_nonzero(on_face) < FACE_BAND_MIN_POINTS:
+            continue
+        if np.ptp(local[on_face, 1]) < FACE_SPAN_SHARE * 2 * half_length:
+            continue  # a few columns of something else across its line are no face of it
+        shown = True
+        if passes_under(rays, cluster[on_face], face, along, half_length, ground_z_m):
+            return True
+    return not shown
+
+
+def roof_shown(cluster: np.ndarray, m: Measurement, model: VehicleModel, ground_z_m: float) -> bool:
+    """Whether a rigid fit's box has points within ``ROOF_BAND_M`` of its top in ``ROOF_SHOWN_SHARE``
+    of its ``ROOF_CELL_M`` cells: a body's roof, not the tops of walls across its footprint."""
+    box = model.tractor
+    (centre, _) = model.box_centers(m.x_m, m.y_m, m.yaw_rad)
+    local = (cluster[:, :2] - centre) @ np.array(
+        [[np.cos(m.yaw_rad), -np.sin(m.yaw_rad)], [np.sin(m.yaw_rad), np.cos(m.yaw_rad)]]
+    )
+    top = (cluster[:, 2] - ground_z_m >= box.top_m - ROOF_BAND_M) & (np.abs(local[:, 0]) <= box.length_m / 2)
+    top &= np.abs(local[:, 1]) <= box.width_m / 2
+    cells = np.floor((local[top] + [box.length_m / 2, box.width_m / 2]) / ROOF_CELL_M).astype(np.int64)
+    total = np.ceil(box.length_m / ROOF_CELL_M) * np.ceil(box.width_m / ROOF_CELL_M)
+    return len(np.unique(cells, axis=0)) >= ROOF_SHOWN_SHARE * total
+
+
+def column_lowest(
+    cluster: np.ndarray, point_xy: np.ndarray, direction_xy: np.ndarray, ground_z_m: float
+) -> tuple[np.ndarray, float]:
+    """The lowest point above the ground in each ``FACE_BAND_M`` column along a face's line (through
+    ``point_xy`` along ``direction_xy``; inf: none), and where along it (from the point) the first
+    column starts."""
+    along = (cluster[:, :2] - point_xy) @ direction_xy
+    first = float(along.min())
+    columns = np.floor((along - first) / FACE_BAND_M).astype(np.int64)
+    lowest = np.full(columns.max() + 1, np.inf)
+    np.minimum.at(lowest, columns, cluster[:, 2] - ground_z_m)
+    return lowest, first
+
+
+def face_foot(cluster: np.ndarray, point_xy: np.ndarray, direction_xy: np.ndarray, ground_z_m: float) -> float:
+    """The height of a face's lower edge: the median over its columns of their lowest point
+    (``column_lowest``: its body's floor; the wheels below show in a few columns only). The rays
+    that pass under a body on wheels cross no box of it."""
+    lowest, _ = column_lowest(cluster, point_xy, direction_xy, ground_z_m)
+    return max(float(np.median(lowest[np.isfinite(lowest)])), 0.0)
+
+
+def l_shaped(cluster: np.ndarray, rect: Rect) -> list[Rect]:
+    """The footprint along the axis the points hug (``l_shape_yaw``) if it is another one about as
+    small (within ``L_SHAPE_AREA_RATIO``): seen from one side and one end and no roof (a sensor on a
+    car), the hull is a right triangle, and the smallest rectangle may lie along its hypotenuse
+    (a 9 m bus seen so: 15 deg off, its fit stuck 20 deg off)."""
+    yaw = l_shape_yaw(cluster[:, :2])
+    off = abs((yaw - rect.yaw_rad + np.pi / 4) % (np.pi / 2) - np.pi / 4)
+    if off < L_SHAPE_MIN_TURN_RAD:
+        return []
+    along = rect_along(cluster[:, :2], yaw)
+    if along.width_m > along.length_m:
+        along = rect_along(cluster[:, :2], yaw + np.pi / 2)
+    return [along] if along.area_m2 <= L_SHAPE_AREA_RATIO * rect.area_m2 else []
