@@ -1216,15 +1216,18 @@ class VehicleTracker:
         """The best-explaining model, in the order its two directions are to be checked: the cheaper
         fit alone, or, when both cost alike, the direction of travel first and then the other (the
         start's checks decide then: a Volvo beside a dock's wall, its cheaper direction's gap
-        filled by the wall, waited 44 frames for its other direction to come out cheaper). Where a
-        rigid box explains the points (``start_min_explained``), an articulated fit they do not
-        support (``_supported``) is no contender: the side and end of a 9 m bus lie on the faces of
-        a 16.5 m MAN as well as on its own box's. (Where none does, the cheapest fit decides, as
-        before: a round crown beside a short wall, its cheapest fit unsupported, had started as the
-        next catalogue vehicle.)"""
+        filled by the wall, waited 44 frames for its other direction to come out cheaper). In one
+        sweep (``start_travel_m`` 0: no next frame to wait for), where a rigid box explains the
+        points (``start_min_explained``), an articulated fit they do not support is no contender:
+        the side and end of a 9 m bus lie on the faces of a 16.5 m MAN as well as on its own box's.
+        With frames to come, an unsupported cheapest fit waits for more of the vehicle to show (so
+        asked in every start, a reversing trailer whose tractor hid behind it started as a rigid
+        vehicle: 25 false vehicle-s on held-out paper +500; its unit hidden there is not seen
+        through, either, nor the MAN's beyond the bus)."""
         articulated = [h for h in hypotheses if h[0].articulated]
         rigid = [h for h in hypotheses if not h[0].articulated]
-        if any(np.mean(h[2].unit >= 0) >= self.params.start_min_explained for h in rigid):
+        one_sweep = self.params.start_travel_m <= 0.0
+        if one_sweep and any(np.mean(h[2].unit >= 0) >= self.params.start_min_explained for h in rigid):
             articulated = [h for h in articulated if _supported(h[2], h[0], ground_z_m, top_seen)]
         best_art = min(articulated, key=lambda h: h[2].cost, default=None)
         best_rigid = min(rigid, key=lambda h: h[2].cost, default=None)
