@@ -1273,9 +1273,9 @@ def test_both_directions_are_checked_when_they_cost_alike():
     volvo, man = tracker.catalogue["volvo_fh"], tracker.catalogue["man_tgx"]
     seed = Seed(np.array([0.0, 0.0]), np.array([0.0, 0.0]))
     alike = [_hypothesis(volvo, 1.0, 0.0054), _hypothesis(volvo, -1.0, 0.0053, np.pi), _hypothesis(man, 1.0, 0.0055)]
-    chosen = tracker._choose(alike, seed)
+    chosen = tracker._choose(alike, seed, 0.0, True)
     assert [(m.name, h.cost) for m, h in chosen] == [("volvo_fh", 0.0053), ("volvo_fh", 0.0054)]
     seed.center_xy = np.array([1.0, 0.0])  # it moved along +x: the direction facing +x first
-    assert [h.cost for _, h in tracker._choose(alike, seed)] == [0.0054, 0.0053]
+    assert [h.cost for _, h in tracker._choose(alike, seed, 0.0, True)] == [0.0054, 0.0053]
     clear = [_hypothesis(volvo, 1.0, 0.0080), _hypothesis(volvo, -1.0, 0.0040, np.pi)]
-    assert [h.cost for _, h in tracker._choose(clear, seed)] == [0.0040]
+    assert [h.cost for _, h in tracker._choose(clear, seed, 0.0, True)] == [0.0040]
