@@ -92,13 +92,18 @@ def vehicle_face(cluster: np.ndarray, rect: Rect, ground_z_m: float) -> bool:
     )
 
 
+def nearest_sensor(rays: Rays, xy: np.ndarray) -> np.ndarray:
+    """The level-frame xy of the sweep origin nearest to ``xy``."""
+    origins = (rays.origins @ rays.to_level.T)[:, :2]
+    return origins[np.nanargmin(np.hypot(*(origins - xy).T))]
+
+
 def face_line(rays: Rays, cluster: np.ndarray, rect: Rect) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """A one-face seed's nearest face: a point on it, its direction and the direction across it
     away from the nearest sensor. The line fitted (least squares) through each ``FACE_BAND_M``
     column's nearest point: a footprint's side is off by a degree or two, and 0.3 m at a
     wall's end put the wall's own returns behind the line."""
-    origins = (rays.origins @ rays.to_level.T)[:, :2]
-    sensor = origins[np.argmin(np.hypot(*(origins - rect.center_xy).T))]
+    sensor = nearest_sensor(rays, rect.center_xy)
     along = np.array([np.cos(rect.yaw_rad), np.sin(rect.yaw_rad)])
     away = np.array([-along[1], along[0]])
     away = away if (rect.center_xy - sensor) @ away >= 0 else -away
@@ -121,8 +126,9 @@ def passes_under(
     ``face`` along ``along``): crossed the line below ``UNDER_BODY_TOP_M`` above the ground and
     below the face's lowest point in that ``FACE_BAND_M`` column (``UNDER_BODY_INSET_M`` inside
     ``half_length_m``), and ended ``UNDER_BODY_BEYOND_M`` or more behind it, in ``UNDER_BODY_SHARE``
-    of its columns. A body on wheels lets them pass along its length; a wall, a hedge or a shed reaches the ground in every column (a ray passing a
-    wall's end, seen at a slant, crosses its line before the end)."""
+    of its columns. A body on wheels lets them pass along its length; a wall, a hedge or a shed
+    reaches the ground in every column (a ray passing a wall's end, seen at a slant, crosses its
+    line before the end)."""
     hits = rays.crossings(
         face, along, half_length_m - UNDER_BODY_INSET_M, ground_z_m + UNDER_BODY_TOP_M, UNDER_BODY_BEYOND_M
     )
@@ -144,8 +150,7 @@ def unit_raised(
     box = model.boxes[unit]
     centre = model.box_centers(m.x_m, m.y_m, m.yaw_rad, m.hitch_rad or 0.0)[unit]
     yaw = m.yaw_rad + (m.hitch_rad or 0.0) * unit
-    origins = (rays.origins @ rays.to_level.T)[:, :2]
-    sensor = origins[np.argmin(np.hypot(*(origins - centre).T))]
+    sensor = nearest_sensor(rays, centre)
     shown = False
     for turn, depth, half_length in (
         (0.0, box.length_m / 2, box.width_m / 2),
