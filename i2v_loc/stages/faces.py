@@ -70,9 +70,10 @@ def vehicle_face(cluster: np.ndarray, rect: Rect, ground_z_m: float) -> bool:
     z_rel = cluster[:, 2] - ground_z_m
     if z_rel.max() > MAX_VEHICLE_HEIGHT_M:
         return False
-    along = (cluster[:, :2] - rect.center_xy) @ np.array([np.cos(rect.yaw_rad), np.sin(rect.yaw_rad)])
-    columns = np.floor((along - along.min()) / FACE_BAND_M).astype(np.int64)
-    if np.unique(columns[z_rel <= FACE_MAX_FOOT_M]).size < FACE_FOOT_SHARE * (columns.max() + 1):
+    lowest, _ = column_lowest(
+        cluster, rect.center_xy, np.array([np.cos(rect.yaw_rad), np.sin(rect.yaw_rad)]), ground_z_m
+    )
+    if np.count_nonzero(lowest <= FACE_MAX_FOOT_M) < FACE_FOOT_SHARE * len(lowest):
         return False  # a board on posts
     depth = (cluster[:, :2] - rect.center_xy) @ np.array([-np.sin(rect.yaw_rad), np.cos(rect.yaw_rad)])
     band = np.floor(z_rel / FACE_BAND_M).astype(np.int64)
@@ -108,9 +109,7 @@ def face_line(rays: Rays, cluster: np.ndarray, rect: Rect) -> tuple[np.ndarray, 
     away = np.array([-along[1], along[0]])
     away = away if (rect.center_xy - sensor) @ away >= 0 else -away
     u, v = ((cluster[:, :2] - rect.center_xy) @ np.column_stack([along, away])).T
-    columns = np.floor((u - u.min()) / FACE_BAND_M).astype(np.int64)
-    nearest = np.full(columns.max() + 1, np.inf)
-    np.minimum.at(nearest, columns, v)
+    nearest = _column_min(u, v)
     filled = np.isfinite(nearest)
     middles = u.min() + (np.flatnonzero(filled) + 0.5) * FACE_BAND_M
     slope, offset = np.polyfit(middles, nearest[filled], 1) if filled.sum() >= 2 else (0.0, nearest[filled][0])
@@ -195,11 +194,15 @@ def column_lowest(
     ``point_xy`` along ``direction_xy``; inf: none), and where along it (from the point) the first
     column starts."""
     along = (cluster[:, :2] - point_xy) @ direction_xy
-    first = float(along.min())
-    columns = np.floor((along - first) / FACE_BAND_M).astype(np.int64)
-    lowest = np.full(columns.max() + 1, np.inf)
-    np.minimum.at(lowest, columns, cluster[:, 2] - ground_z_m)
-    return lowest, first
+    return _column_min(along, cluster[:, 2] - ground_z_m), float(along.min())
+
+
+def _column_min(along: np.ndarray, values: np.ndarray) -> np.ndarray:
+    """The least of ``values`` in each ``FACE_BAND_M`` column of ``along``, from its least (inf: none)."""
+    columns = np.floor((along - along.min()) / FACE_BAND_M).astype(np.int64)
+    least = np.full(columns.max() + 1, np.inf)
+    np.minimum.at(least, columns, values)
+    return least
 
 
 def face_foot(cluster: np.ndarray, point_xy: np.ndarray, direction_xy: np.ndarray, ground_z_m: float) -> float:

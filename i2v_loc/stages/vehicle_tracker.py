@@ -880,12 +880,10 @@ class VehicleTracker:
             two = self._two_units(hypotheses, cluster, seed, ground_z_m, top_seen)
             choices = [two] if two is not None else self._choose(hypotheses, seed, ground_z_m, top_seen)
         for model, m in choices:
-            seed.rigid = not model.articulated
-            fit_moved = self._fit_moved(seed, m)  # its first rigid fit is remembered
-            if not (fit_moved and self._may_start(seed, rigid_allowed)):
+            if not self._allowed_to_start(seed, model, m, rigid_allowed):
                 return None
             if (
-                float(np.mean(m.unit >= 0)) >= self.params.start_min_explained
+                self._explains(m)
                 and _supported(m, model, ground_z_m, top_seen)
                 and not _gap_filled(cluster, m, model, ground_z_m)
                 # without rays a hole and a gap look alike: the points alone decide
@@ -915,12 +913,22 @@ class VehicleTracker:
         m = fit(thin(cluster, self.params.fit_max_points), prior, self.params, START_ITERATIONS, START_SCALE_M)
         if m is None:
             return None
-        seed.rigid = True
-        if not (self._fit_moved(seed, m) and self._may_start(seed, rigid_allowed)):
+        if not self._allowed_to_start(seed, model, m, rigid_allowed):
             return None
-        if float(np.mean(m.unit >= 0)) < self.params.start_min_explained or self._seen_through(m, model, ground_z_m):
+        if not self._explains(m) or self._seen_through(m, model, ground_z_m):
             return None
         return model, m
+
+    def _allowed_to_start(self, seed: Seed, model: VehicleModel, m: Measurement, rigid_allowed: bool) -> bool:
+        """Whether the seed, now fitted ``m`` with ``model``, may start: a rigid one once it (and its
+        first rigid fit, remembered here) moved and the map is ready (``_may_start``)."""
+        seed.rigid = not model.articulated
+        fit_moved = self._fit_moved(seed, m)
+        return fit_moved and self._may_start(seed, rigid_allowed)
+
+    def _explains(self, m: Measurement) -> bool:
+        """The fit explains ``start_min_explained`` of its points."""
+        return float(np.mean(m.unit >= 0)) >= self.params.start_min_explained
 
     def _stands_on_wheels(
         self, cluster: np.ndarray, m: Measurement, model: VehicleModel, ground_z_m: float, top_seen: bool
@@ -958,9 +966,8 @@ class VehicleTracker:
         along its travel if it moved (else facing the sensor from its end; along the face's line
         from its side)."""
         floor = face_foot(cluster, face, along, ground_z_m)
-        face = face + along * float(
-            np.ptp((cluster[:, :2] - face) @ along) / 2 + ((cluster[:, :2] - face) @ along).min()
-        )
+        spread = (cluster[:, :2] - face) @ along
+        face = face + along * float(np.ptp(spread) / 2 + spread.min())  # the face's middle
         height = float(cluster[:, 2].max() - ground_z_m) - floor
         if end_face(rect):
             model = VehicleModel.rigid("rigid", self.params.rigid_min_length_m, rect.length_m, height, floor)
@@ -1234,7 +1241,7 @@ class VehicleTracker:
         through, either, nor the MAN's beyond the bus)."""
         articulated = [h for h in hypotheses if h[0].articulated]
         rigid = [h for h in hypotheses if not h[0].articulated]
-        if self._one_sweep() and any(np.mean(h[2].unit >= 0) >= self.params.start_min_explained for h in rigid):
+        if self._one_sweep() and any(self._explains(h[2]) for h in rigid):
             articulated = [h for h in articulated if _supported(h[2], h[0], ground_z_m, top_seen)]
         best_art = min(articulated, key=lambda h: h[2].cost, default=None)
         best_rigid = min(rigid, key=lambda h: h[2].cost, default=None)
