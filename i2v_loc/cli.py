@@ -35,8 +35,21 @@ def build_parser(only: str | None = None) -> argparse.ArgumentParser:
     return parser
 
 
+MATH_THREAD_VARIABLES = ("OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "OMP_NUM_THREADS")
+
+
+def pin_math_threads() -> None:
+    """One BLAS / OpenMP thread unless the environment already says how many. A frame's small
+    matrices gain nothing from more, and a multi-threaded BLAS sums in an order that depends on
+    the machine's load, so the same recording could give other estimates on a busy machine. Set
+    before numpy loads; spawned evaluation workers inherit it."""
+    for name in MATH_THREAD_VARIABLES:
+        os.environ.setdefault(name, "1")
+
+
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
+    pin_math_threads()
     if argv == ["--version"]:
         print(f"i2v-loc {__version__}")
         return 0

@@ -34,6 +34,7 @@ TWO_FIT_SPEED_SIGMA_M_S = 1.0  # two fits 0.1 s apart, a few centimetres each
 MAX_START_SPEED_M_S = 25.0  # 90 km/h, a truck's top speed
 MAX_CURVATURE_1_M = 0.5  # a turning circle of 2 m: tighter than any road vehicle's
 MAX_STEP_S = 0.1  # the kinematics are integrated in midpoint steps no longer than this
+_AT_FIRST_PREDICTION = "taken at the first prediction"  # a new vehicle's state to measure its first motion from
 
 
 def _midpoint_steps(dt_s: float) -> tuple[float, int]:
@@ -154,9 +155,10 @@ class KinematicFilter:
         self.rejected = 0  # measurements outside the innovation gate
         self._in_a_row = 0
         # without a speed, the second fit gives the motion (``_motion_of_two_fits``) from the state
-        # before the first prediction (the start's sizes may have moved it since)
-        self._two_fits = speed_m_s == 0.0
-        self._first: tuple[np.ndarray, np.ndarray, float] | None = None
+        # before the first prediction (the start's sizes may have moved it since): taken then
+        self._first: tuple[np.ndarray, np.ndarray, float] | str | None = (
+            _AT_FIRST_PREDICTION if speed_m_s == 0.0 else None
+        )
 
     def restart(self, z: np.ndarray, r: np.ndarray) -> None:
         """The pose and hitch restart from the fit ``z`` (covariance ``r``); speed and curvature are
@@ -170,8 +172,8 @@ class KinematicFilter:
         p[CURVATURE, CURVATURE] = max(p[CURVATURE, CURVATURE], INITIAL_CURVATURE_SIGMA_1_M**2)
         self.ukf.P = p
         self._in_a_row = 0
-        if self._first is not None:  # no longer the first fit's state
-            self._first, self._two_fits = None, False
+        if isinstance(self._first, tuple):  # no longer the first fit's state
+            self._first = None
 
     def _q(self, dt_s: float) -> np.ndarray:
         p = self.params
@@ -186,7 +188,7 @@ class KinematicFilter:
 
     def predict(self, stamp_s: float) -> FilterState:
         dt = stamp_s - self.stamp_s if np.isfinite(stamp_s) else 0.1
-        if self._two_fits and self._first is None:
+        if self._first is _AT_FIRST_PREDICTION:
             self._first = (self.ukf.x.copy(), self.ukf.P.copy(), self.stamp_s)
         if dt > 0:
             self.ukf.predict(
@@ -202,7 +204,7 @@ class KinematicFilter:
         the prediction is not: the pose and hitch restart from the fit (speed and curvature kept,
         their variance reset)."""
         z = np.asarray(z, dtype=float)
-        if self._first is not None:
+        if isinstance(self._first, tuple):
             self._motion_of_two_fits(z)
         x, p = self.ukf.x.copy(), self.ukf.P.copy()
         if observed is None:
@@ -228,7 +230,7 @@ class KinematicFilter:
         had 0.96 m/s and 0.02 1/m after its second fit, and its fits fell outside the gate. The
         first two fits' points are alike not yet moved to the frame's time: their difference is
         the motion. Implausible differences (a jump between two objects) are left to the filter."""
-        (x, p, stamp), self._first, self._two_fits = self._first, None, False
+        (x, p, stamp), self._first = self._first, None
         dt = self.stamp_s - stamp
         if dt <= 0:
             return

@@ -86,6 +86,10 @@ GAP_OPEN_MIN_POINTS = 10
 GAP_SEEN_MIN_RAYS = 1  # a solid side stops every ray: one through a seed's gap shows it empty, not hidden
 GAP_SEEN_BEYOND_M = 0.3  # past the gap: a ray ending on a side running through it did not cross it
 GAP_SIDES_REACH_M = 2.5  # the body's sides next to the gap: about a cab's length either way
+# the gap's box is this far inside the sides: rays grazing a parked trailer's side ran along it within
+# 3 cm of its points' extent for a metre and "crossed" its "gap" (a false vehicle for 25 s, generalization
+# suite); 0.25 m inside kept too few of a MAN's rays through its 0.7 m gap (two started 26 frames late)
+GAP_SIDE_INSET_M = 0.1
 SOLID_INSET_M = 0.5  # a unit's box this far inside its faces is crossed by no ray (a sweep's motion blurs them)
 SEEN_THROUGH_RATIO = 0.1  # of the rays ending on a unit, at most this many cross it (real ones: under 0.01)
 CAB_SLICE_MIN_M = 1.0
@@ -751,12 +755,13 @@ class VehicleTracker:
                 seed = Seed(center, center, first_points=thin(cluster, SEED_FIRST_POINTS))
                 self.seeds.append(seed)
             seed.points, seed.rect = cluster, rect
-            seed.travelled = seed.travelled or seed.moved(self.params.start_travel_m)
+            set_off = not seed.travelled and seed.moved(self.params.start_travel_m)
+            seed.travelled = seed.travelled or set_off
             shape = _Shape(len(cluster), rect.length_m, rect.width_m, center, rigid_allowed)
             if (
                 seed.frames >= self.params.start_frames
                 and self._may_fit(seed)
-                and (seed.failed is None or (seed.retry_due(rigid_allowed) and seed.failed.changed(shape)))
+                and (seed.failed is None or set_off or (seed.retry_due(rigid_allowed) and seed.failed.changed(shape)))
             ):
                 ready.append((seed, cluster, rect, shape))
         self.seeds = [s for s in self.seeds if s.seen]
@@ -831,12 +836,13 @@ class VehicleTracker:
     def _new_track(
         self, cluster: np.ndarray, rect: Rect, seed: Seed, ground_z_m: float, stamp_s: float, rigid_allowed: bool
     ) -> _Track | None:
-        chosen = self._candidate(cluster, rect, seed, ground_z_m, rigid_allowed)
+        top_seen = not self._at_view_top(cluster)
+        chosen = self._candidate(cluster, rect, seed, ground_z_m, rigid_allowed, top_seen)
         if chosen is None:
             return None
         model, m = chosen
         track = self._track(next(self._ids), model, m, ground_z_m, stamp_s, 0.0)
-        track.rigid_seen = rigid_seen(rect, self.params, not self._at_view_top(cluster))
+        track.rigid_seen = rigid_seen(rect, self.params, top_seen)
         self._learn_at_start(track, cluster, m)
         return track
 
@@ -860,13 +866,12 @@ class VehicleTracker:
             track.last = again
 
     def _candidate(
-        self, cluster: np.ndarray, rect: Rect, seed: Seed, ground_z_m: float, rigid_allowed: bool
+        self, cluster: np.ndarray, rect: Rect, seed: Seed, ground_z_m: float, rigid_allowed: bool, top_seen: bool
     ) -> tuple[VehicleModel, Measurement] | None:
         """The best-explaining model and its fit, if it passes the start's checks (``rect``: the
-        cluster's minimum-area rectangle). A seed longer than any rigid vehicle is articulated: the
-        catalogue models are tried cheapest first (an unknown tractor's cab puts a model's gap on
-        the real trailer's front)."""
-        top_seen = not self._at_view_top(cluster)
+        cluster's minimum-area rectangle; ``top_seen``: no point at a sensor's view top). A seed
+        longer than any rigid vehicle is articulated: the catalogue models are tried cheapest first
+        (an unknown tractor's cab puts a model's gap on the real trailer's front)."""
         if one_face_sized(rect, self.params):
             return self._one_face(cluster, rect, seed, ground_z_m, rigid_allowed, top_seen)
         may_be_rigid = rect.length_m <= RIGID_MAX_LENGTH_M
@@ -1052,7 +1057,8 @@ class VehicleTracker:
 
     def _gap_seen_empty(self, m: Measurement, model: VehicleModel, ground_z_m: float) -> bool:
         """At least ``GAP_SEEN_MIN_RAYS`` rays crossed the middle of the model's gap (``_gap_counts``'
-        box, across between the sides the fit's points show next to it: ``_sides_at_gap``) and ended
+        box, across between the sides the fit's points show next to it, ``_sides_at_gap``, less
+        ``GAP_SIDE_INSET_M`` each) and ended
         ``GAP_SEEN_BEYOND_M`` beyond it: the gap is empty, not hidden (a standing seed's hole may be a
         pole's shadow on a trailer's side)."""
         if self._rays is None:
@@ -1061,12 +1067,14 @@ class VehicleTracker:
         sides = _sides_at_gap(m, model, start, length)
         if sides is None:
             return False
+        half_width = (sides[1] - sides[0]) / 2 - GAP_SIDE_INSET_M
+        if half_width <= 0.0:
+            return False
         centre = np.array([m.x_m, m.y_m]) + rotate_xy((start + length / 2, (sides[0] + sides[1]) / 2), m.yaw_rad)
         low, high = _gap_band(model)
         seen, _, _ = self._rays.through(
-            tuple(centre), m.yaw_rad, length / 2, (sides[1] - sides[0]) / 2,
-            (ground_z_m + low, ground_z_m + high), GAP_SEEN_BEYOND_M,
-        )  # fmt: skip
+            tuple(centre), m.yaw_rad, length / 2, half_width, (ground_z_m + low, ground_z_m + high), GAP_SEEN_BEYOND_M
+        )
         return seen >= GAP_SEEN_MIN_RAYS
 
     def _articulated_choices(self, hypotheses) -> list[tuple[VehicleModel, Measurement]]:
@@ -1133,12 +1141,13 @@ class VehicleTracker:
         here = np.array([s.x_m, s.y_m])
         probe = Seed(here, here - heading, moving=True)  # the direction of travel, for a tie between the two ends
         rect = min_area_rect(points[:, :2])
-        chosen = self._candidate(points, rect, probe, track.ground_z_m, rigid_allowed=False)
+        top_seen = not self._at_view_top(points)
+        chosen = self._candidate(points, rect, probe, track.ground_z_m, False, top_seen)
         if chosen is None:
             return track
         model, m = chosen
         new = self._track(track.id, model, m, track.ground_z_m, stamp_s, s.speed_m_s)
-        new.first_xy, new.rigid_seen = track.first_xy, rigid_seen(rect, self.params, not self._at_view_top(points))
+        new.first_xy, new.rigid_seen = track.first_xy, rigid_seen(rect, self.params, top_seen)
         self._learn_at_start(new, points, m)
         self.tracks[self.tracks.index(track)] = new
         return new
@@ -1488,7 +1497,8 @@ def _shift_along_m(before: VehicleModel, after: VehicleModel) -> float:
 
 
 def _supported(m: Measurement, model: VehicleModel, ground_z_m: float, top_seen: bool = True) -> bool:
-    """Each unit's explained points span at least ``UNIT_SUPPORT`` of its length, reach
+    """Each unit's explained points span at least ``UNIT_SUPPORT`` of its length or of its width (a
+    reversing MAN's cab, hidden behind its trailer but for its front face, waited 20 frames), reach
     ``UNIT_SUPPORT`` of its height above its floor (a car's side on a trailer's faces is no truck;
     unless the sensors' view ends below: ``top_seen`` False)
     and are at least ``UNIT_SUPPORT`` of the unit's share of the side area (a parked trailer's
@@ -1503,7 +1513,7 @@ def _supported(m: Measurement, model: VehicleModel, ground_z_m: float, top_seen:
         if (
             mine.sum() < 3
             or mine.sum() / explained < UNIT_SUPPORT * areas[u] / areas.sum()
-            or np.ptp(q[mine, 0]) < UNIT_SUPPORT * box.length_m
+            or max(np.ptp(q[mine, 0]) / box.length_m, np.ptp(q[mine, 1]) / box.width_m) < UNIT_SUPPORT
             or (top_seen and z_rel[mine].max() < box.floor_m + UNIT_SUPPORT * box.height_m)
             or np.mean(z_rel[mine] < box.floor_m) > UNIT_SUPPORT
         ):
