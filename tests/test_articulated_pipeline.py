@@ -475,6 +475,36 @@ def test_rays_grazing_a_parked_trailers_side_within_its_points_show_no_gap():
     assert tracker._gap_seen_empty(m, man, 0.0)
 
 
+def test_in_one_sweep_a_face_seen_through_the_gap_shows_the_hinge():
+    """A standing MAN seen at 25 deg off its axis from a car's roof 12 m away: no ray passes its 0.7 m
+    gap (it lets through only rays within 15 deg of square to it), but the cab's rear face shows
+    through the gap's opening, inside the sides. With no frame to come (``detect``) that is its
+    hinge, and it starts articulated; in the yard it waits to move. A parked trailer seen so, a
+    MAN's cab fitted on its front, shows no face inside its side there."""
+    from i2v_loc.stages.vehicle_tracker import _gap_looked_into
+    from i2v_loc.stages.visibility import Rays
+
+    man = VehicleModel.from_config("man_tgx", PARAMS.vehicles["man_tgx"])
+    slant = np.radians(25.0)
+    sensor = (1.9 - 12.0 * np.cos(slant), 3.0 - 12.0 * np.sin(slant), 1.8)
+    points = vehicle_points(man, 0.0, 3.0, 0.0, sensors=[sensor], seed=0)
+    m = fit(points, Prior(0.0, 3.0, 0.0, 0.0, man), PARAMS.articulated, iterations=20)
+    assert _gap_looked_into(points, m, man, 0.0)
+    trailer = VehicleModel.rigid("rigid", 13.6, 2.5, 2.6, 1.2)
+    parked = vehicle_points(trailer, 0.0, 3.0, 0.0, sensors=[sensor], seed=0)
+    on_front = Measurement(
+        6.8 - man.tractor.front_m, 3.0, 0.0, 0.0, np.eye(4), parked, np.zeros(len(parked), np.int8), 0.0
+    )
+    assert not _gap_looked_into(parked, on_front, man, 0.0)
+
+    rays = Rays(points.astype(np.float32), np.array([sensor]), np.array([0, len(points)]), np.eye(3))  # none beyond
+    one_sweep = apply_patch(PARAMS, {"articulated": {"start_frames": 1, "start_travel_m": 0.0}}).articulated
+    (report,) = VehicleTracker(one_sweep, PARAMS.vehicles).process(points, flat, 0.0, rays=rays)
+    assert report.model.articulated and abs(report.state.hitch_rad) < np.radians(2.0)
+    yard = VehicleTracker(PARAMS.articulated, PARAMS.vehicles)
+    assert not any(yard.process(points, flat, 0.1 * k, background_ready=False, rays=rays) for k in range(5))
+
+
 def test_a_wall_crossing_a_trailer_is_not_its_side():
     """A Twizy's trailer (1.75 m wide) docked, a dock's wall crossing its middle at 37 deg: the
     wall's points beside its front, labelled its left face, run off its axis and give no width;

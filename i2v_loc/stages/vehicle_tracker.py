@@ -90,6 +90,8 @@ GAP_SIDES_REACH_M = 2.5  # the body's sides next to the gap: about a cab's lengt
 # 3 cm of its points' extent for a metre and "crossed" its "gap" (a false vehicle for 25 s, generalization
 # suite); 0.25 m inside kept too few of a MAN's rays through its 0.7 m gap (two started 26 frames late)
 GAP_SIDE_INSET_M = 0.1
+GAP_LOOKED_MIN_POINTS = 8  # on a face across the gap, seen through its opening (one sweep: no motion to wait for)
+GAP_FACE_MARGIN_M = 0.15  # the faces bounding the gap: their points' noise and the fit's error along
 SOLID_INSET_M = 0.5  # a unit's box this far inside its faces is crossed by no ray (a sweep's motion blurs them)
 SEEN_THROUGH_RATIO = 0.1  # of the rays ending on a unit, at most this many cross it (real ones: under 0.01)
 CAB_SLICE_MIN_M = 1.0
@@ -1017,17 +1019,19 @@ class VehicleTracker:
 
     def _hinge_shown(self, seed: Seed, m: Measurement, model: VehicleModel, ground_z_m: float) -> bool:
         """Whether a straight articulated fit is two units: it moves (its seed moved
-        ``start_travel_m``, or it is a tracked vehicle's probe), or its gap was seen empty; a standing
-        straight one may be a parked trailer with a hole in its side (a pole's shadow). A rigid fit,
-        or a bent one, needs neither. (Tried: the motion of the fit's middle between cab front and
-        trailer rear instead of the seed's centre; a first fit of the seed merged with a dock wall
-        put it elsewhere, and a 16 m vehicle started 20 frames later on held-out seeds. Tried: a
-        seed that failed for want of this fitted again as soon as it moved, not after
-        ``SEED_RETRY_FRAMES``: a parked trailer's seed whose centre jumped when a passing vehicle
-        joined it was fitted again and started bent, 28.8 false vehicle-s on held-out seeds.)"""
+        ``start_travel_m``, or it is a tracked vehicle's probe), or its gap was seen empty, or, in one
+        sweep, into (``_gap_looked_into``); a standing straight one may be a parked trailer with a
+        hole in its side (a pole's shadow). A rigid fit, or a bent one, needs neither. (Tried: the
+        motion of the fit's middle between cab front and trailer rear instead of the seed's centre;
+        a first fit of the seed merged with a dock wall put it elsewhere, and a 16 m vehicle
+        started 20 frames later on held-out seeds.)"""
         if model.trailer is None or abs(m.hitch_rad) > GAP_TEST_MAX_HITCH_RAD:
             return True
-        return seed.moved(self.params.start_travel_m) or self._gap_seen_empty(m, model, ground_z_m)
+        return (
+            seed.moved(self.params.start_travel_m)
+            or self._gap_seen_empty(m, model, ground_z_m)
+            or (self._one_sweep() and _gap_looked_into(seed.points, m, model, ground_z_m))
+        )
 
     def _tall_enough(self, cluster: np.ndarray, ground_z_m: float, top_seen: bool) -> bool:
         """As tall as some catalogue vehicle's higher unit, less ``LOW_SEED_SLACK_M`` (a Twizy is
@@ -1538,6 +1542,32 @@ def _gap_open(cluster: np.ndarray, m: Measurement, model: VehicleModel, ground_z
     return (
         counts is not None and counts[1] >= GAP_OPEN_MIN_POINTS and counts[0] <= GAP_OPEN_RATIO * counts[1] * counts[2]
     )
+
+
+def _gap_looked_into(cluster: np.ndarray, m: Measurement, model: VehicleModel, ground_z_m: float) -> bool:
+    """At least ``GAP_LOOKED_MIN_POINTS`` of the points between the cab's rear and the trailer's front
+    (``GAP_FACE_MARGIN_M`` either way), at the gap's heights, lie ``GAP_SIDE_INSET_M`` inside the sides the
+    fit shows there (``_sides_at_gap``): a face across the body, the cab's rear or the trailer's
+    front, seen through the gap's opening. Seen at a slant from a car, a straight MAN's 0.7 m gap
+    lets no ray through (it needs one within 15 deg of square to it), but shows the face behind
+    it; a parked trailer's side with a pole's shadow on it shows none."""
+    trailer_front = model.trailer.front_m - model.kingpin_behind_axle_m
+    start, length = _gap_middle(model)
+    sides = _sides_at_gap(m, model, start, length)
+    if sides is None:
+        return False
+    (q,) = unit_frames(cluster, m.vector, model.with_boxes(model.tractor, None))
+    z_rel = cluster[:, 2] - ground_z_m
+    low, high = _gap_band(model)
+    inside = (
+        (q[:, 0] >= trailer_front - GAP_FACE_MARGIN_M)
+        & (q[:, 0] <= model.tractor.rear_m + GAP_FACE_MARGIN_M)
+        & (q[:, 1] >= sides[0] + GAP_SIDE_INSET_M)
+        & (q[:, 1] <= sides[1] - GAP_SIDE_INSET_M)
+        & (z_rel >= low)
+        & (z_rel <= high)
+    )
+    return int(np.count_nonzero(inside)) >= GAP_LOOKED_MIN_POINTS
 
 
 def _gap_counts(
