@@ -87,8 +87,9 @@ GAP_SEEN_MIN_RAYS = 1  # a solid side stops every ray: one through a seed's gap 
 GAP_SEEN_BEYOND_M = 0.3  # past the gap: a ray ending on a side running through it did not cross it
 GAP_SIDES_REACH_M = 2.5  # the body's sides next to the gap: about a cab's length either way
 # the gap's box is this far inside the sides: rays grazing a parked trailer's side ran along it within
-# 3 cm of its points' extent for a metre and "crossed" its "gap" (a false vehicle for 25 s, generalization
-# suite); 0.25 m inside kept too few of a MAN's rays through its 0.7 m gap (two started 26 frames late)
+# 3 cm of its points' extent for a metre and "crossed" its "gap" (a false vehicle for 25 s on the
+# generalization suite with a trial start rule); 0.25 m inside kept too few of a MAN's rays through its
+# 0.7 m gap (two started 26 frames late)
 GAP_SIDE_INSET_M = 0.1
 GAP_LOOKED_MIN_POINTS = 8  # on a face across the gap, seen through its opening (one sweep: no motion to wait for)
 GAP_FACE_MARGIN_M = 0.15  # the faces bounding the gap: their points' noise and the fit's error along
@@ -1501,8 +1502,7 @@ def _shift_along_m(before: VehicleModel, after: VehicleModel) -> float:
 
 
 def _supported(m: Measurement, model: VehicleModel, ground_z_m: float, top_seen: bool = True) -> bool:
-    """Each unit's explained points span at least ``UNIT_SUPPORT`` of its length or of its width (a
-    reversing MAN's cab, hidden behind its trailer but for its front face, waited 20 frames), reach
+    """Each unit's explained points span at least ``UNIT_SUPPORT`` of its length, reach
     ``UNIT_SUPPORT`` of its height above its floor (a car's side on a trailer's faces is no truck;
     unless the sensors' view ends below: ``top_seen`` False)
     and are at least ``UNIT_SUPPORT`` of the unit's share of the side area (a parked trailer's
@@ -1517,7 +1517,7 @@ def _supported(m: Measurement, model: VehicleModel, ground_z_m: float, top_seen:
         if (
             mine.sum() < 3
             or mine.sum() / explained < UNIT_SUPPORT * areas[u] / areas.sum()
-            or max(np.ptp(q[mine, 0]) / box.length_m, np.ptp(q[mine, 1]) / box.width_m) < UNIT_SUPPORT
+            or np.ptp(q[mine, 0]) < UNIT_SUPPORT * box.length_m
             or (top_seen and z_rel[mine].max() < box.floor_m + UNIT_SUPPORT * box.height_m)
             or np.mean(z_rel[mine] < box.floor_m) > UNIT_SUPPORT
         ):
