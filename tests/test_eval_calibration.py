@@ -32,7 +32,7 @@ def fake_calibration(monkeypatch):
     fitness = {"l3": 0.9}
     constraint = {}  # weakest horizontal direction in points, per sensor (none: unconstrained figure)
 
-    def fake(recording, params):
+    def fake(recording, params, progress=None):
         calls.append(params.calibration.windows)
         results = []
         for sensor in params.sensors:
@@ -96,17 +96,36 @@ def test_tasks_run_with_the_calibrated_sensors_and_the_guess_clock_offsets(fake_
     assert params.tracking.max_distance_m == 2.5 and params.sensor("l3").extrinsics == TRUTH.sensor("l3").extrinsics
 
 
-def test_a_refused_calibration_evaluates_with_the_guess_and_says_so(fake_calibration, tmp_path):
+def test_a_refused_sensor_is_evaluated_at_its_guess_the_others_calibrated_and_it_is_said(fake_calibration, tmp_path):
     _, fitness = fake_calibration
     fitness["l3"] = 0.1
     result = cal.calibrate_recording(str(SAMPLE), {}, tmp_path)
     assert result["status"] == cal.REFUSED and "l3 (0.10)" in result["message"]
-    assert result["sensors"] == [s.model_dump(mode="json") for s in GUESS.sensors]
+    used = {s["name"]: s for s in result["sensors"]}
+    assert used["l3"] == GUESS.sensor("l3").model_dump(mode="json")  # the refused one: its guess
+    assert used["l2"]["extrinsics"] != GUESS.sensor("l2").model_dump(mode="json")["extrinsics"]
     rows = {r["sensor"]: r for r in result["per_sensor"]}
-    assert rows["l2"]["error_cm"] == pytest.approx(rows["l2"]["guess_error_cm"])  # the guess is what is used
-    assert rows["l2"]["calibrated_error_cm"] == pytest.approx(5.0)
+    assert rows["l3"]["error_cm"] == pytest.approx(rows["l3"]["guess_error_cm"])  # the guess is what is used
+    assert rows["l2"]["error_cm"] == pytest.approx(rows["l2"]["calibrated_error_cm"]) == pytest.approx(5.0)
     text = _report(result)
     assert "WARNING — volvo_fh_u_turn: CALIBRATION REFUSED" in text and "**REFUSED**" in text
+
+
+def test_calibrate_writes_the_sensors_it_could_calibrate_and_fails_naming_the_refused_one(
+    fake_calibration, tmp_path, capsys
+):
+    from i2v_loc.cli import main
+
+    _, fitness = fake_calibration
+    fitness["l3"] = 0.1
+    out = tmp_path / "calibrated.yaml"
+    assert main(["calibrate", str(SAMPLE), "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "REFUSED" in err and "l3 (0.10)" in err and str(out) in err
+    written = load_params(out)
+    assert written.sensor("l3").extrinsics == GUESS.sensor("l3").extrinsics
+    assert written.sensor("l2").extrinsics == _perturbed(TRUTH.sensor("l2").extrinsics, 0.03, -0.04, 1.5)
+    assert written.sensor("l4").extrinsics == TRUTH.sensor("l4").extrinsics
 
 
 def test_a_weakly_constrained_sensor_is_calibrated_with_a_warning(fake_calibration, tmp_path):

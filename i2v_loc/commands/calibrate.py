@@ -26,7 +26,13 @@ def run(args) -> int:
 
     import numpy as np
 
-    from i2v_loc.evaluation.calibration import run_calibration, sensor_errors, weak_warning
+    from i2v_loc.evaluation.calibration import (
+        accepted_sensors,
+        refused_message,
+        run_calibration,
+        sensor_errors,
+        weak_warning,
+    )
     from i2v_loc.formats import open_recording
     from i2v_loc.params import dump_yaml, load_params
     from i2v_loc.recording import RecordingError
@@ -50,8 +56,8 @@ def run(args) -> int:
         raise UserError(str(err)) from err
     truth = load_params(recording.sensors_file).sensors if recording.sensors_file.is_file() else []
     by_name = {r.name: r.extrinsics for r in results}
-    sensors = [s.model_copy(update={"extrinsics": by_name[s.name]}) for s in params.sensors]
-    errors = {row["sensor"]: row for row in sensor_errors(sensors, truth)}
+    calibrated = [s.model_copy(update={"extrinsics": by_name[s.name]}) for s in params.sensors]
+    errors = {row["sensor"]: row for row in sensor_errors(calibrated, truth)}
     print(
         f"{'sensor':8} {'fitness':>8} {'rmse_m':>8} {'weakest':>8}  against"
         + ("   error_cm  error_deg" if truth else "")
@@ -62,13 +68,7 @@ def run(args) -> int:
         if errors[r.name]["error_cm"] is not None:
             line += f" {errors[r.name]['error_cm']:8.2f} {errors[r.name]['error_deg']:10.3f}"
         print(line)
-    refused = [r for r in results if r.fitness < params.calibration.min_fitness]
-    if refused:
-        names = ", ".join(f"{r.name} ({r.fitness:.2f})" for r in refused)
-        raise UserError(
-            f"calibration refused: fitness below min_fitness {params.calibration.min_fitness} for {names}; "
-            f"{args.out} not written"
-        )
+    sensors, refused = accepted_sensors(params.sensors, results, params.calibration.min_fitness)
     warning = weak_warning(results, params.calibration.min_constraint_points)
     if warning:
         print(f"WARNING: {warning}", file=sys.stderr)
@@ -76,6 +76,8 @@ def run(args) -> int:
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(dump_yaml(params.model_copy(update={"sensors": sensors}), ["sensors"]))
     print(f"wrote {out}")
+    if refused:  # written, but not done: the refused sensors need a better guess or more overlap
+        raise UserError(f"{refused_message(refused, params.calibration.min_fitness)}: in {out}")
     return 0
 
 
