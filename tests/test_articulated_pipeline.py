@@ -1175,30 +1175,6 @@ def test_a_moving_seed_that_fitted_one_box_is_fitted_again_before_the_map_is_rea
     assert moved.retry_due(rigid_allowed=False)
 
 
-def test_a_standing_vehicle_that_was_no_vehicle_is_fitted_again_when_it_sets_off():
-    """A Volvo standing straight, seen from one side with nothing behind its gap for a ray to end on:
-    a hole or a gap, the start cannot tell, and its seed fails. The frame its seed has moved
-    (``Seed.moved``) it is fitted again, not ``SEED_RETRY_FRAMES`` after the failure."""
-    from i2v_loc.stages.visibility import Rays
-
-    model = volvo()
-    tracker = VehicleTracker(PARAMS.articulated, PARAMS.vehicles)
-    vehicles = [(model, (0.0, 3.0, 0.0, 0.0))]
-    started = None
-    sensor = np.array(SENSORS[:1])
-    for k, (t, points, _) in enumerate(drive(vehicles, 3.0, lambda t: 0.0 if t < 0.5 else 3.0, 0.0, sensor)):
-        rays = Rays(points.astype(np.float32), sensor, np.array([0, len(points)]), np.eye(3))  # none beyond it
-        reports = tracker.process(points, flat, t, background_ready=False, rays=rays)
-        if reports:
-            started = k
-            break
-        if k == PARAMS.articulated.start_frames:
-            assert tracker.seeds and all(s.failed is not None for s in tracker.seeds)  # standing: no start
-    first_failure = PARAMS.articulated.start_frames - 1
-    assert started is not None and started < first_failure + SEED_RETRY_FRAMES
-    assert reports[0].model.articulated and abs(reports[0].state.hitch_rad) < np.radians(2.0)
-
-
 def test_a_moving_car_is_no_vehicle_and_is_not_fitted(monkeypatch):
     """Shorter than any rigid vehicle and lower than every catalogue vehicle's higher unit, a car
     is no vehicle: its seed is not fitted at all (the start's fits cost 40-80 ms a time)."""

@@ -758,13 +758,12 @@ class VehicleTracker:
                 seed = Seed(center, center, first_points=thin(cluster, SEED_FIRST_POINTS))
                 self.seeds.append(seed)
             seed.points, seed.rect = cluster, rect
-            set_off = not seed.travelled and seed.moved(self.params.start_travel_m)
-            seed.travelled = seed.travelled or set_off
+            seed.travelled = seed.travelled or seed.moved(self.params.start_travel_m)
             shape = _Shape(len(cluster), rect.length_m, rect.width_m, center, rigid_allowed)
             if (
                 seed.frames >= self.params.start_frames
                 and self._may_fit(seed)
-                and (seed.failed is None or set_off or (seed.retry_due(rigid_allowed) and seed.failed.changed(shape)))
+                and (seed.failed is None or (seed.retry_due(rigid_allowed) and seed.failed.changed(shape)))
             ):
                 ready.append((seed, cluster, rect, shape))
         self.seeds = [s for s in self.seeds if s.seen]
