@@ -28,6 +28,7 @@ def run(args) -> int:
 
     from i2v_loc.evaluation.calibration import (
         accepted_sensors,
+        calibrated_sensors,
         refused_message,
         run_calibration,
         sensor_errors,
@@ -55,8 +56,7 @@ def run(args) -> int:
     except ValueError as err:
         raise UserError(str(err)) from err
     truth = load_params(recording.sensors_file).sensors if recording.sensors_file.is_file() else []
-    by_name = {r.name: r.extrinsics for r in results}
-    calibrated = [s.model_copy(update={"extrinsics": by_name[s.name]}) for s in params.sensors]
+    calibrated = calibrated_sensors(params.sensors, results)
     errors = {row["sensor"]: row for row in sensor_errors(calibrated, truth)}
     print(
         f"{'sensor':8} {'fitness':>8} {'rmse_m':>8} {'weakest':>8}  against"

@@ -22,7 +22,7 @@ import numpy as np
 CACHE_VERSION = 5  # 5: a refused sensor at its guess, the others calibrated; 4: structure correspondences on one side
 
 CALIBRATED = "calibrated"
-REFUSED = "refused"  # fitness too low: evaluated with the guess
+REFUSED = "refused"  # a sensor's fitness too low: that sensor evaluated at its guess
 NO_GUESS = "no_guess"  # no sensors_guess.yaml: evaluated with sensors.yaml
 FROM_PARAMS = "from_params"  # the --params files set the sensors
 TRUE = "true_extrinsics"  # --true-extrinsics (diagnosis)
@@ -131,11 +131,15 @@ def accepted_sensors(guess_sensors, results, min_fitness: float) -> tuple[list, 
     with the others calibrated)."""
     by_name = {r.name: r for r in results}
     refused = [by_name[s.name] for s in guess_sensors if by_name[s.name].fitness < min_fitness]
-    sensors = [
-        s if by_name[s.name].fitness < min_fitness else s.model_copy(update={"extrinsics": by_name[s.name].extrinsics})
-        for s in guess_sensors
-    ]
+    calibrated = calibrated_sensors(guess_sensors, results)
+    sensors = [g if by_name[g.name].fitness < min_fitness else c for g, c in zip(guess_sensors, calibrated)]
     return sensors, refused
+
+
+def calibrated_sensors(guess_sensors, results) -> list:
+    """The guess's sensors with the calibrated extrinsics of ``results`` (accepted or not)."""
+    by_name = {r.name: r.extrinsics for r in results}
+    return [s.model_copy(update={"extrinsics": by_name[s.name]}) for s in guess_sensors]
 
 
 def refused_message(refused, min_fitness: float) -> str:
@@ -179,7 +183,7 @@ def calibrate_recording(recording_path: str, patch: dict, cache_dir: str | Path 
         return cached
     results, _ = run_calibration(recording, guess)
     by_name = {r.name: r for r in results}
-    calibrated = [s.model_copy(update={"extrinsics": by_name[s.name].extrinsics}) for s in guess.sensors]
+    calibrated = calibrated_sensors(guess.sensors, results)
     used, refused = accepted_sensors(guess.sensors, results, guess.calibration.min_fitness)
     rows = []
     for row, cal_row, guess_row in zip(
