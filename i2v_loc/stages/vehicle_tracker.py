@@ -873,7 +873,11 @@ class VehicleTracker:
         """The best-explaining model and its fit, if it passes the start's checks (``rect``: the
         cluster's minimum-area rectangle; ``top_seen``: no point at a sensor's view top). A seed
         longer than any rigid vehicle is articulated: the catalogue models are tried cheapest first
-        (an unknown tractor's cab puts a model's gap on the real trailer's front)."""
+        (an unknown tractor's cab puts a model's gap on the real trailer's front), but while a
+        cheaper one only lacks points (not supported, yet neither its gap filled nor a unit seen
+        through) none the other way round starts: seen by one LiDAR ahead of its cab, a MAN's
+        right fit waited for its trailer's side to show, and a Volvo the wrong way round, at 16
+        times its cost, started instead."""
         if one_face_sized(rect, self.params):
             return self._one_face(cluster, rect, seed, ground_z_m, rigid_allowed, top_seen)
         may_be_rigid = rect.length_m <= RIGID_MAX_LENGTH_M
@@ -886,12 +890,18 @@ class VehicleTracker:
         if may_be_rigid:
             two = self._two_units(hypotheses, cluster, seed, ground_z_m, top_seen)
             choices = [two] if two is not None else self._choose(hypotheses, seed, ground_z_m, top_seen)
+        waiting = None  # a cheaper fit that only lacks points yet: no fit the other way round starts
         for model, m in choices:
             if not self._allowed_to_start(seed, model, m, rigid_allowed):
                 return None
+            if waiting is not None and not _same_way(m, waiting):
+                continue
+            if not _supported(m, model, ground_z_m, top_seen):
+                refuted = _gap_filled(cluster, m, model, ground_z_m) or self._seen_through(m, model, ground_z_m)
+                waiting = waiting or (None if refuted else m)
+                continue
             if (
                 self._explains(m)
-                and _supported(m, model, ground_z_m, top_seen)
                 and not _gap_filled(cluster, m, model, ground_z_m)
                 # without rays a hole and a gap look alike: the points alone decide
                 and (self._rays is None or self._hinge_shown(seed, m, model, ground_z_m))
@@ -1273,6 +1283,12 @@ class VehicleTracker:
             heading = [np.array([np.cos(h[2].yaw_rad), np.sin(h[2].yaw_rad)]) @ travel for h in pair]
             pair = pair[::-1] if heading[1] > heading[0] else pair
         return [(h[0], h[2]) for h in pair]
+
+
+def _same_way(a: Measurement, b: Measurement) -> bool:
+    """Whether two fits' mean axes (between tractor and trailer) point the same way."""
+    axis = [m.yaw_rad + (m.hitch_rad or 0.0) / 2 for m in (a, b)]
+    return bool(np.cos(axis[0] - axis[1]) > 0.0)
 
 
 def _tractor_around(prior: Prior) -> list[Prior]:
