@@ -987,6 +987,32 @@ def test_a_rigid_track_becomes_articulated_when_it_moves():
     assert pos < 0.05 and abs(yaw_err) < 0.5 and abs(hitch) < 0.5 and abs(np.degrees(truth[3] - truth[2])) > 5.0
 
 
+def test_a_rigid_track_on_part_of_a_vehicle_is_fitted_again_with_the_rest_of_it():
+    """A MAN that came into view cab first started as a rigid box on its front 7.6 m, which claims
+    none of the rest: fitted again with the unclaimed points connected to its own, it becomes the
+    MAN (same id); a box standing apart is not taken in."""
+    model = VehicleModel.from_config("man_tgx", PARAMS.vehicles["man_tgx"])
+    yaw, axle = 0.0, np.array([-12.0, 4.0])
+    front = axle + model.tractor.front_m * np.array([np.cos(yaw), np.sin(yaw)])
+    part = VehicleModel.rigid("rigid", 7.6, model.trailer.width_m, 4.0)
+    other = vehicle_points(VehicleModel.rigid("rigid", 6.0, 2.5, 2.6), 30.0, -12.0, 0.3, sensors=SENSORS)
+    tracker = VehicleTracker(PARAMS.articulated, PARAMS.vehicles)
+    frames = drive([(model, (*axle, yaw, yaw))], 6.0, 2.0, lambda t: 0.0)
+    t, points, _ = next(frames)
+    m = fit(points, Prior(*(front - [3.8, 0.0]), yaw, 0.0, part), PARAMS.articulated, iterations=20)
+    tracker.tracks.append(tracker._track(7, part, m, 0.0, t, 2.0))
+    kinds, truth = [], None
+    for t, points, (state,) in frames:
+        reports = tracker.process(np.vstack([points, other]), flat, t)
+        report = next(r for r in reports if r.id == 7)
+        kinds.append(report.model.name)
+        truth = state
+    assert kinds[0] == "rigid" and kinds[-1] == "man_tgx"
+    pos, yaw_err, hitch = errors(report, truth)
+    assert pos < 0.05 and abs(yaw_err) < 0.5 and abs(hitch) < 0.5
+    assert len(tracker.tracks) == 1
+
+
 def test_a_lower_bound_on_the_trailer_length_does_not_rename_the_vehicle():
     """Points that only reach further back (a door jamb in line with the trailer's side) bound its
     length from below: the box grows, but the name follows measured lengths only."""
@@ -1141,6 +1167,28 @@ def test_a_seed_moved_when_it_left_a_place_not_when_it_grew():
     assert not grown.moved(travel)
     assert not _seed_that_moved(box, travel - 0.2).moved(travel)  # not far enough
     assert replace(grown, moving=True).moved(travel)
+
+
+def test_a_seed_moved_when_the_place_it_left_is_seen_empty_not_hidden():
+    """A parked trailer's side seen past a truck driving by: its first points are hidden now and
+    others show, its centre travelled, but the rays do not cross where it was: with them, it did
+    not move. Driven 3 m on, the place its first points left is crossed by rays: it moved."""
+    trailer = VehicleModel.rigid("rigid", 12.0, 2.5, 2.6, 1.2)
+    sensor = (0.0, -15.0, 4.0)
+    passing = world_boxes(VehicleModel.rigid("rigid", 6.0, 2.5, 4.2), -4.5, -4.5, 0.0)
+    before = vehicle_points(trailer, 0.0, 0.0, 0.0, sensors=[sensor], spacing=0.2)
+    first = before[before[:, 0] < 0.0]  # what it showed first (its other end was hidden then)
+    travel = PARAMS.articulated.start_travel_m
+
+    def seed(now: np.ndarray) -> Seed:
+        return Seed(now[:, :2].mean(axis=0), first[:, :2].mean(axis=0), first_points=first, points=now)
+
+    hidden = vehicle_points(trailer, 0.0, 0.0, 0.0, sensors=[sensor], spacing=0.2, others=passing)
+    rays = cast_rays(world_boxes(trailer, 0.0, 0.0, 0.0) + passing, [sensor])
+    assert seed(hidden).travel_m >= travel and seed(hidden).moved(travel)  # the points alone: it moved
+    assert not seed(hidden).moved(travel, rays)
+    driven = vehicle_points(trailer, 3.0, 0.0, 0.0, sensors=[sensor], spacing=0.2)
+    assert seed(driven).moved(travel, cast_rays(world_boxes(trailer, 3.0, 0.0, 0.0), [sensor]))
 
 
 def test_two_units_are_judged_on_the_cheapest_supported_fit():

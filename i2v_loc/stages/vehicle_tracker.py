@@ -120,6 +120,7 @@ RECHECK_MIN_SPEED_M_S = 0.5  # a rigid track is fitted again as every model whil
 RECHECK_FRAMES = 20  # a moving rigid track is fitted as every model every this many frames (the fits cost ~0.1 s)
 VACATED_M = 0.5  # a first point this far from all of a seed's points now: its place was left
 VACATED_MIN_SHARE = 0.1
+VACATED_SEEN_MIN_RAYS = 3  # through a place a seed's first points left: seen empty, not hidden
 SEED_FIRST_POINTS = 200
 SEED_RETRY_FRAMES = 20  # a seed that was no vehicle is fitted again after this many frames
 SHAPE_CHANGE_M = 0.5  # if its extent or centre moved this much
@@ -189,18 +190,36 @@ class Seed:
     def travel_m(self) -> float:
         return float(np.hypot(*(self.center_xy - self.first_xy)))
 
-    def moved(self, travel_m: float) -> bool:
+    def moved(self, travel_m: float, rays: Rays | None = None) -> bool:
         """Known to move, or its centre travelled ``travel_m`` and it left a place behind: at least
-        ``VACATED_MIN_SHARE`` of its first points are ``VACATED_M`` from all of its points now. A
-        standing container that a passing truck uncovers grows where it was hidden, and its centre
-        travels as far (one started as a Twizy, 9 false vehicle-s on held-out seeds); what it
-        showed first stays where it was."""
+        ``VACATED_MIN_SHARE`` of its first points are ``VACATED_M`` from all of its points now and,
+        when asked with the frame's ``rays``, their place is seen empty (``_seen_empty``). A standing
+        container that a passing truck uncovers grows where it was hidden, and its centre travels as
+        far (one started as a Twizy, 9 false vehicle-s on held-out seeds); what it showed first stays
+        where it was, or is hidden now: a parked trailer's side, seen by one LiDAR past a MAN driving
+        by, lost its first points behind the MAN, showed others, and started as a rigid vehicle."""
         if self.moving:
             return True
         if self.travel_m < travel_m or len(self.first_points) == 0 or len(self.points) == 0:
             return False
         distance, _ = cKDTree(self.points[:, :2]).query(self.first_points[:, :2], distance_upper_bound=VACATED_M)
-        return float(np.mean(np.isinf(distance))) >= VACATED_MIN_SHARE
+        vacated = np.isinf(distance)
+        if float(np.mean(vacated)) < VACATED_MIN_SHARE:
+            return False
+        return rays is None or _seen_empty(rays, self.first_points[vacated])
+
+
+def _seen_empty(rays: Rays, points: np.ndarray) -> bool:
+    """At least ``VACATED_SEEN_MIN_RAYS`` rays crossed the box around ``points`` (their footprint's
+    rectangle, at least ``VACATED_M`` wide, and heights) and ended ``GAP_SEEN_BEYOND_M`` beyond it:
+    no surface is there now (hidden, the rays would have ended before it)."""
+    rect = min_area_rect(points[:, :2])
+    z = (float(points[:, 2].min()), float(points[:, 2].max()))
+    half_width = max(rect.width_m, VACATED_M) / 2
+    crossed, _, _ = rays.through(
+        tuple(rect.center_xy), rect.yaw_rad, rect.length_m / 2, half_width, z, GAP_SEEN_BEYOND_M
+    )
+    return crossed >= VACATED_SEEN_MIN_RAYS
 
 
 class _Window(deque):
@@ -362,9 +381,10 @@ class VehicleTracker:
         owner = self._claim(points, priors, lost)
         owned = [_own_body(points, owner, i, prior) for i, prior in enumerate(priors)]
         reports = []
+        free = points[owner < 0]
         for i, (track, (prior, at_wall)) in enumerate(zip(self.tracks, owned)):
             track.at_wall = at_wall
-            reports.append(self._step(track, prior, points[owner == i], stamp_s, lost[i]))
+            reports.append(self._step(track, prior, points[owner == i], free, stamp_s, lost[i]))
         self.tracks = [t for t in self.tracks if t.missed < self.params.leave_frames]
         reports = [r for r in reports if any(t.id == r.id for t in self.tracks)]
         reports += self._start(points[owner < 0], ground, stamp_s, rigid_allowed=background_ready)
@@ -397,7 +417,10 @@ class VehicleTracker:
             points, np.vstack(boxes), track_of_box, len(priors), float(self.params.gate_margin_m)
         )
 
-    def _step(self, track: _Track, prior: Prior, points: np.ndarray, stamp_s: float, lost: bool) -> VehicleReport:
+    def _step(
+        self, track: _Track, prior: Prior, points: np.ndarray, free: np.ndarray, stamp_s: float, lost: bool
+    ) -> VehicleReport:
+        """One frame of a track: fit its claimed ``points``, fuse, learn (``free``: the points no track claimed)."""
         track.ground_z_m = prior.ground_z_m
         m = fit(points, prior, self.params) if len(points) else None
         found = self._reacquired(points, prior, m) if m is not None and lost else None
@@ -416,7 +439,7 @@ class VehicleTracker:
                 before = (track.model, track.catalogue_name)
                 self._learn(track, m, points)
                 self._follow_model(track, prior, m, *before)
-            track = self._recheck_rigid(track, points, stamp_s)
+            track = self._recheck_rigid(track, points, free, stamp_s)
         else:
             track.missed += 1
         return track.report(measured)
@@ -934,6 +957,8 @@ class VehicleTracker:
             return None
         if not self._explains(m) or self._seen_through(m, model, ground_z_m):
             return None
+        if not self._one_sweep() and not seed.moved(self.params.start_travel_m, self._rays):
+            return None  # a face's points come and go as things pass before it: where it was must be seen empty
         return model, m
 
     def _allowed_to_start(self, seed: Seed, model: VehicleModel, m: Measurement, rigid_allowed: bool) -> bool:
@@ -1143,14 +1168,17 @@ class VehicleTracker:
             reach,
         )
 
-    def _recheck_rigid(self, track: _Track, points: np.ndarray, stamp_s: float) -> _Track:
+    def _recheck_rigid(self, track: _Track, points: np.ndarray, free: np.ndarray, stamp_s: float) -> _Track:
         """A rigid track is fitted again as every model every ``RECHECK_FRAMES`` frames while it
         moves: a tractor and trailer driving straight can look like one long box, a hinge shows
-        later (it becomes articulated, with its id)."""
+        later (it becomes articulated, with its id). Fitted with the unclaimed points connected to
+        its own (``_with_connected``): a MAN that came into one LiDAR's view cab first started as a
+        rigid box 7.6 m long, which claimed no more of it, and its trailer's side stayed outside."""
         track.frames += 1
         s = track.filter.state
         if track.model.articulated or track.frames % RECHECK_FRAMES or abs(s.speed_m_s) < RECHECK_MIN_SPEED_M_S:
             return track
+        points = self._with_connected(points, free, track.ground_z_m)
         heading = np.array([np.cos(s.yaw_rad), np.sin(s.yaw_rad)]) * np.sign(s.speed_m_s)
         here = np.array([s.x_m, s.y_m])
         probe = Seed(here, here - heading, moving=True)  # the direction of travel, for a tie between the two ends
@@ -1165,6 +1193,19 @@ class VehicleTracker:
         self._learn_at_start(new, points, m)
         self.tracks[self.tracks.index(track)] = new
         return new
+
+    def _with_connected(self, points: np.ndarray, free: np.ndarray, ground_z_m: float) -> np.ndarray:
+        """``points`` and the ``free`` points in the start's clusters (``seed_groups``) that hold some of them."""
+        if len(free) == 0 or len(points) == 0:
+            return points
+        p = self.params
+        both = np.vstack([points, free]).astype(points.dtype, copy=False)
+        groups = seed_groups(
+            both, lambda x, y: ground_z_m, p.start_voxel_m, p.start_min_height_m, 1, p.start_join_m, 0.0
+        )
+        own = _row_keys(points)
+        holding = [g for g in groups if np.isin(_row_keys(g), own).any()]
+        return np.vstack(holding) if holding else points
 
     def _hypotheses(
         self, cluster: np.ndarray, rect: Rect, ground_z_m: float, may_be_rigid: bool, top_seen: bool
@@ -1283,6 +1324,12 @@ class VehicleTracker:
             heading = [np.array([np.cos(h[2].yaw_rad), np.sin(h[2].yaw_rad)]) @ travel for h in pair]
             pair = pair[::-1] if heading[1] > heading[0] else pair
         return [(h[0], h[2]) for h in pair]
+
+
+def _row_keys(points: np.ndarray) -> np.ndarray:
+    """One comparable value per row of ``points`` (its bytes)."""
+    rows = np.ascontiguousarray(points)
+    return rows.view(np.dtype((np.void, rows.dtype.itemsize * rows.shape[1]))).ravel()
 
 
 def _same_way(a: Measurement, b: Measurement) -> bool:
