@@ -37,6 +37,18 @@ def articulated(name: str, x: float, y: float, yaw: float) -> list[m.Mesh]:
     ]
 
 
+def parked_trailer(name: str, x: float, y: float, yaw: float) -> list[m.Mesh]:
+    """A catalogue vehicle's trailer standing alone (its box's centre at x, y)."""
+    trailer = Params().vehicles[name].trailer
+    centre = m.box_center_in_axle_frame(trailer, is_truck=False)
+    return [m.transformed(m.shifted(m.trailer_mesh(trailer), (-centre[0], 0.0, 0.0)), _pose(x, y, yaw))]
+
+
+def container(x: float, y: float, yaw: float, length_m: float = 2.99) -> list[m.Mesh]:
+    """A 2.44 m wide, 2.6 m tall box set down on the ground (a 10-ft container by default)."""
+    return [m.box((x, y, 1.3), (length_m, 2.44, 2.6), yaw, "concrete")]
+
+
 def bus(x: float, y: float, yaw: float, length_m: float = 12.0, width_m: float = 2.55) -> list[m.Mesh]:
     """A 3.2 m tall body 0.3 m above the ground on two axles (centre at x, y)."""
     wheels = m.wheel_pair(length_m / 2 - 2.5, width_m / 2 - 0.2, 0.5, 0.3)

@@ -114,3 +114,19 @@ def test_a_board_beside_a_wall_is_no_vehicle(tmp_path, capsys):
     under the board, in 4 of the face's 29 columns: a body's clearance runs along it, a board's does not."""
     parts = cm.wall(1.41, -13.85, 5.47, -7.68, 2.81) + cm.sign(1.23, -13.62, 2.695)
     assert _detect(tmp_path, capsys, parts) == []
+
+
+@pytest.mark.parametrize("name", ["man_tgx", "volvo_fh"])
+def test_a_container_set_down_before_a_parked_trailer_is_no_tractor(tmp_path, capsys, name):
+    """A 10-ft container 0.8 m before a parked trailer's front looks like a cab in one sweep; its
+    faces reach down to the ground (the rays end on them right above it), a cab's bumper does not:
+    no tractor and trailer. The same vehicle's own tractor there is one."""
+    x, y, yaw = 16.0, 10.0, -2.2
+    trailer = Params().vehicles[name].trailer
+    along = trailer.length_m / 2 + 0.8 + 2.99 / 2
+    parked = cm.parked_trailer(name, x, y, yaw) + cm.container(x + along * np.cos(yaw), y + along * np.sin(yaw), yaw)
+    assert not [v for v in _detect(tmp_path, capsys, parked) if v["kind"] == "articulated"]
+    vehicle = Params().vehicles[name]
+    axle = along - 2.99 / 2 + vehicle.truck.wheelbase_m  # its rear axle about where the container stands
+    (v,) = _detect(tmp_path, capsys, cm.articulated(name, x + axle * np.cos(yaw), y + axle * np.sin(yaw), yaw))
+    assert v["kind"] == "articulated" and v["vehicle"] == name

@@ -34,6 +34,9 @@ UNDER_BODY_SHARE = 0.5  # of a face's columns: a body's clearance runs along it 
 L_SHAPE_MIN_TURN_RAD = np.radians(3.0)
 L_SHAPE_AREA_RATIO = 1.05
 FACE_SPAN_SHARE = 0.5  # a face's points span this share of it to be asked about
+GROUNDED_BAND_M = (0.08, 0.25)  # above the ground: the ground's noise below, road vehicles' clearance above
+GROUNDED_SHARE = 0.6  # of a face's columns (a cab's wheels fill about a third of its side's)
+GROUNDED_MIN_FLOOR_M = 0.25  # a unit's box this high or higher has no body in the band
 
 
 def one_face_sized(rect: Rect, params: ArticulatedParams) -> bool:
@@ -146,11 +149,46 @@ def unit_raised(
     """Whether rays pass under one of the unit's faces that face the nearest sensor (``passes_under``,
     on the points within ``FACE_MAX_DEPTH_M`` of it, spanning ``FACE_SPAN_SHARE`` of its length);
     True if none of them shows."""
+    shown = False
+    for face, along, half_length, on_face in _faces_shown(rays, cluster, m, model, unit):
+        shown = True
+        if passes_under(rays, cluster[on_face], face, along, half_length, ground_z_m):
+            return True
+    return not shown
+
+
+def unit_grounded(
+    rays: Rays, cluster: np.ndarray, m: Measurement, model: VehicleModel, unit: int, ground_z_m: float
+) -> bool:
+    """Whether one of the unit's faces shown to the nearest sensor (as ``unit_raised`` asks) reaches
+    down to the ground: rays end within ``FACE_MAX_DEPTH_M`` of its plane ``GROUNDED_BAND_M`` above
+    the ground in ``GROUNDED_SHARE`` of the ``FACE_BAND_M`` columns its points span. A container or a wall stands on
+    the ground; a cab's bumper is higher (the front end drops these returns as ground, the rays keep
+    them). Never for a unit whose box reaches that low (a Twizy's body is 0.1 m up)."""
+    if model.boxes[unit].floor_m < GROUNDED_MIN_FLOOR_M:
+        return False
+    ends = rays.level_points
+    low = (ends[:, 2] - ground_z_m >= GROUNDED_BAND_M[0]) & (ends[:, 2] - ground_z_m <= GROUNDED_BAND_M[1])
+    ends = ends[low]
+    for face, along, _, on_face in _faces_shown(rays, cluster, m, model, unit):
+        normal = np.array([along[1], -along[0]])
+        spread = (cluster[on_face, :2] - face) @ along  # the face as far as its points show it
+        across, at = ((ends[:, :2] - face) @ np.column_stack([normal, along])).T
+        on = (np.abs(across) <= FACE_MAX_DEPTH_M) & (at >= spread.min()) & (at <= spread.max())
+        columns = np.unique(np.floor((at[on] - spread.min()) / FACE_BAND_M))
+        if len(columns) >= GROUNDED_SHARE * np.ceil(np.ptp(spread) / FACE_BAND_M):
+            return True
+    return False
+
+
+def _faces_shown(rays: Rays, cluster: np.ndarray, m: Measurement, model: VehicleModel, unit: int):
+    """The unit's upright faces that face the nearest sensor and whose points (within
+    ``FACE_MAX_DEPTH_M`` of it, at least ``FACE_BAND_MIN_POINTS``) span ``FACE_SPAN_SHARE`` of it:
+    (a point on it, its direction, its half length, which of ``cluster`` lie on it) each."""
     box = model.boxes[unit]
     centre = model.box_centers(m.x_m, m.y_m, m.yaw_rad, m.hitch_rad or 0.0)[unit]
     yaw = m.yaw_rad + (m.hitch_rad or 0.0) * unit
     sensor = nearest_sensor(rays, centre)
-    shown = False
     for turn, depth, half_length in (
         (0.0, box.length_m / 2, box.width_m / 2),
         (np.pi, box.length_m / 2, box.width_m / 2),
@@ -166,10 +204,7 @@ def unit_raised(
             continue
         if np.ptp(local[on_face, 1]) < FACE_SPAN_SHARE * 2 * half_length:
             continue  # a few columns of something else across its line are no face of it
-        shown = True
-        if passes_under(rays, cluster[on_face], face, along, half_length, ground_z_m):
-            return True
-    return not shown
+        yield face, along, half_length, on_face
 
 
 def roof_shown(cluster: np.ndarray, m: Measurement, model: VehicleModel, ground_z_m: float) -> bool:

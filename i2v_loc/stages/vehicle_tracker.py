@@ -35,6 +35,7 @@ from i2v_loc.stages.faces import (
     passes_under,
     rigid_seen,
     roof_shown,
+    unit_grounded,
     unit_raised,
     vehicle_face,
 )
@@ -930,6 +931,7 @@ class VehicleTracker:
                 and (self._rays is None or self._hinge_shown(seed, m, model, ground_z_m))
                 and not self._seen_through(m, model, ground_z_m)
                 and self._stands_on_wheels(cluster, m, model, ground_z_m, top_seen)
+                and not self._cab_grounded(cluster, m, model, ground_z_m)
             ):
                 return model, m
         return None
@@ -993,6 +995,14 @@ class VehicleTracker:
             )
         heights_shown = top_seen or _supported(m, model, ground_z_m)
         return heights_shown or unit_raised(self._rays, cluster, m, model, 1, ground_z_m)
+
+    def _cab_grounded(self, cluster: np.ndarray, m: Measurement, model: VehicleModel, ground_z_m: float) -> bool:
+        """Whether an articulated fit's cab has a face reaching down to the ground
+        (``faces.unit_grounded``): a box set down before a parked trailer's front, a 10-ft
+        container, had started as its tractor in one sweep. Never without rays."""
+        return (
+            model.articulated and self._rays is not None and unit_grounded(self._rays, cluster, m, model, 0, ground_z_m)
+        )
 
     def _behind_face(
         self,

@@ -60,6 +60,11 @@ class Rays:
         keep = (np.abs(along) <= half_length_m) & (at[:, 2] <= top_z_m)
         return np.column_stack([along[keep], at[keep, 2]])
 
+    @property
+    def level_points(self) -> np.ndarray:
+        """Every ray's return, level frame (N, 3)."""
+        return self._level_segments[1]
+
     @cached_property
     def _level_segments(self) -> tuple[np.ndarray, np.ndarray]:
         """Each ray's origin and return, level frame (origins NaN where the sensor is not known)."""
