@@ -162,9 +162,10 @@ def unit_grounded(
 ) -> bool:
     """Whether one of the unit's faces shown to the nearest sensor (as ``unit_raised`` asks) reaches
     down to the ground: rays end within ``FACE_MAX_DEPTH_M`` of its plane ``GROUNDED_BAND_M`` above
-    the ground in ``GROUNDED_SHARE`` of the ``FACE_BAND_M`` columns its points span. A container or a wall stands on
-    the ground; a cab's bumper is higher (the front end drops these returns as ground, the rays keep
-    them). Never for a unit whose box reaches that low (a Twizy's body is 0.1 m up)."""
+    the ground in ``GROUNDED_SHARE`` of the ``FACE_BAND_M`` columns its points span. A container or
+    a wall stands on the ground; a cab's bumper is higher (the front end drops these returns as
+    ground, the rays keep them). Never for a unit whose box reaches that low (a Twizy's body is
+    0.1 m up)."""
     if model.boxes[unit].floor_m < GROUNDED_MIN_FLOOR_M:
         return False
     ends = rays.level_points

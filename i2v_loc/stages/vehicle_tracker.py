@@ -388,7 +388,7 @@ class VehicleTracker:
             reports.append(self._step(track, prior, points[owner == i], free, stamp_s, lost[i]))
         self.tracks = [t for t in self.tracks if t.missed < self.params.leave_frames]
         reports = [r for r in reports if any(t.id == r.id for t in self.tracks)]
-        reports += self._start(points[owner < 0], ground, stamp_s, rigid_allowed=background_ready)
+        reports += self._start(free, ground, stamp_s, rigid_allowed=background_ready)
         return reports
 
     def _prior(self, track: _Track, stamp_s: float, ground) -> Prior:
