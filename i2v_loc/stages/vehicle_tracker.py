@@ -1209,13 +1209,12 @@ class VehicleTracker:
         if len(free) == 0 or len(points) == 0:
             return points
         p = self.params
-        both = np.vstack([points, free]).astype(points.dtype, copy=False)
-        groups = seed_groups(
+        both = _in_grid_precision(np.vstack([points, free]))
+        groups = seed_group_rows(
             both, lambda x, y: ground_z_m, p.start_voxel_m, p.start_min_height_m, 1, p.start_join_m, 0.0
         )
-        own = _row_keys(points)
-        holding = [g for g in groups if np.isin(_row_keys(g), own).any()]
-        return np.vstack(holding) if holding else points
+        holding = [rows for rows in groups if (rows < len(points)).any()]  # rows below len(points) are its own
+        return both[np.concatenate(holding)] if holding else points
 
     def _hypotheses(
         self, cluster: np.ndarray, rect: Rect, ground_z_m: float, may_be_rigid: bool, top_seen: bool
@@ -1334,12 +1333,6 @@ class VehicleTracker:
             heading = [np.array([np.cos(h[2].yaw_rad), np.sin(h[2].yaw_rad)]) @ travel for h in pair]
             pair = pair[::-1] if heading[1] > heading[0] else pair
         return [(h[0], h[2]) for h in pair]
-
-
-def _row_keys(points: np.ndarray) -> np.ndarray:
-    """One comparable value per row of ``points`` (its bytes)."""
-    rows = np.ascontiguousarray(points)
-    return rows.view(np.dtype((np.void, rows.dtype.itemsize * rows.shape[1]))).ravel()
 
 
 def _same_way(a: Measurement, b: Measurement) -> bool:
@@ -1733,14 +1726,36 @@ def seed_groups(
     is that long)."""
     if len(points) == 0:
         return []
-    dtype = np.float32 if points.dtype == np.float32 else np.float64  # the grid in the points' precision
-    points = np.ascontiguousarray(points, dtype=dtype)
+    points = _in_grid_precision(points)
+    return [
+        points[rows]
+        for rows in seed_group_rows(points, ground, voxel_m, min_height_m, min_points, join_m, min_diagonal_m)
+    ]
+
+
+def seed_group_rows(
+    points: np.ndarray,
+    ground,
+    voxel_m: float,
+    min_height_m: float,
+    min_points: int,
+    join_m: float,
+    min_diagonal_m: float,
+) -> list[np.ndarray]:
+    """``seed_groups`` as rows of ``points``."""
+    points = _in_grid_precision(points)
+    dtype = points.dtype.type
     z0 = ground(0.0, 0.0)
     rows, bounds = kernels.seed_groups(
         points, dtype(voxel_m), dtype(1.0), z0, ground(1.0, 0.0) - z0, ground(0.0, 1.0) - z0,
         float(min_height_m), int(min_points), float(join_m), float(min_diagonal_m),
     )  # fmt: skip
-    return [points[rows[a:b]] for a, b in zip(bounds[:-1].tolist(), bounds[1:].tolist())]
+    return [rows[a:b] for a, b in zip(bounds[:-1].tolist(), bounds[1:].tolist())]
+
+
+def _in_grid_precision(points: np.ndarray) -> np.ndarray:
+    """``points`` contiguous, float32 if they are, else float64: the start's grid in their precision."""
+    return np.ascontiguousarray(points, dtype=np.float32 if points.dtype == np.float32 else np.float64)
 
 
 def _as_long_as(model: VehicleModel, length_m: float) -> VehicleModel:
