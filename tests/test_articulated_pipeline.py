@@ -764,11 +764,11 @@ def test_seed_parts_are_joined_by_their_nearest_points():
     """Components closer than the join distance (point to point) are one cluster, chained; one
     whose footprint overlaps another's grown one without close points stays apart; clusters list
     their components largest first, each component's points in point order."""
-    from i2v_loc.stages.vehicle_tracker import seed_groups
+    from i2v_loc.stages.vehicle_tracker import seed_group_rows
 
     def groups(*parts, join=2.0, min_diagonal=0.0):
         points = np.vstack(parts)
-        return seed_groups(points, lambda x, y: 0.0, 0.2, 1.0, 3, join, min_diagonal)
+        return [points[rows] for rows in seed_group_rows(points, lambda x, y: 0.0, 0.2, 1.0, 3, join, min_diagonal)]
 
     assert groups(np.zeros((0, 3))) == []
     a = np.vstack([_column(0, 0), _column(1, 0)])  # two components 1 m apart: joined
@@ -810,7 +810,7 @@ def test_the_seeds_closeness_test_is_a_kd_tree_query():
 def test_seed_components_too_small_or_too_low_are_left_out():
     """A component needs ``min_points`` points and its top ``min_height`` above the ground under its
     centre (a sloped ground: the height is taken there, not at z = 0)."""
-    from i2v_loc.stages.vehicle_tracker import seed_groups
+    from i2v_loc.stages.vehicle_tracker import seed_group_rows
 
     def sloped(x, y):  # a 2 % grade along x, 0.3 m up at the origin
         return 0.3 + 0.02 * x
@@ -820,8 +820,8 @@ def test_seed_components_too_small_or_too_low_are_left_out():
     high_but_few = _column(5, -3, n=2) + [0, 0, 1.0]
     sunk = _column(40, 0, height=1.5)  # 1.5 m above z = 0 but the ground there is 1.1 m up
     points = np.vstack([tall, low, high_but_few, sunk])
-    (only,) = seed_groups(points, sloped, 0.2, 1.0, 3, 0.5, 0.0)
-    assert np.array_equal(only, tall)
+    (only,) = seed_group_rows(points, sloped, 0.2, 1.0, 3, 0.5, 0.0)
+    assert np.array_equal(points[only], tall)
 
 
 def dock(x_m: float, y_m: float, yaw_rad: float) -> np.ndarray:

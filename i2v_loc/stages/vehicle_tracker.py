@@ -840,9 +840,9 @@ class VehicleTracker:
         (a cab and its trailer are apart by up to about 1.5 m), of a vehicle's length and at least
         ``start_min_width_m`` wide (a wall, or a vehicle seen from one side only, is a plane)."""
         p = self.params
-        points = _below_tall_structures(points, ground, p.start_voxel_m)
+        points = _in_grid_precision(_below_tall_structures(points, ground, p.start_voxel_m))
         out = []
-        for cluster in seed_groups(
+        for rows in seed_group_rows(
             points,
             ground,
             p.start_voxel_m,
@@ -851,6 +851,7 @@ class VehicleTracker:
             p.start_join_m,
             min(p.start_min_length_m, END_FACE_WIDTH_M[0]),
         ):
+            cluster = points[rows]
             rect = min_area_rect(cluster[:, :2])
             seen_wide = (
                 p.start_min_length_m <= rect.length_m <= p.start_max_length_m and rect.width_m >= p.start_min_width_m
@@ -1205,7 +1206,7 @@ class VehicleTracker:
         return new
 
     def _with_connected(self, points: np.ndarray, free: np.ndarray, ground_z_m: float) -> np.ndarray:
-        """``points`` and the ``free`` points in the start's clusters (``seed_groups``) that hold some of them."""
+        """``points`` and the ``free`` points in the start's clusters (``seed_group_rows``) that hold some of them."""
         if len(free) == 0 or len(points) == 0:
             return points
         p = self.params
@@ -1710,29 +1711,6 @@ def ground_heights(ground, xy: np.ndarray) -> np.ndarray:
     return z0 + (ground(1.0, 0.0) - z0) * xy[:, 0] + (ground(0.0, 1.0) - z0) * xy[:, 1]
 
 
-def seed_groups(
-    points: np.ndarray,
-    ground,
-    voxel_m: float,
-    min_height_m: float,
-    min_points: int,
-    join_m: float,
-    min_diagonal_m: float,
-) -> list[np.ndarray]:
-    """The points of each start cluster (``kernels.seed_groups``): connected ``voxel_m`` components
-    of ``min_points`` points reaching ``min_height_m`` above the ground under their centre, joined
-    where points of two come closer than ``join_m`` (a cab and its trailer are apart by up to about
-    1.5 m), whose footprint's diagonal reaches ``min_diagonal_m`` (no rectangle around a shorter one
-    is that long)."""
-    if len(points) == 0:
-        return []
-    points = _in_grid_precision(points)
-    return [
-        points[rows]
-        for rows in seed_group_rows(points, ground, voxel_m, min_height_m, min_points, join_m, min_diagonal_m)
-    ]
-
-
 def seed_group_rows(
     points: np.ndarray,
     ground,
@@ -1742,7 +1720,13 @@ def seed_group_rows(
     join_m: float,
     min_diagonal_m: float,
 ) -> list[np.ndarray]:
-    """``seed_groups`` as rows of ``points``."""
+    """The rows of ``points`` in each start cluster (``kernels.seed_groups``): connected ``voxel_m``
+    components of ``min_points`` points reaching ``min_height_m`` above the ground under their
+    centre, joined where points of two come closer than ``join_m`` (a cab and its trailer are apart
+    by up to about 1.5 m), whose footprint's diagonal reaches ``min_diagonal_m`` (no rectangle
+    around a shorter one is that long)."""
+    if len(points) == 0:
+        return []
     points = _in_grid_precision(points)
     dtype = points.dtype.type
     z0 = ground(0.0, 0.0)
