@@ -359,3 +359,25 @@ def test_moving_the_pose_keeps_the_motion_and_the_covariance():
     assert f.ukf.x[HITCH] == pytest.approx(before[0][HITCH] - 0.05)
     assert f.ukf.x[SPEED] == before[0][SPEED] and f.ukf.x[CURVATURE] == before[0][CURVATURE]
     assert np.array_equal(f.ukf.P, before[1])
+
+
+def test_a_restart_from_fits_that_measured_some_directions_keeps_the_filters_others():
+    """Fits outside the gate, in a row, that measured the trailer's pose only (x, y and the trailer's
+    yaw, yaw + hitch; no cab): the restart takes them along those directions and keeps the filter's
+    hitch along the one they left open. (Restarted whole, the hitch took the fits' value there,
+    which only their weak prior held: 17 deg sigma, and the next fit swung it 25 deg off.)"""
+    f = new_filter(np.zeros(4))
+    f.predict(0.1)
+    hitch_before = f.state.hitch_rad
+    u = np.array([0.0, 0.0, 1.0, 1.0]) / np.sqrt(2.0)
+    rows = np.vstack([np.eye(4)[:2], u])
+    basis = np.linalg.qr(np.column_stack([u, np.eye(4)[:, [0, 1, 2]]]))[0]
+    vague = basis @ np.diag([1e-6, 1e-6, 1e-6, 0.3]) @ basis.T  # the open direction: the weak prior's
+    z = np.array([3.0, 0.5, 0.3, -0.3])  # trailer yaw 0: the filter's; cab and hitch 0.3 rad off
+    for _ in range(PARAMS.articulated.reset_after_rejections):
+        assert not f.update(z, vague, (rows, np.eye(3) * 1e-6))
+    s = f.state
+    assert abs(s.x_m - 3.0) < 1e-3 and abs(s.y_m - 0.5) < 1e-3  # the fits were right there
+    assert abs(s.yaw_rad + s.hitch_rad) < 1e-3  # the trailer's yaw, as measured
+    assert abs(s.hitch_rad - hitch_before) < 0.01  # the filter's, not the fits' -0.3
+    assert s.hitch_std_rad < np.radians(1.0)

@@ -160,11 +160,14 @@ class KinematicFilter:
             _AT_FIRST_PREDICTION if speed_m_s == 0.0 else None
         )
 
-    def restart(self, z: np.ndarray, r: np.ndarray) -> None:
+    def restart(self, z: np.ndarray, r: np.ndarray, observed: tuple[np.ndarray, np.ndarray] | None = None) -> None:
         """The pose and hitch restart from the fit ``z`` (covariance ``r``); speed and curvature are
-        kept, their variance reset."""
+        kept, their variance reset. With ``observed`` (the directions its points measured, fewer
+        than all): the fit there, the filter along the rest (``_observed_restart``)."""
         n = len(z)
         idx = [X, Y, YAW, HITCH][:n]
+        if observed is not None and 0 < len(observed[0]) < n:
+            z, r = self._observed_restart(z, *observed, idx)
         self.ukf.x[idx] = z
         p = np.diag(np.diag(self.ukf.P)).copy()
         p[np.ix_(idx, idx)] = r
@@ -174,6 +177,24 @@ class KinematicFilter:
         self._in_a_row = 0
         if isinstance(self._first, tuple):  # no longer the first fit's state
             self._first = None
+
+    def _observed_restart(
+        self, z: np.ndarray, rows: np.ndarray, noise: np.ndarray, idx: list[int]
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """The pose and its covariance from the fit's information along the directions it measured
+        and the filter's along those it did not (the null space of ``rows``). (Restarted whole from a
+        fit that saw no cab, the hitch took the fit's weak prior, a 17 deg sigma, and the next fit of
+        the trailer alone swung it 25 deg off.)"""
+        x, p = self.ukf.x[idx], self.ukf.P[np.ix_(idx, idx)]
+        null = np.linalg.svd(rows)[2][len(rows) :].T
+        kept = null @ np.linalg.inv(null.T @ p @ null) @ null.T
+        measured = rows.T @ np.linalg.inv(noise) @ rows
+        cov = np.linalg.inv(measured + kept)
+        step = z - x
+        step[2:] = wrap_rad(step[2:])  # the angles
+        new = x + cov @ measured @ step
+        new[2:] = wrap_rad(new[2:])
+        return new, (cov + cov.T) / 2
 
     def _q(self, dt_s: float) -> np.ndarray:
         p = self.params
@@ -216,7 +237,7 @@ class KinematicFilter:
             self.rejected += 1
             self._in_a_row += 1
             if self._in_a_row >= self.params.reset_after_rejections:
-                self.restart(z, r)
+                self.restart(z, r, observed)
             return False
         self._in_a_row = 0
         self.ukf.x[YAW], self.ukf.x[HITCH] = wrap_rad(self.ukf.x[YAW]), wrap_rad(self.ukf.x[HITCH])

@@ -99,6 +99,7 @@ SEEN_THROUGH_RATIO = 0.1  # of the rays ending on a unit, at most this many cros
 CAB_SLICE_MIN_M = 1.0
 LENGTH_CONVERGED_OBSERVATIONS = 5
 TURN_MAX_SPEED_STD_M_S = 0.5  # the hinge is measured in a turn from frames de-skewed with a speed known this well
+HINGE_PINNED_COST_RATIO = 0.5  # a free hinge explaining the points this much better than the model's: where it is
 LENGTH_MAX_STD_M = 0.05  # a trailer's length the points pin no better than this is not measured
 SETTLED_SLACK_M = 0.5
 STILL_END_FRAMES = 20  # moving frames whose reach must agree before it is taken as the unit's end
@@ -436,7 +437,7 @@ class VehicleTracker:
         if measured:
             track.missed, track.last = 0, m
             if self.params.learn_dimensions:
-                self._learn_kingpin(track, prior, points)
+                self._learn_kingpin(track, prior, points, m)
                 before = (track.model, track.catalogue_name)
                 self._learn(track, m, points)
                 self._follow_model(track, prior, m, *before)
@@ -556,18 +557,24 @@ class VehicleTracker:
         (_, front), (_, rear) = (kernels.face_median(q, 0, m.unit, m.face, 0, f, ANYWHERE) for f in (FRONT, REAR))
         track.cab_length.add(front - rear)
 
-    def _learn_kingpin(self, track: _Track, prior: Prior, points: np.ndarray) -> None:
+    def _learn_kingpin(self, track: _Track, prior: Prior, points: np.ndarray, own: Measurement) -> None:
         """The kingpin's offset shows only at a hitch angle (straight, it trades with the trailer's
         front): while unsettled, a second fit with it free measures it. (Free in the pose's own fit,
-        it let the rear axle wander by up to 9 cm on a known vehicle.) Straight, the same fit
-        measures their difference, how far ahead of the rear axle the trailer's front is, when the
-        cab's rear face pins the axle: until the first hitch angle that is the model's."""
+        it let the rear axle wander by up to 9 cm on a known vehicle.) The same fit measures the
+        trailer's front when its face shows, or when it explains the points at least
+        ``1 / HINGE_PINNED_COST_RATIO`` times better than the frame's ``own`` fit with the model's
+        hinge: the points pin where the hinge is then, and the turn goes on being measured until
+        both are settled. (An unknown trailer's front, 1.6 m ahead of its kingpin, the catalogue's
+        1.2 m, its face never shown to `l1` alone: once the cab's front came into view, the model's
+        hinge bent the cab 8 deg off, at 17 times the free fit's cost, for 4 s.) Straight, the same
+        fit measures their difference, how far ahead of the rear axle the trailer's front is, when
+        the cab's rear face pins the axle: until the first hitch angle that is the model's."""
         kingpin = track.kingpin
         if kingpin is None:
             return
         turning = (
             abs(prior.hitch_rad) >= KINGPIN_MIN_HITCH_RAD
-            and len(kingpin.values) < KINGPIN_SETTLED
+            and min(len(kingpin.values), len(track.trailer_front.values)) < KINGPIN_SETTLED
             and track.filter.speed_std_m_s <= TURN_MAX_SPEED_STD_M_S
         )
         straight = abs(prior.hitch_rad) <= REACH_MAX_HITCH_RAD and not kingpin.values
@@ -578,11 +585,19 @@ class VehicleTracker:
             return
         front_seen = _face_seen(m, _changed(track.model, kingpin_behind_axle_m=m.kingpin_m), 1, FRONT)
         if turning:
-            kingpin.add(m.kingpin_m)
-            if front_seen:
+            if len(kingpin.values) < KINGPIN_SETTLED:
+                kingpin.add(m.kingpin_m)
+            if front_seen or self._hinge_pinned(m, own):
                 track.trailer_front.add(m.trailer_front_m)
         elif front_seen and np.sum((m.unit == 0) & (m.face == REAR)) >= REAR_FACE_MIN_POINTS:
             track.reach.add(m.trailer_front_m - m.kingpin_m)
+
+    def _hinge_pinned(self, free: Measurement, own: Measurement) -> bool:
+        """The fit with the hinge free explains the points ``1 / HINGE_PINNED_COST_RATIO`` times better
+        than the frame's ``own`` one, and no rear face of the trailer could have placed its front
+        (with the model's length: a length learned 0.21 m long moved the free front 0.2 m back onto
+        the rear face's points, at less than half the cost)."""
+        return free.cost < HINGE_PINNED_COST_RATIO * own.cost and free.rear_points < REAR_FACE_MIN_POINTS
 
     def _trailer_front(self, track: _Track) -> float:
         """The trailer's front ahead of the kingpin: where its face was seen at a hitch angle, else
