@@ -419,6 +419,31 @@ def test_a_trailer_front_the_points_pin_in_a_turn_is_learned_though_its_face_is_
     assert max(abs(e) for e in errors_deg[-10:]) < 0.5  # with the MAN's front: 1.5 deg
 
 
+def test_a_fit_gated_out_is_searched_around_the_kingpin_before_the_prediction_is_kept():
+    """A MAN standing bent 12 deg, one sensor ahead of its cab; then its cab is 15 deg further round
+    (the trailer where it was): the prediction is 15 deg off the cab. The fit warm-started there is
+    gated out; the search around the kingpin finds the cab at less than ``DIRECTION_COST_RATIO`` of
+    that fit's cost, and the filter restarts from it at once. (Before: the prediction kept for two frames, then restarted from
+    a fit warm-started in the wrong place, 5 deg off for three more: a 13.6 m trailer's cab seen
+    by `l3` and `l4` at its roundabout's turn-in ran 12-55 deg off for 8 s.)"""
+    man = VehicleModel.from_config("man_tgx", PARAMS.vehicles["man_tgx"])
+    hitch, sensor = np.radians(-12.0), [(8.0, -6.0, 5.0)]
+    tracker = VehicleTracker(PARAMS.articulated, PARAMS.vehicles)
+    points = vehicle_points(man, 0.0, 0.0, 0.0, hitch, sensors=sensor, spacing=0.15, seed=0)
+    tracker.tracks.append(
+        tracker._track(1, man, fit(points, Prior(0.0, 0.0, 0.0, hitch, man), PARAMS.articulated), 0.0, 0.0, 0.0)
+    )
+    for k in range(1, 20):
+        tracker.process(vehicle_points(man, 0.0, 0.0, 0.0, hitch, sensors=sensor, spacing=0.15, seed=k), flat, 0.1 * k)
+    turned = np.radians(15.0)
+    axle = man.kingpin_xy(0.0, 0.0, 0.0) - man.kingpin_xy(0.0, 0.0, turned)  # the kingpin stays
+    for k in range(20, 26):
+        points = vehicle_points(man, *axle, turned, hitch - turned, sensors=sensor, spacing=0.15, seed=k)
+        state = tracker.process(points, flat, 0.1 * k)[0].state
+        assert abs(angle_deg(state.yaw_rad - turned)) < 0.5
+        assert abs(angle_deg(state.hitch_rad - (hitch - turned))) < 0.5
+
+
 def test_a_trailer_front_reaching_further_is_learned_driving_straight():
     """This tractor has its kingpin 0.6 m ahead of the rear axle, the catalogue's Volvo FH 0.3 m:
     its trailer's front reaches 1.5 m ahead of the axle, not 1.2. Straight, the trailer's faces put

@@ -427,13 +427,15 @@ class VehicleTracker:
         m = fit(points, prior, self.params) if len(points) else None
         found = self._reacquired(points, prior, m) if m is not None and lost else None
         measured = False
+        if found is None and m is not None:
+            measured = track.filter.update(m.vector, m.covariance, m.observed)
+            self.rejected += not measured
+            if not (measured or lost) and prior.model.articulated:  # warm-started in the wrong place?
+                found = self._better(self._reacquired(points, prior, m), m)
         if found is not None:  # the pose restarts from it (the prediction's sigma points are elsewhere)
             track.filter.restart(found.vector, found.covariance)
             m, measured = found, True
             prior = _at_pose(prior, m)  # what is learned from
-        elif m is not None:
-            measured = track.filter.update(m.vector, m.covariance, m.observed)
-            self.rejected += not measured
         if measured:
             track.missed, track.last = 0, m
             if self.params.learn_dimensions:
@@ -445,6 +447,14 @@ class VehicleTracker:
         else:
             track.missed += 1
         return track.report(measured)
+
+    @staticmethod
+    def _better(found: Measurement | None, m: Measurement) -> Measurement | None:
+        """``found`` if it explains the frame's points better than its own fit ``m`` by
+        ``DIRECTION_COST_RATIO`` (both fitted to all of them; a fit gated out on a straight, its cab's
+        few points fitted well, was replaced by one 0.3 m back at three times its cost, and the MAN's
+        trailer was learned 0.63 m too long)."""
+        return found if found is not None and found.cost < DIRECTION_COST_RATIO * m.cost else None
 
     def _tractor_lost(self, track: _Track) -> bool:
         """The last fit explained fewer than ``SIDE_MIN_POINTS`` points by the cab and the hitch's
@@ -465,7 +475,10 @@ class VehicleTracker:
         look for it. All are fitted to one sample, half of it from within a tractor's reach of the
         kingpin and off the trailer (their costs are compared). Reversing with the cab hidden from
         its one LiDAR, a MAN's prediction ran 80 deg off while the trailer was tracked, and its fits
-        stayed there once the cab showed again."""
+        stayed there once the cab showed again. Asked too when the frame's fit was gated out: warm-
+        started from a prediction several degrees off, a fit can settle with the cab's front face
+        unexplained (seen by `l3` and `l4` at a roundabout's turn-in, an unknown cab then ran 12-55
+        deg off for 8 s, the filter restarting from such fits)."""
         model = prior.model
         sample = _around_kingpin(points, prior, self.params.fit_max_points)
         here = fit(sample, prior, self.params)
