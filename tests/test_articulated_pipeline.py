@@ -419,6 +419,37 @@ def test_a_trailer_front_the_points_pin_in_a_turn_is_learned_though_its_face_is_
     assert max(abs(e) for e in errors_deg[-10:]) < 0.5  # with the MAN's front: 1.5 deg
 
 
+def _one_side_widths(with_rays: bool) -> tuple[float, float]:
+    """An unknown tractor and trailer, both 2.55 m wide, taken for the catalogue's MAN (2.77),
+    standing straight, seen by one sensor off the trailer's rear left corner: its rear face and
+    left side. The model's widths after 20 frames."""
+    man = VehicleModel.from_config("man_tgx", PARAMS.vehicles["man_tgx"])
+    truth = man.with_boxes(replace(man.tractor, width_m=2.55), replace(man.trailer, width_m=2.55))
+    sensor = [(-18.0, 7.0, 4.0)]
+    tracker = VehicleTracker(PARAMS.articulated, PARAMS.vehicles)
+    rays = cast_rays(world_boxes(truth, 0.0, 0.0, 0.0), sensor) if with_rays else None
+    points = vehicle_points(truth, 0.0, 0.0, 0.0, sensors=sensor, spacing=0.15, seed=0)
+    tracker.tracks.append(
+        tracker._track(1, man, fit(points, Prior(0.0, 0.0, 0.0, 0.0, man), PARAMS.articulated), 0.0, 0.0, 0.0)
+    )
+    for k in range(1, 21):
+        points = vehicle_points(truth, 0.0, 0.0, 0.0, sensors=sensor, spacing=0.15, seed=k)
+        tracker.process(points, flat, 0.1 * k, rays=rays)
+    model = tracker.tracks[0].model
+    return model.tractor.width_m, model.trailer.width_m
+
+
+def test_a_width_seen_from_one_side_is_bracketed_at_the_far_corner_of_an_end_face():
+    """One sensor sees one side of each unit, never both: the trailer's width lies between the rear
+    face's farthest point and the nearest ray that passed beside it (0.15 m apart here), and the
+    cab's follows it (the MAN's cab and trailer are equally wide). Without the rays the catalogue's
+    widths stay."""
+    assert _one_side_widths(with_rays=False) == (2.77, 2.77)
+    cab, trailer = _one_side_widths(with_rays=True)
+    assert trailer == pytest.approx(2.55, abs=0.05)
+    assert cab == pytest.approx(trailer)
+
+
 def test_a_fit_gated_out_is_searched_around_the_kingpin_before_the_prediction_is_kept():
     """A MAN standing bent 12 deg, one sensor ahead of its cab; then its cab is 15 deg further round
     (the trailer where it was): the prediction is 15 deg off the cab. The fit warm-started there is
@@ -961,7 +992,7 @@ def test_a_wall_beyond_the_far_side_seen_by_one_sensor_is_no_side():
                 1, model, fit(first, Prior(*axle, 0.0, 0.0, model), PARAMS.articulated), 0.0, 0.0, 0.0
             )
         ]
-        for k in range(1, 11):
+        for k in range(1, 26):  # a width counts from its third frame seen
             vehicle = vehicle_points(model, *axle, 0.0, sensors=sensors, spacing=0.1, seed=k)
             beyond = vehicle_points(wall_model, *wall_xy, 0.0, sensors=sensors, spacing=0.1, others=boxes, seed=k)
             tracker.process(np.vstack([vehicle, beyond]), flat, 0.1 * k, rays=rays if with_rays else None)
@@ -1472,3 +1503,20 @@ def test_while_a_cheaper_fit_lacks_points_none_the_other_way_round_starts(monkey
     lacking.clear()
     refuted.clear()
     assert start((man, 1.0, right), (volvo_model, -1.0, flipped)) == (man, right)
+
+
+def test_a_width_counts_from_its_third_frame_and_brackets_from_their_tenth():
+    """A dock shelter's wall can pass for a side in one frame (a Twizy's 1.75 m trailer, 1.99 m):
+    both sides' widths count from the third, their median then; one side's brackets count from
+    the tenth while no both-sides width does, and give way to one that does."""
+    width = _Extent(1.75, 50, min_values=3)
+    width.add(1.99)
+    width.add(1.76)
+    assert width.estimate == 1.75 and not width.observed
+    for value in [1.80] * 9:
+        width.add_bracket(value)
+    assert width.estimate == 1.75
+    width.add_bracket(1.80)
+    assert width.observed and width.estimate == pytest.approx(1.80)
+    width.add(1.74)
+    assert width.estimate == pytest.approx(1.76)  # the median of 1.99, 1.76, 1.74

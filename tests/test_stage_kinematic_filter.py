@@ -381,3 +381,31 @@ def test_a_restart_from_fits_that_measured_some_directions_keeps_the_filters_oth
     assert abs(s.yaw_rad + s.hitch_rad) < 1e-3  # the trailer's yaw, as measured
     assert abs(s.hitch_rad - hitch_before) < 0.01  # the filter's, not the fits' -0.3
     assert s.hitch_std_rad < np.radians(1.0)
+
+
+def test_each_units_motion_is_its_box_centres_in_the_kinematics():
+    """A turning, bending vehicle: each unit's box centre moves over 1 ms as ``unit_motions`` says
+    (the trailer's rate is the tractor's plus the hitch's), and a point 2 m ahead of the centre
+    moves with the velocity the unit's rate adds there."""
+    from i2v_loc.stages.kinematic_filter import FilterState, unit_motions
+    from i2v_loc.stages.vehicle_model import VehicleModel
+
+    model = VehicleModel.from_config("volvo_fh", VOLVO)
+    x = np.array([1.0, 2.0, 0.4, 3.0, 0.08, np.radians(25.0)])
+    dt = 1e-3
+    later = propagate(x, dt, model.kingpin_behind_axle_m, model.trailer_axle_m, True, NEVER_HOLDS_M)
+    hitch_rate = (later[HITCH] - x[HITCH]) / dt
+    state = FilterState(*x[:6], np.eye(6), hitch_rate, False)
+    motions = unit_motions(state, model)
+    now_centers = model.box_centers(x[0], x[1], x[2], x[HITCH])
+    later_centers = model.box_centers(later[0], later[1], later[2], later[HITCH])
+    for motion, now, then, yaw, rate in zip(
+        motions, now_centers, later_centers, (x[2], x[2] + x[HITCH]), (3.0 * 0.08, 3.0 * 0.08 + hitch_rate)
+    ):
+        assert motion.velocity_xy == pytest.approx((then - now) / dt, abs=2e-3)
+        assert motion.rate_rad_s == pytest.approx(rate)
+        ahead = now + 2.0 * np.array([np.cos(yaw), np.sin(yaw)])
+        assert motion.velocity_at(ahead[None])[0] == pytest.approx(
+            motion.velocity_xy + 2.0 * rate * np.array([-np.sin(yaw), np.cos(yaw)])
+        )
+    assert abs(motions[1].rate_rad_s - motions[0].rate_rad_s) > 0.05  # the hitch did change

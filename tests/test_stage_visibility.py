@@ -143,3 +143,21 @@ def test_the_top_of_a_sensors_view_is_its_sweeps_highest_return():
     tilted = rays(sweep, origins=[[0.0, 0.0, 3.0]], to_level=tilt)
     assert tilted.at_view_top(at_top @ tilt.T, np.radians(0.1))
     assert not tilted.at_view_top(below @ tilt.T, np.radians(0.5))
+
+
+def test_rays_are_carried_with_a_moving_unit_from_their_capture_time():
+    """A ray captured 0.1 s before the reference time, while a unit moved sideways at 2 m/s and turned
+    at 1 rad/s about its centre (2, 0): in the unit's place at the reference time, each end of the
+    ray is carried by the unit's velocity there (first order). The sensor at (0, 0): (0, 2) + 1 x
+    (-2, 0) = (0, 0) m/s, it stays; the return at (10, 0): (0, 2) + 1 x (8, 0) = (0, 10) m/s, 1 m
+    along y. The ray from (0, 0) to (10, 1) crosses x = 5 at y = 0.5."""
+    from i2v_loc.stages.kinematic_filter import UnitMotion
+
+    origin, end = np.array([[0.0, 0.0, 2.0]]), np.array([[10.0, 0.0, 2.0]], dtype=np.float32)
+    still = Rays(end, origin, np.array([0, 1]), np.eye(3))
+    moved = Rays(end, origin, np.array([0, 1]), np.eye(3), np.array([0.1]))
+    motion = UnitMotion(np.array([2.0, 0.0]), 0.0, np.array([0.0, 2.0]), 1.0)
+    args = (np.array([5.0, 0.0]), np.array([0.0, 1.0]), 3.0, 5.0, 0.3)
+    assert moved.crossings(*args, motion)[:, 0] == pytest.approx([0.5], abs=1e-6)
+    assert still.crossings(*args, motion)[:, 0] == pytest.approx([0.0])  # no lags known: as captured
+    assert moved.crossings(*args)[:, 0] == pytest.approx([0.0])  # no motion: as captured

@@ -18,6 +18,7 @@ from i2v_loc.pipelines.handoff import ParameterHandoff
 from i2v_loc.results import FrameResult, StageTimer, UnitResult, VehicleResult, _r, count_frame, frame_result
 from i2v_loc.stages.background import BackgroundMap, ProtectedBox, region_box
 from i2v_loc.stages.concatenation import Concatenation, MotionHint
+from i2v_loc.stages.kinematic_filter import unit_motions
 from i2v_loc.stages.level_frame import LevelFrame
 from i2v_loc.stages.primitives import Rect, voxel_centroids
 from i2v_loc.stages.region import Region
@@ -47,11 +48,6 @@ class ArticulatedVehicleResult(VehicleResult):
             }
         )
         return out
-
-
-def _turn(rate_rad_s: float, arm_xy: np.ndarray) -> np.ndarray:
-    """Velocity of a point ``arm_xy`` from a centre turning at ``rate_rad_s``."""
-    return rate_rad_s * np.array([-arm_xy[1], arm_xy[0]])
 
 
 class ArticulatedPipeline(ParameterHandoff):
@@ -124,7 +120,9 @@ class ArticulatedPipeline(ParameterHandoff):
             level_points = self.level.points(points)
             known = np.isfinite(merged.sweep_origins).all(axis=1).any()  # else no ray is known (a cloud file)
             rays = (
-                Rays(merged.points, merged.sweep_origins, merged.sweep_bounds, self.level.rotation) if known else None
+                Rays(merged.points, merged.sweep_origins, merged.sweep_bounds, self.level.rotation, merged.lag_s)
+                if known
+                else None
             )
             self._reports = self.tracker.process(level_points, ground, merged.stamp_s, ready, rays)
             self._reports_stamp_s = merged.stamp_s
@@ -183,27 +181,12 @@ class ArticulatedPipeline(ParameterHandoff):
 
     def _level_unit_boxes(self):
         for r in self._reports:
-            s, model = r.state, r.model
-            centers = model.box_centers(s.x_m, s.y_m, s.yaw_rad, s.hitch_rad)
-            axle = np.array([s.x_m, s.y_m])
-            axle_velocity = s.speed_m_s * np.array([np.cos(s.yaw_rad), np.sin(s.yaw_rad)])
-            omega = s.speed_m_s * s.curvature_1_m
-            # each box moves with the velocity of its centre (a turning cab's centre moves sideways)
-            yield (
-                centers[0],
-                s.yaw_rad,
-                model.tractor,
-                axle_velocity + _turn(omega, centers[0] - axle),
-                omega,
-                r.travel_m,
-                model.articulated,
-            )
-            if model.trailer is not None:
-                kingpin = model.kingpin_xy(s.x_m, s.y_m, s.yaw_rad)
-                kingpin_velocity = axle_velocity + _turn(omega, kingpin - axle)
-                trailer_rate = omega + s.hitch_rate_rad_s
-                velocity = kingpin_velocity + _turn(trailer_rate, centers[1] - kingpin)
-                yield centers[1], s.yaw_rad + s.hitch_rad, model.trailer, velocity, trailer_rate, r.travel_m, True
+            model = r.model
+            for motion, box in zip(unit_motions(r.state, model), model.boxes):
+                yield (
+                    motion.center_xy, motion.yaw_rad, box, motion.velocity_xy, motion.rate_rad_s, r.travel_m,
+                    model.articulated,
+                )  # fmt: skip
 
     def _protected_boxes(self, units) -> list[ProtectedBox]:
         """Every articulated vehicle's boxes (one standing from the start is no background), a rigid

@@ -1506,6 +1506,47 @@ def rays_through_box(points, origins, bounds, rotation, box, beyond_m):
     return count, ended, front
 
 
+@njit(**_JIT)
+def plane_crossings(points, origins, bounds, rotation, lag, plane, motion, beyond_m):
+    """Where rays (each sweep's origin to each of its returns, rows ``bounds[k]:bounds[k + 1]``; yard
+    frame, turned by ``rotation`` into the level frame) cross an upright plane and end at least
+    ``beyond_m`` behind it: (n, 2) along the plane from its point, and height. ``plane``: point x,
+    y, direction x, y (unit), half length, top z; crossings farther along or higher are left out.
+    ``motion``: centre x, y, velocity x, y and yaw rate of a unit each ray is carried with by its
+    ``lag`` (first order; zeros: as captured). Sweeps with a NaN origin are left out."""
+    px, py, dx, dy, half_length, top = plane[0], plane[1], plane[2], plane[3], plane[4], plane[5]
+    nx, ny = -dy, dx
+    out = np.empty((points.shape[0], 2))
+    n = 0
+    for k in range(origins.shape[0]):
+        if not (np.isfinite(origins[k, 0]) and np.isfinite(origins[k, 1]) and np.isfinite(origins[k, 2])):
+            continue
+        ox, oy, oz = _box_frame(origins[k, 0], origins[k, 1], origins[k, 2], rotation, 0.0, 0.0, 1.0, 0.0)
+        for i in range(bounds[k], bounds[k + 1]):
+            ex, ey, ez = _box_frame(points[i, 0], points[i, 1], points[i, 2], rotation, 0.0, 0.0, 1.0, 0.0)
+            sx, sy = _carried(ox, oy, motion, lag[i])
+            ex, ey = _carried(ex, ey, motion, lag[i])
+            before = (sx - px) * nx + (sy - py) * ny
+            after = (ex - px) * nx + (ey - py) * ny
+            if before * after >= 0.0 or abs(after) < beyond_m:
+                continue
+            t = before / (before - after)
+            along = (sx + t * (ex - sx) - px) * dx + (sy + t * (ey - sy) - py) * dy
+            z = oz + t * (ez - oz)
+            if abs(along) <= half_length and z <= top:
+                out[n, 0], out[n, 1] = along, z
+                n += 1
+    return out[:n]
+
+
+@njit(**_INLINE)
+def _carried(x, y, motion, lag):
+    """A level-frame place carried with a unit's motion (centre x, y, velocity x, y, yaw rate) by ``lag``."""
+    vx = motion[2] - motion[4] * (y - motion[1])
+    vy = motion[3] + motion[4] * (x - motion[0])
+    return x + vx * lag, y + vy * lag
+
+
 @njit(**_INLINE)
 def _box_frame(x, y, z, rotation, cx, cy, c, s):
     """A yard point turned into the level frame, then into the box's frame (its centre, its yaw)."""

@@ -23,6 +23,7 @@ import numpy as np
 from i2v_loc.geometry import wrap_rad
 from i2v_loc.params import ArticulatedParams
 from i2v_loc.stages import kernels
+from i2v_loc.stages.vehicle_model import VehicleModel
 
 X, Y, YAW, SPEED, CURVATURE, HITCH = range(6)
 _ANGLES_X = np.array([YAW, HITCH])
@@ -106,6 +107,45 @@ class FilterState:
     @property
     def hitch_std_rad(self) -> float:
         return float(np.sqrt(max(self.covariance[HITCH, HITCH], 0.0)))
+
+
+@dataclass(frozen=True)
+class UnitMotion:
+    """How one unit of a vehicle moves: its box centre, yaw, the centre's velocity and the yaw rate
+    (level frame)."""
+
+    center_xy: np.ndarray
+    yaw_rad: float
+    velocity_xy: np.ndarray
+    rate_rad_s: float
+
+    def velocity_at(self, xy: np.ndarray) -> np.ndarray:
+        """(N, 2) velocities of the unit's points at ``xy`` (N, 2)."""
+        arm = xy - self.center_xy
+        return self.velocity_xy + self.rate_rad_s * np.column_stack([-arm[:, 1], arm[:, 0]])
+
+
+def unit_motions(s: FilterState, model: VehicleModel) -> list[UnitMotion]:
+    """Each unit's motion in the state ``s`` (a turning cab's centre moves sideways; the trailer
+    turns about its kingpin at the tractor's rate plus the hitch's)."""
+    centers = model.box_centers(s.x_m, s.y_m, s.yaw_rad, s.hitch_rad)
+    axle = np.array([s.x_m, s.y_m])
+    axle_velocity = s.speed_m_s * np.array([np.cos(s.yaw_rad), np.sin(s.yaw_rad)])
+    omega = s.speed_m_s * s.curvature_1_m
+    motions = [UnitMotion(centers[0], s.yaw_rad, axle_velocity + _turn(omega, centers[0] - axle), omega)]
+    if model.trailer is not None:
+        kingpin = model.kingpin_xy(s.x_m, s.y_m, s.yaw_rad)
+        kingpin_velocity = axle_velocity + _turn(omega, kingpin - axle)
+        rate = omega + s.hitch_rate_rad_s
+        motions.append(
+            UnitMotion(centers[1], s.yaw_rad + s.hitch_rad, kingpin_velocity + _turn(rate, centers[1] - kingpin), rate)
+        )
+    return motions
+
+
+def _turn(rate_rad_s: float, arm_xy: np.ndarray) -> np.ndarray:
+    """Velocity of a point ``arm_xy`` from a centre turning at ``rate_rad_s``."""
+    return rate_rad_s * np.array([-arm_xy[1], arm_xy[0]])
 
 
 _TINY_NOISE = np.eye(6) * 1e-12  # keeps the covariance positive definite

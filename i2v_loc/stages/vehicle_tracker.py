@@ -51,7 +51,7 @@ from i2v_loc.stages.hinged_fit import (
     in_unit_box,
     thin,
 )
-from i2v_loc.stages.kinematic_filter import FilterState, KinematicFilter
+from i2v_loc.stages.kinematic_filter import FilterState, KinematicFilter, unit_motions
 from i2v_loc.stages.primitives import Rect, min_area_rect, voxel_keys
 from i2v_loc.stages.vehicle_model import MAX_VEHICLE_HEIGHT_M, RIGID_MAX_LENGTH_M, Box, VehicleModel
 from i2v_loc.stages.visibility import Rays
@@ -112,6 +112,21 @@ END_SEEN_REACH_M = 1.0
 END_TRAVEL_M = 0.3  # a moving trailer's end counts once it has gone this far with it (not stayed put)
 END_HISTORY = 50  # frames of ends kept to judge that by
 ANYWHERE = (-np.inf, np.inf)  # no bound along a unit
+# per unit of an articulated vehicle: the end faces nothing of the vehicle hides (a cab covers part of
+# its trailer's front face at a hitch angle, the trailer part of the cab's rear)
+OPEN_ENDS = ((FRONT,), (REAR,))
+WIDTH_MIN_OBSERVATIONS = (
+    3  # both sides seen: one frame's width can be a dock shelter's (a Twizy's 1.75 m trailer, 1.99)
+)
+BRACKETS_SETTLED = 10
+BRACKETS_KEPT = 20  # then no more: each costs a pass over the frame's rays (about 2 ms for four OS1-32)  # a unit's widths bracketed from one side (``_width_across_end``) before they count
+CORNER_BRACKET_M = 0.15  # a side's spacing of voxel centroids and columns seen at 20-30 deg, at 20 m
+CORNER_BEYOND_M = (
+    0.15  # a ray ending this far past an end face's plane passed it (its points: within 0.05 m), though it
+)
+# ends on the ground soon after: past the lower corner of a cab, a ray ending 0.4 m on was the first 0.06 m out
+SIDE_NEAR_END_M = 2.0
+VEHICLE_WIDTH_M = (RIGID_MIN_WIDTH_M, END_FACE_WIDTH_M[1])  # a bracket outside: a fit that went astray
 FACE_SEEN_SPAN = 0.6  # an end face is seen when its points span this share of the unit's width
 END_BAND_M = 0.4
 MAX_BODY_GAP_M = 1.0
@@ -246,10 +261,16 @@ class _Extent:
     bounds: _Window = field(default_factory=_Window)
     median: float | None = None
     lower_bound: float = -np.inf
+    brackets: _Window = field(default_factory=_Window)  # a unit's width from one side (``_width_across_end``)
+    bracket_median: float | None = None
     reaches: deque = field(default_factory=lambda: deque(maxlen=STILL_END_FRAMES))
+    min_values: int = 1  # observations before their median counts
 
     def add(self, value: float) -> None:
         self.median = _windowed_median(self.values, value, self.window)
+
+    def add_bracket(self, value: float) -> None:
+        self.bracket_median = _windowed_median(self.brackets, value, self.window)
 
     def add_bound(self, value: float) -> None:
         self.lower_bound = _windowed_median(self.bounds, value, self.window)
@@ -271,10 +292,24 @@ class _Extent:
         return len(self.values) >= LENGTH_CONVERGED_OBSERVATIONS
 
     @property
+    def counted(self) -> bool:
+        """Measured in ``min_values`` frames."""
+        return len(self.values) >= self.min_values
+
+    @property
+    def observed(self) -> bool:
+        """Measured, or bracketed in ``BRACKETS_SETTLED`` frames (one is a fraction of a voxel off
+        in most frames, but 0.45 m in some)."""
+        return self.counted or len(self.brackets) >= BRACKETS_SETTLED
+
+    @property
     def measured(self) -> float:
-        """The median, else the end the moving unit's points kept reaching, else the prior."""
-        if self.median is not None:
+        """The median once counted, else that of the brackets once settled, else the end the
+        moving unit's points kept reaching, else the prior."""
+        if self.counted and self.median is not None:
             return self.median
+        if self.observed:
+            return self.bracket_median
         end = self.still_end
         return self.prior if end is None else end
 
@@ -283,6 +318,20 @@ class _Extent:
         """The measured value; at least the lower bound until settled (a face seen outweighs points
         that only reach further)."""
         return self.measured if self.settled else max(self.measured, self.lower_bound)
+
+
+def _unit_widths(extents: list[_Extent]) -> list[float]:
+    """Each unit's width; one not yet observed, its vehicle's other one's, less the difference of
+    their priors. (Seen from one side, the cab's axis and the trailer's lie half their widths in
+    from the sides: an unknown trailer measured 2.55 m wide, its cab left at the catalogue's 2.77,
+    had its axis 0.11 m off the cab's, and the hinge bent the cab 2.6 deg.)"""
+    widths = [extent.estimate for extent in extents]
+    observed = [extent.observed for extent in extents]
+    if len(extents) == 2 and observed[0] != observed[1]:
+        seen, unseen = (0, 1) if observed[0] else (1, 0)
+        # to the bit the prior's when the seen one is its own
+        widths[unseen] = extents[unseen].prior + (widths[seen] - extents[seen].prior)
+    return widths
 
 
 def _hinge_extents(model: VehicleModel, window: int) -> tuple[_Extent, _Extent, _Extent]:
@@ -339,7 +388,7 @@ class _Track:
         """Per unit, which of its length, width and height its points measured: a rigid one's as it
         started (one face shows one of its length and width) and its width once both sides showed;
         an articulated one's lengths and widths once observed, its heights never (the catalogue's)."""
-        width = [w.median is not None for w in self.widths]
+        width = [w.observed for w in self.widths]
         if self.trailer_length is None:
             return ((self.rigid_seen[0], self.rigid_seen[1] or width[0], self.rigid_seen[2]),)
         return (
@@ -502,7 +551,6 @@ class VehicleTracker:
         """The sizes the fit ``m`` of the vehicle's claimed ``points`` shows."""
         model = track.model
         local = unit_frames(m.points, m.vector, model)
-        widths = []
         faced = self._sides_faced(m, model)
         for u, box in enumerate(model.boxes):
             (n_left, left), (n_right, right) = (
@@ -513,7 +561,11 @@ class VehicleTracker:
             # it faces: the width between them
             if min(n_left, n_right) >= SIDE_MIN_POINTS and faced[u] and _sides_along(local[u], m, u, box):
                 track.widths[u].add(left - right)
-            widths.append(track.widths[u].estimate)
+            elif max(n_left, n_right) >= SIDE_MIN_POINTS > min(n_left, n_right) and not track.at_wall:
+                width = self._width_across_end(track, m, points, u, LEFT if n_left > n_right else RIGHT)
+                if width is not None:
+                    track.widths[u].add_bracket(width)
+        widths = _unit_widths(track.widths)
         tractor = {"width_m": widths[0]}
         if track.cab_length is not None:
             self._learn_cab_length(track, m, local[0])
@@ -533,6 +585,56 @@ class VehicleTracker:
             self._retype(track, name)
         track.model = _changed(track.model, name=name, trailer_axle_m=self._trailer_axle(track))
         track.filter.trailer_axle_m = track.model.trailer_axle_m
+
+    def _width_across_end(
+        self, track: _Track, m: Measurement, points: np.ndarray, unit: int, side: int
+    ) -> float | None:
+        """The unit's width from its one ``side`` seen, next to the end (a yaw 0.5 deg off moves a
+        13.6 m trailer's rear 0.06 m across against its side's middle), to the far corner of an end
+        face nothing of the vehicle hides (``OPEN_ENDS``): a sensor that sees a side and an end face
+        of a box sees the whole face. The corner lies between the face's farthest point (the second
+        farthest of all the claimed ``points`` near it: the fit's are thinned) and the nearest ray
+        that passed beside the face, carried with the unit from its capture time: their middle, when
+        they bracket it within ``CORNER_BRACKET_M``. In the body's lower half: rays pass through a
+        cab's windscreen. (One sensor never sees both sides: an unknown trailer 2.55 m wide kept the
+        catalogue's 2.77, its side fitted 0.11 m off its axis bent the hitch 1.5 deg; the farthest
+        points alone, seen at a grazing angle, fell 0.1-0.4 m short of the corner.)"""
+        model = track.model
+        box = model.boxes[unit]
+        extent = track.widths[unit]
+        if not model.articulated or self._rays is None or extent.counted or len(extent.brackets) >= BRACKETS_KEPT:
+            return None
+        local = unit_frames(m.points, m.vector, model)[unit]
+        q = unit_frames(points, m.vector, model)[unit]
+        heights = (track.ground_z_m + box.floor_m, track.ground_z_m + box.floor_m + box.height_m / 2)
+        body = (points[:, 2] >= heights[0]) & (points[:, 2] <= heights[1])
+        origin, yaw = _unit_origins(m.vector, model)[unit]
+        motion = unit_motions(track.filter.state, model)[unit]
+        along, across = np.array([np.cos(yaw), np.sin(yaw)]), np.array([-np.sin(yaw), np.cos(yaw)])
+        widths = []
+        for face in OPEN_ENDS[unit]:
+            if not _face_seen(m, model, unit, face):
+                continue
+            _, end_m = kernels.face_median(local, 0, m.unit, m.face, unit, face, ANYWHERE)
+            n_side, side_m = kernels.face_median(
+                local, 1, m.unit, m.face, unit, side, (end_m - SIDE_NEAR_END_M, end_m + SIDE_NEAR_END_M)
+            )
+            if n_side < SIDE_MIN_POINTS:
+                continue
+            outward = 1.0 if side == LEFT else -1.0  # the seen side positive: the far corner is negative
+            on_face = outward * q[body & (np.abs(q[:, 0] - end_m) <= END_BAND_M / 2), 1]
+            if len(on_face) < 2:
+                continue
+            last = np.partition(on_face, 1)[1]
+            rays = self._rays.crossings(
+                origin + end_m * along, across, box.width_m / 2 + 1.0, heights[1], CORNER_BEYOND_M, motion
+            )
+            beside = -outward * rays[rays[:, 1] >= heights[0], 0]
+            beside = beside[beside > -last - CORNER_BRACKET_M]
+            if len(beside) and beside.min() + last <= CORNER_BRACKET_M:
+                widths.append(outward * side_m + (beside.min() - last) / 2)
+        width = float(np.mean(widths)) if widths else None
+        return width if width is not None and VEHICLE_WIDTH_M[0] <= width <= VEHICLE_WIDTH_M[1] else None
 
     def _follow_model(self, track: _Track, prior: Prior, m: Measurement, before: VehicleModel, name: str) -> None:
         """A learned change moved a front or the kingpin against the rear axle by more than
@@ -632,10 +734,11 @@ class VehicleTracker:
         cab = track.cab_length
         if cab is not None and cab.median is None:  # not measured yet: the new type's
             cab.prior = prior.tractor.length_m
-        tractor = replace(
-            prior.tractor, width_m=model.tractor.width_m, length_m=cab.estimate if cab else prior.tractor.length_m
-        )
-        trailer = replace(prior.trailer, width_m=model.trailer.width_m, length_m=model.trailer.length_m)
+        for extent, box in zip(track.widths, prior.boxes):
+            extent.prior = box.width_m
+        widths = _unit_widths(track.widths)  # from the new type's where not measured
+        tractor = replace(prior.tractor, width_m=widths[0], length_m=cab.estimate if cab else prior.tractor.length_m)
+        trailer = replace(prior.trailer, width_m=widths[1], length_m=model.trailer.length_m)
         track.model = replace(prior.with_boxes(tractor, trailer), trailer_axle_m=model.trailer_axle_m)
         track.catalogue_name = name
         # learned again from the old axle
@@ -1182,7 +1285,7 @@ class VehicleTracker:
             speed_m_s,
         )
         window = self.params.dimension_window
-        widths = [_Extent(box.width_m, window) for box in model.boxes]
+        widths = [_Extent(box.width_m, window, min_values=WIDTH_MIN_OBSERVATIONS) for box in model.boxes]
         cab = _Extent(model.tractor.length_m, window) if model.articulated else None
         length = kingpin = front = reach = None
         if model.trailer is not None:

@@ -13,6 +13,7 @@ from functools import cached_property
 import numpy as np
 
 from i2v_loc.stages import kernels
+from i2v_loc.stages.kinematic_filter import UnitMotion
 
 
 @dataclass(eq=False)
@@ -24,6 +25,7 @@ class Rays:
     origins: np.ndarray  # (S, 3) yard frame, one per sweep
     bounds: np.ndarray  # (S + 1,) the sweeps' first rows, then N
     to_level: np.ndarray  # (3, 3) rotation
+    lag_s: np.ndarray | None = None  # (N,) the frame's reference time minus each ray's capture time
 
     def through(
         self, center_xy: tuple[float, float], yaw_rad: float, half_length_m: float, half_width_m: float,
@@ -43,22 +45,22 @@ class Rays:
         return int(through), int(ended), float(front)
 
     def crossings(
-        self, point_xy: np.ndarray, direction_xy: np.ndarray, half_length_m: float, top_z_m: float, beyond_m: float
-    ) -> np.ndarray:
+        self, point_xy: np.ndarray, direction_xy: np.ndarray, half_length_m: float, top_z_m: float, beyond_m: float,
+        motion: UnitMotion | None = None,
+    ) -> np.ndarray:  # fmt: skip
         """Where rays cross the upright plane through ``point_xy`` along ``direction_xy`` (level
         frame) within ``half_length_m`` of the point and below ``top_z_m``, having come from their
         sensor's side and ending ``beyond_m`` or more behind it: (n, 2) along the line from the
-        point, and height."""
-        normal = np.array([-direction_xy[1], direction_xy[0]])
-        start, end = self._level_segments
-        before, after = (start[:, :2] - point_xy) @ normal, (end[:, :2] - point_xy) @ normal
-        with np.errstate(invalid="ignore", divide="ignore"):
-            crosses = (np.sign(before) * np.sign(after) < 0) & (np.abs(after) >= beyond_m)
-            t = before[crosses] / (before[crosses] - after[crosses])
-        at = start[crosses] + t[:, None] * (end[crosses] - start[crosses])
-        along = (at[:, :2] - point_xy) @ np.asarray(direction_xy)
-        keep = (np.abs(along) <= half_length_m) & (at[:, 2] <= top_z_m)
-        return np.column_stack([along[keep], at[keep, 2]])
+        point, and height. With a unit's ``motion``, the plane is the unit's at the reference time
+        and each ray is carried with the unit from its capture time (a sweep's 0.1 s moves a
+        trailer's rear half a metre at 5 m/s: rays captured after it left crossed where it was)."""
+        plane = np.array([*point_xy, *direction_xy, half_length_m, top_z_m], dtype=float)
+        carry = np.zeros(5) if motion is None else np.array([*motion.center_xy, *motion.velocity_xy, motion.rate_rad_s])
+        lag = np.zeros(len(self.points)) if self.lag_s is None else np.asarray(self.lag_s, dtype=float)
+        rotation = np.array(self.to_level, dtype=float)
+        return kernels.plane_crossings(
+            self.points, self.origins, self.bounds, rotation, lag, plane, carry, float(beyond_m)
+        )
 
     @property
     def level_points(self) -> np.ndarray:
