@@ -115,16 +115,14 @@ ANYWHERE = (-np.inf, np.inf)  # no bound along a unit
 # per unit of an articulated vehicle: the end faces nothing of the vehicle hides (a cab covers part of
 # its trailer's front face at a hitch angle, the trailer part of the cab's rear)
 OPEN_ENDS = ((FRONT,), (REAR,))
-WIDTH_MIN_OBSERVATIONS = (
-    3  # both sides seen: one frame's width can be a dock shelter's (a Twizy's 1.75 m trailer, 1.99)
-)
-BRACKETS_SETTLED = 10
-BRACKETS_KEPT = 20  # then no more: each costs a pass over the frame's rays (about 2 ms for four OS1-32)  # a unit's widths bracketed from one side (``_width_across_end``) before they count
+# both sides seen: one frame's width can be a dock shelter's (a Twizy's 1.75 m trailer, 1.99)
+WIDTH_MIN_OBSERVATIONS = 3
+BRACKETS_SETTLED = 10  # a unit's widths bracketed from one side (``_width_across_end``) before they count
+BRACKETS_KEPT = 20  # then no more: each costs a pass over the frame's rays (about 2 ms for four OS1-32)
 CORNER_BRACKET_M = 0.15  # a side's spacing of voxel centroids and columns seen at 20-30 deg, at 20 m
-CORNER_BEYOND_M = (
-    0.15  # a ray ending this far past an end face's plane passed it (its points: within 0.05 m), though it
-)
+# a ray ending this far past an end face's plane passed it (its points: within 0.05 m), though it
 # ends on the ground soon after: past the lower corner of a cab, a ray ending 0.4 m on was the first 0.06 m out
+CORNER_BEYOND_M = 0.15
 SIDE_NEAR_END_M = 2.0
 VEHICLE_WIDTH_M = (RIGID_MIN_WIDTH_M, END_FACE_WIDTH_M[1])  # a bracket outside: a fit that went astray
 FACE_SEEN_SPAN = 0.6  # an end face is seen when its points span this share of the unit's width
