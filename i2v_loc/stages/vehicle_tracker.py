@@ -112,9 +112,9 @@ END_SEEN_REACH_M = 1.0
 END_TRAVEL_M = 0.3  # a moving trailer's end counts once it has gone this far with it (not stayed put)
 END_HISTORY = 50  # frames of ends kept to judge that by
 ANYWHERE = (-np.inf, np.inf)  # no bound along a unit
-# per unit of an articulated vehicle: the end faces nothing of the vehicle hides (a cab covers part of
+# per unit of an articulated vehicle: the end face nothing of the vehicle hides (a cab covers part of
 # its trailer's front face at a hitch angle, the trailer part of the cab's rear)
-OPEN_ENDS = ((FRONT,), (REAR,))
+OPEN_ENDS = (FRONT, REAR)
 # both sides seen: one frame's width can be a dock shelter's (a Twizy's 1.75 m trailer, 1.99)
 WIDTH_MIN_OBSERVATIONS = 3
 BRACKETS_SETTLED = 10  # a unit's widths bracketed from one side (``_width_across_end``) before they count
@@ -597,42 +597,37 @@ class VehicleTracker:
         cab's windscreen. (One sensor never sees both sides: an unknown trailer 2.55 m wide kept the
         catalogue's 2.77, its side fitted 0.11 m off its axis bent the hitch 1.5 deg; the farthest
         points alone, seen at a grazing angle, fell 0.1-0.4 m short of the corner.)"""
-        model = track.model
-        box = model.boxes[unit]
-        extent = track.widths[unit]
+        model, face = track.model, OPEN_ENDS[unit]
+        box, extent = model.boxes[unit], track.widths[unit]
         if not model.articulated or self._rays is None or extent.counted or len(extent.brackets) >= BRACKETS_KEPT:
             return None
+        if not _face_seen(m, model, unit, face):
+            return None
         local = unit_frames(m.points, m.vector, model)[unit]
-        q = unit_frames(points, m.vector, model)[unit]
+        _, end_m = kernels.face_median(local, 0, m.unit, m.face, unit, face, ANYWHERE)
+        near_end = (end_m - SIDE_NEAR_END_M, end_m + SIDE_NEAR_END_M)
+        n_side, side_m = kernels.face_median(local, 1, m.unit, m.face, unit, side, near_end)
         heights = (track.ground_z_m + box.floor_m, track.ground_z_m + box.floor_m + box.height_m / 2)
-        body = (points[:, 2] >= heights[0]) & (points[:, 2] <= heights[1])
+        q = unit_frames(points, m.vector, model)[unit]
+        outward = 1.0 if side == LEFT else -1.0  # the seen side positive: the far corner is negative
+        on_face = (
+            (points[:, 2] >= heights[0]) & (points[:, 2] <= heights[1]) & (np.abs(q[:, 0] - end_m) <= END_BAND_M / 2)
+        )
+        if n_side < SIDE_MIN_POINTS or np.count_nonzero(on_face) < 2:
+            return None
+        last = np.partition(outward * q[on_face, 1], 1)[1]
         origin, yaw = _unit_origins(m.vector, model)[unit]
-        motion = unit_motions(track.filter.state, model)[unit]
         along, across = np.array([np.cos(yaw), np.sin(yaw)]), np.array([-np.sin(yaw), np.cos(yaw)])
-        widths = []
-        for face in OPEN_ENDS[unit]:
-            if not _face_seen(m, model, unit, face):
-                continue
-            _, end_m = kernels.face_median(local, 0, m.unit, m.face, unit, face, ANYWHERE)
-            n_side, side_m = kernels.face_median(
-                local, 1, m.unit, m.face, unit, side, (end_m - SIDE_NEAR_END_M, end_m + SIDE_NEAR_END_M)
-            )
-            if n_side < SIDE_MIN_POINTS:
-                continue
-            outward = 1.0 if side == LEFT else -1.0  # the seen side positive: the far corner is negative
-            on_face = outward * q[body & (np.abs(q[:, 0] - end_m) <= END_BAND_M / 2), 1]
-            if len(on_face) < 2:
-                continue
-            last = np.partition(on_face, 1)[1]
-            rays = self._rays.crossings(
-                origin + end_m * along, across, box.width_m / 2 + 1.0, heights[1], CORNER_BEYOND_M, motion
-            )
-            beside = -outward * rays[rays[:, 1] >= heights[0], 0]
-            beside = beside[beside > -last - CORNER_BRACKET_M]
-            if len(beside) and beside.min() + last <= CORNER_BRACKET_M:
-                widths.append(outward * side_m + (beside.min() - last) / 2)
-        width = float(np.mean(widths)) if widths else None
-        return width if width is not None and VEHICLE_WIDTH_M[0] <= width <= VEHICLE_WIDTH_M[1] else None
+        motion = unit_motions(track.filter.state, model)[unit]
+        rays = self._rays.crossings(
+            origin + end_m * along, across, box.width_m / 2 + 1.0, heights[1], CORNER_BEYOND_M, motion
+        )
+        beside = -outward * rays[rays[:, 1] >= heights[0], 0]
+        beside = beside[beside > -last - CORNER_BRACKET_M]
+        if not len(beside) or beside.min() + last > CORNER_BRACKET_M:
+            return None
+        width = outward * side_m + (beside.min() - last) / 2
+        return width if VEHICLE_WIDTH_M[0] <= width <= VEHICLE_WIDTH_M[1] else None
 
     def _follow_model(self, track: _Track, prior: Prior, m: Measurement, before: VehicleModel, name: str) -> None:
         """A learned change moved a front or the kingpin against the rear axle by more than
