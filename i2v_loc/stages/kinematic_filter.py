@@ -119,11 +119,6 @@ class UnitMotion:
     velocity_xy: np.ndarray
     rate_rad_s: float
 
-    def velocity_at(self, xy: np.ndarray) -> np.ndarray:
-        """(N, 2) velocities of the unit's points at ``xy`` (N, 2)."""
-        arm = xy - self.center_xy
-        return self.velocity_xy + self.rate_rad_s * np.column_stack([-arm[:, 1], arm[:, 0]])
-
 
 def unit_motions(s: FilterState, model: VehicleModel) -> list[UnitMotion]:
     """Each unit's motion in the state ``s`` (a turning cab's centre moves sideways; the trailer

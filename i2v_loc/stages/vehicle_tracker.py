@@ -304,7 +304,7 @@ class _Extent:
     def measured(self) -> float:
         """The median once counted, else that of the brackets once settled, else the end the
         moving unit's points kept reaching, else the prior."""
-        if self.counted and self.median is not None:
+        if self.counted:
             return self.median
         if self.observed:
             return self.bracket_median
@@ -560,7 +560,7 @@ class VehicleTracker:
             if min(n_left, n_right) >= SIDE_MIN_POINTS and faced[u] and _sides_along(local[u], m, u, box):
                 track.widths[u].add(left - right)
             elif max(n_left, n_right) >= SIDE_MIN_POINTS > min(n_left, n_right) and not track.at_wall:
-                width = self._width_across_end(track, m, points, u, LEFT if n_left > n_right else RIGHT)
+                width = self._width_across_end(track, m, points, local[u], u, LEFT if n_left > n_right else RIGHT)
                 if width is not None:
                     track.widths[u].add_bracket(width)
         widths = _unit_widths(track.widths)
@@ -585,25 +585,25 @@ class VehicleTracker:
         track.filter.trailer_axle_m = track.model.trailer_axle_m
 
     def _width_across_end(
-        self, track: _Track, m: Measurement, points: np.ndarray, unit: int, side: int
+        self, track: _Track, m: Measurement, points: np.ndarray, local: np.ndarray, unit: int, side: int
     ) -> float | None:
         """The unit's width from its one ``side`` seen, next to the end (a yaw 0.5 deg off moves a
         13.6 m trailer's rear 0.06 m across against its side's middle), to the far corner of an end
         face nothing of the vehicle hides (``OPEN_ENDS``): a sensor that sees a side and an end face
         of a box sees the whole face. The corner lies between the face's farthest point (the second
-        farthest of all the claimed ``points`` near it: the fit's are thinned) and the nearest ray
-        that passed beside the face, carried with the unit from its capture time: their middle, when
-        they bracket it within ``CORNER_BRACKET_M``. In the body's lower half: rays pass through a
-        cab's windscreen. (One sensor never sees both sides: an unknown trailer 2.55 m wide kept the
-        catalogue's 2.77, its side fitted 0.11 m off its axis bent the hitch 1.5 deg; the farthest
-        points alone, seen at a grazing angle, fell 0.1-0.4 m short of the corner.)"""
+        farthest of all the claimed ``points`` near it: the fit's, ``local`` in the unit's frame,
+        are thinned) and the nearest ray that passed beside the face, carried with the unit from its
+        capture time: their middle, when they bracket it within ``CORNER_BRACKET_M``. In the body's
+        lower half: rays pass through a cab's windscreen. (One sensor never sees both sides: an
+        unknown trailer 2.55 m wide kept the catalogue's 2.77, its side fitted 0.11 m off its axis
+        bent the hitch 1.5 deg; the farthest points alone, seen at a grazing angle, fell 0.1-0.4 m
+        short of the corner.)"""
         model, face = track.model, OPEN_ENDS[unit]
         box, extent = model.boxes[unit], track.widths[unit]
         if not model.articulated or self._rays is None or extent.counted or len(extent.brackets) >= BRACKETS_KEPT:
             return None
         if not _face_seen(m, model, unit, face):
             return None
-        local = unit_frames(m.points, m.vector, model)[unit]
         _, end_m = kernels.face_median(local, 0, m.unit, m.face, unit, face, ANYWHERE)
         near_end = (end_m - SIDE_NEAR_END_M, end_m + SIDE_NEAR_END_M)
         n_side, side_m = kernels.face_median(local, 1, m.unit, m.face, unit, side, near_end)

@@ -62,17 +62,10 @@ class Rays:
             self.points, self.origins, self.bounds, rotation, lag, plane, carry, float(beyond_m)
         )
 
-    @property
+    @cached_property
     def level_points(self) -> np.ndarray:
         """Every ray's return, level frame (N, 3)."""
-        return self._level_segments[1]
-
-    @cached_property
-    def _level_segments(self) -> tuple[np.ndarray, np.ndarray]:
-        """Each ray's origin and return, level frame (origins NaN where the sensor is not known)."""
-        to_level = np.asarray(self.to_level)
-        origins = np.repeat(self.origins @ to_level.T, np.diff(self.bounds), axis=0)
-        return origins, self.points @ to_level.T
+        return self.points @ np.asarray(self.to_level).T
 
     def at_view_top(self, points: np.ndarray, tolerance_rad: float) -> bool:
         """Whether any of ``points`` (level frame) lies within ``tolerance_rad`` of the elevation of
