@@ -1108,6 +1108,77 @@ def irls(
 
 
 @njit(**_JIT)
+def joint_hinge_irls(
+    xy,
+    z_rel,
+    starts,
+    geometries,
+    locals0,
+    shared0,
+    local_weights,
+    shared_weights,
+    scale,
+    start_scale,
+    iterations,
+    ranges,
+    chassis_gap,
+    top_band,
+):
+    """Reweighted Gauss-Newton steps of the hinged model fitted to several frames at once: each
+    frame ``f`` (its points ``starts[f]:starts[f + 1]``) has its own pose (``locals0[f]``: x, y,
+    yaw, hitch), all share the kingpin's offset and the trailer's front (``shared0``). Each frame's own parameters are eliminated from its normal equations (the
+    Schur complement), the shared step solved from their sum, then each frame's step from it.
+    Weak priors (``local_weights``, ``shared_weights``: the diagonal of their information) pull
+    towards the start; the loss scale and the stop as ``irls``. Returns the shared parameters, the
+    frames' own, the shared parameters' information (unweighted by the noise) and the residuals."""
+    n_frames, n_local = locals0.shape
+    n_params = n_local + 2
+    local = locals0.copy()
+    shared = shared0.copy()
+    v = np.empty(n_params)
+    residual = np.empty(xy.shape[0])
+    information = np.zeros((2, 2))
+    h_ll_inv = np.empty((n_frames, n_local, n_local))
+    h_ls = np.empty((n_frames, n_local, 2))
+    g_l = np.empty((n_frames, n_local))
+    for k in range(iterations):
+        c = max(scale, start_scale * 0.5**k)
+        information = np.diag(shared_weights)
+        gradient = shared_weights * (shared - shared0)
+        for f in range(n_frames):
+            a, b = starts[f], starts[f + 1]
+            v[:n_local] = local[f]
+            v[n_local:] = shared
+            r, jacobian, _, _, _ = fit_faces(
+                xy[a:b], z_rel[a:b], geometries[f], top_band, 4, False, True, v, chassis_gap
+            )
+            residual[a:b] = r
+            weighted = _cauchy_weighted(jacobian, r, c)
+            normal = np.dot(weighted.T, jacobian)
+            g = np.dot(weighted.T, r)
+            for j in range(n_local):
+                normal[j, j] += local_weights[j]
+                g[j] += local_weights[j] * (local[f, j] - locals0[f, j])
+            h_ll_inv[f] = np.linalg.inv(normal[:n_local, :n_local])
+            h_ls[f] = normal[:n_local, n_local:]
+            g_l[f] = g[:n_local]
+            reduce = np.dot(h_ls[f].T, h_ll_inv[f])
+            information += normal[n_local:, n_local:] - np.dot(reduce, h_ls[f])
+            gradient += g[n_local:] - np.dot(reduce, g_l[f])
+        step = np.linalg.solve(information, -gradient)
+        shared = shared + step
+        shared[0] = min(max(shared[0], ranges[2]), ranges[3])
+        moved = max(abs(step[0]), abs(step[1]))
+        for f in range(n_frames):
+            local_step = -np.dot(h_ll_inv[f], g_l[f] + np.dot(h_ls[f], step))
+            local[f] += local_step
+            moved = max(moved, abs(local_step[0]), abs(local_step[1]))
+        if c == scale and moved < 1e-3:
+            break
+    return shared, local, information - np.diag(shared_weights), residual
+
+
+@njit(**_JIT)
 def _cauchy_weighted(jacobian, residual, scale):
     """The Jacobian's rows times the Cauchy weights 1 / (1 + (r / scale)^2) of their residuals."""
     n, n_params = jacobian.shape
@@ -1798,6 +1869,10 @@ def warm_up() -> None:
     )
     cauchy_cost(residual, 0.1)
     fit_covariance(residual, jacobian, np.ones(7), 0.1, 0.3, 0.01, 0.0004)
+    joint_hinge_irls(
+        xy, z, np.array([0, 3]), geometry[None].copy(), v0[None, :4].copy(), v0[5:].copy(), np.ones(4), np.ones(2),
+        0.1, 0.2, 2, ranges, 0.1, 0.25,
+    )  # fmt: skip
     face_median(p64, 1, np.zeros(3, dtype=np.int8), np.zeros(3, dtype=np.int8), 0, 0, (-1.0, 1.0))
     labels = np.zeros(3, dtype=np.int8)
     rear_face(
