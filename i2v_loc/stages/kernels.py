@@ -1129,7 +1129,9 @@ def joint_hinge_irls(
     yaw, hitch), all share the kingpin's offset and the trailer's front (``shared0``). Each frame's own parameters are eliminated from its normal equations (the
     Schur complement), the shared step solved from their sum, then each frame's step from it.
     Weak priors (``local_weights``, ``shared_weights``: the diagonal of their information) pull
-    towards the start; the loss scale and the stop as ``irls``. Returns the shared parameters, the
+    towards the start; the loss scale as ``irls``'s; stops once a step at the final scale moved
+    the shared parameters by less than 1 mm (the frames' poses are a means: followed to 1 mm too,
+    20 frames took all 10 steps, 2-3 ms, for the same hinge). Returns the shared parameters, the
     frames' own, the shared parameters' information (unweighted by the noise) and the residuals."""
     n_frames, n_local = locals0.shape
     n_params = n_local + 2
@@ -1172,7 +1174,6 @@ def joint_hinge_irls(
         for f in range(n_frames):
             local_step = -np.dot(h_ll_inv[f], g_l[f] + np.dot(h_ls[f], step))
             local[f] += local_step
-            moved = max(moved, abs(local_step[0]), abs(local_step[1]))
         if c == scale and moved < 1e-3:
             break
     return shared, local, information - np.diag(shared_weights), residual
