@@ -1126,8 +1126,9 @@ def joint_hinge_irls(
 ):
     """Reweighted Gauss-Newton steps of the hinged model fitted to several frames at once: each
     frame ``f`` (its points ``starts[f]:starts[f + 1]``) has its own pose (``locals0[f]``: x, y,
-    yaw, hitch), all share the kingpin's offset and the trailer's front (``shared0``). Each frame's own parameters are eliminated from its normal equations (the
-    Schur complement), the shared step solved from their sum, then each frame's step from it.
+    yaw, hitch), all share the kingpin's offset and the trailer's front (``shared0``). Each
+    frame's own parameters are eliminated from its normal equations (the Schur complement), the
+    shared step solved from their sum, then each frame's step from it.
     Weak priors (``local_weights``, ``shared_weights``: the diagonal of their information) pull
     towards the start; the loss scale as ``irls``'s; stops once a step at the final scale moved
     the shared parameters by less than 1 mm (the frames' poses are a means: followed to 1 mm too,
