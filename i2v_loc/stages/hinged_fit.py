@@ -321,9 +321,8 @@ def fit_hinge(frames: list[TurnFrame], model: VehicleModel, params: ArticulatedP
     1.48-1.60 m ahead of the kingpin, 1.2; with the length 1.23-1.29 m). One frame pins only where
     its two units' axes cross, and a side's error moves that point along the other axis by the
     error over the hitch's sine: frames at different hitch angles disagree but for the one point
-    fixed in both units. (An unknown 6.5 m
-    trailer's reverse docking seen by `l1`: single frames' best kingpins spread from -0.1 to
-    -0.8 m, their sum's lay at the truth, -0.70 m.)"""
+    fixed in both units. (An unknown 6.5 m trailer's reverse docking seen by `l1`: single frames'
+    best kingpins spread from -0.1 to -0.8 m, their sum's lay at the truth, -0.70 m.)"""
     poses = np.array([f.pose for f in frames], dtype=float)
     if poses.ndim != 2 or poses.shape[1] != 4:
         raise ValueError(f"a turn frame's pose is x, y, yaw and hitch; got shape {poses.shape}")
@@ -341,5 +340,6 @@ def fit_hinge(frames: list[TurnFrame], model: VehicleModel, params: ArticulatedP
     )  # fmt: skip
     inliers = residual[np.abs(residual) <= params.fit_inlier_m]
     noise2 = max(np.median(inliers**2) / 0.455 if len(inliers) else scale**2, params.fit_noise_floor_m**2)
-    covariance = np.linalg.inv(information / noise2 + np.diag(1.0 / np.full(2, WEAK_KINGPIN_SIGMA_M) ** 2))
+    prior_information = np.diag(shared_weights / scale**2)  # the weak prior's, in its own units
+    covariance = np.linalg.inv(information / noise2 + prior_information)
     return Hinge(float(shared[0]), float(shared[1]), np.sqrt(np.diag(covariance)), fitted)

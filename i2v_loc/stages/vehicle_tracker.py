@@ -616,13 +616,15 @@ class VehicleTracker:
         _, end_m = kernels.face_median(local, 0, m.unit, m.face, unit, face, ANYWHERE)
         near_end = (end_m - SIDE_NEAR_END_M, end_m + SIDE_NEAR_END_M)
         n_side, side_m = kernels.face_median(local, 1, m.unit, m.face, unit, side, near_end)
+        if n_side < SIDE_MIN_POINTS:
+            return None
         heights = (track.ground_z_m + box.floor_m, track.ground_z_m + box.floor_m + box.height_m / 2)
         q = unit_frames(points, m.vector, model)[unit]
         outward = 1.0 if side == LEFT else -1.0  # the seen side positive: the far corner is negative
         on_face = (
             (points[:, 2] >= heights[0]) & (points[:, 2] <= heights[1]) & (np.abs(q[:, 0] - end_m) <= END_BAND_M / 2)
         )
-        if n_side < SIDE_MIN_POINTS or np.count_nonzero(on_face) < 2:
+        if np.count_nonzero(on_face) < 2:
             return None
         last = np.partition(outward * q[on_face, 1], 1)[1]
         origin, yaw = _unit_origins(m.vector, model)[unit]

@@ -56,11 +56,19 @@ class Rays:
         trailer's rear half a metre at 5 m/s: rays captured after it left crossed where it was)."""
         plane = np.array([*point_xy, *direction_xy, half_length_m, top_z_m], dtype=float)
         carry = np.zeros(5) if motion is None else np.array([*motion.center_xy, *motion.velocity_xy, motion.rate_rad_s])
-        lag = np.zeros(len(self.points)) if self.lag_s is None else np.asarray(self.lag_s, dtype=float)
-        rotation = np.array(self.to_level, dtype=float)
         return kernels.plane_crossings(
-            self.points, self.origins, self.bounds, rotation, lag, plane, carry, float(beyond_m)
+            self.points, self.origins, self.bounds, self._rotation, self._lag_s, plane, carry, float(beyond_m)
         )
+
+    @cached_property
+    def _rotation(self) -> np.ndarray:
+        return np.array(self.to_level, dtype=float)
+
+    @cached_property
+    def _lag_s(self) -> np.ndarray:
+        """Each ray's lag as the kernel takes it (zeros when not known); converted once per frame,
+        not per crossing asked."""
+        return np.zeros(len(self.points)) if self.lag_s is None else np.asarray(self.lag_s, dtype=float)
 
     @cached_property
     def level_points(self) -> np.ndarray:
