@@ -20,7 +20,7 @@ behind its trailer while reversing: its yaw followed the prediction's curvature,
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -254,6 +254,37 @@ def fit(
         face,
         _observed(marginal, sigmas[:n_pose], floor),
     )
+
+
+def rear_sigma_m(m: Measurement, model: VehicleModel, params: ArticulatedParams) -> float:
+    """How well the fit ``m`` alone places the trailer's rear face along the trailer's axis."""
+    g, marginal = _rear_along(m, model, params)
+    return float(np.sqrt(max(g @ marginal @ g, 0.0)))
+
+
+def with_rear_end(
+    m: Measurement, model: VehicleModel, offset_m: float, sigma_m: float, params: ArticulatedParams
+) -> Measurement:
+    """The fit ``m`` with the trailer's rear end seen ``offset_m`` further along the trailer's axis
+    than its box puts it (standard deviation ``sigma_m``): the pose and its covariance fused with
+    that one linear measurement (information form), the observed directions again from them."""
+    g, marginal = _rear_along(m, model, params)
+    covariance = np.linalg.inv(np.linalg.inv(marginal) + np.outer(g, g) / sigma_m**2)
+    covariance = np.ascontiguousarray((covariance + covariance.T) / 2)
+    x, y, yaw, hitch = m.vector + covariance @ g * (offset_m / sigma_m**2)
+    floor = _floor(params, len(g))
+    return replace(
+        m, x_m=float(x), y_m=float(y), yaw_rad=float(wrap_rad(yaw)), hitch_rad=float(wrap_rad(hitch)),
+        covariance=covariance + np.diag(floor**2), observed=_observed(covariance, WEAK_PRIOR_SIGMAS, floor),
+    )  # fmt: skip
+
+
+def _rear_along(m: Measurement, model: VehicleModel, params: ArticulatedParams) -> tuple[np.ndarray, np.ndarray]:
+    """How the trailer's rear face moves along the trailer's axis with the pose (x, y, yaw, hitch:
+    the kingpin swings about the rear axle with the yaw), and the fit's covariance without its floor."""
+    along = m.yaw_rad + m.hitch_rad
+    g = np.array([math.cos(along), math.sin(along), -model.kingpin_behind_axle_m * math.sin(m.hitch_rad), 0.0])
+    return g, m.covariance - np.diag(_floor(params, len(g)) ** 2)
 
 
 def _weak_prior_sigmas(prior: Prior) -> np.ndarray:
