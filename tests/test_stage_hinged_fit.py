@@ -9,7 +9,17 @@ import pytest
 from hinged_points import vehicle_points
 
 from i2v_loc.params import Params
-from i2v_loc.stages.hinged_fit import CHASSIS_GAP_M, REAR, Prior, TurnFrame, faces, fit, fit_hinge
+from i2v_loc.stages.hinged_fit import (
+    CHASSIS_GAP_M,
+    REAR,
+    Prior,
+    TurnFrame,
+    faces,
+    fit,
+    fit_hinge,
+    rear_sigma_m,
+    with_rear_end,
+)
 from i2v_loc.stages.vehicle_model import VehicleModel
 
 PARAMS = Params()
@@ -306,3 +316,24 @@ def test_the_hinge_fitted_to_a_turns_frames_at_once_is_the_truth_where_single_fr
     assert hinge.trailer_front_m == pytest.approx(1.5, abs=0.03)
     assert max(abs(k) for k in single_kingpins) > 0.1
     assert hinge.std_m.max() < 0.05 and len(hinge.poses) == 6
+
+
+def test_a_rear_end_seen_moves_the_fit_along_the_trailer_as_far_as_the_fit_is_unsure():
+    """The trailer's rear end seen 0.4 m behind the fit's rear face (sigma 0.15 m): a fit unsure
+    along the trailer (2 m) moves back 0.4 m along the trailer's axis (30 deg: the tractor's hitch
+    and yaw stay) and is sure within 0.15 m after; a fit sure within 2 cm barely moves."""
+    model, yaw, hitch = volvo(), np.radians(10.0), np.radians(20.0)
+    points = vehicle_points(model, 2.0, 3.0, yaw, hitch, sensors=SENSORS)
+    m = fit(points, Prior(2.0, 3.0, yaw, hitch, model), PARAMS.articulated)
+    params, floor = PARAMS.articulated, np.diag([0.03, 0.03, np.radians(0.3), np.radians(0.3)]) ** 2
+    axis = np.array([np.cos(yaw + hitch), np.sin(yaw + hitch)])
+    for along_sigma, moved in ((2.0, -0.4), (0.02, -0.4 * 0.02**2 / (0.02**2 + 0.15**2))):
+        pose = np.diag([0.02, 0.02, np.radians(0.1), np.radians(0.1)]) ** 2
+        pose[:2, :2] += (along_sigma**2 - 0.02**2) * np.outer(axis, axis)
+        unsure = replace(m, covariance=pose + floor)
+        assert rear_sigma_m(unsure, model, params) == pytest.approx(along_sigma, rel=0.02)
+        fused = with_rear_end(unsure, model, -0.4, 0.15, params)
+        step = fused.vector - m.vector
+        assert step[:2] @ axis == pytest.approx(moved, abs=0.005)
+        assert abs(step[:2] @ np.array([-axis[1], axis[0]])) < 0.005 and np.abs(step[2:]).max() < 1e-3
+        assert rear_sigma_m(fused, model, params) < min(along_sigma, 0.15)

@@ -515,9 +515,9 @@ class VehicleTracker:
         behind it (``_seen_end``), once its length is settled, when the fit alone places its rear
         face no better than ``END_ALONG_SIGMA_M``. A trailer's side shows not where along it the
         trailer is: with its cab hidden or out of view, the filter ran it on at the speed it had
-        (a 16 m trailer that stopped in front of one LiDAR drove 4 m on in 3 s and was lost). (Also
-        when a side's points end elsewhere than the fit's rear face: a trailer's length learned
-        0.35 m long then pulled it against its cab's points every frame.)"""
+        (a 16 m trailer that stopped in front of one LiDAR drove 4 m on in 3 s and was lost). (Asked
+        also wherever a side's points ended elsewhere than the fit's rear face, that trailer's
+        length, learned 0.35 m long, pulled it against its cab's points every frame.)"""
         model = track.model
         if (
             not model.articulated
@@ -529,7 +529,7 @@ class VehicleTracker:
         local = unit_frames(m.points, m.vector, model)[1]
         sides = [local[(m.unit == 1) & (m.face == face)] for face in (LEFT, RIGHT)]
         sides = [side for side in sides if len(side)]
-        end = self._seen_end(track, m, _in_trailer_frame(points, m, track), sides, model.trailer.width_m)
+        end = self._seen_end(track, m, points, sides, model.trailer.width_m)
         if end is None:
             return m
         return with_rear_end(m, model, end - model.trailer.rear_m, END_ALONG_SIGMA_M, self.params)
@@ -797,8 +797,7 @@ class VehicleTracker:
                 track.trailer_length.add(length)
         elif not track.trailer_length.settled:
             on_side = [rows[(m.unit[rows] == 1) & (m.face[rows] == face)] for face in (LEFT, RIGHT)]
-            claimed = _in_trailer_frame(points, m, track)
-            end = self._seen_end(track, m, claimed, [q[side] for side in on_side if len(side)], width_m)
+            end = self._seen_end(track, m, points, [q[side] for side in on_side if len(side)], width_m)
             if end is not None and self._end_went_along(track, m, "seen", end):
                 track.trailer_length.add(trailer.front_m - end)
         if self._end_went_along(track, m, "bound", rear):
@@ -834,14 +833,15 @@ class VehicleTracker:
         seen.append((place, end_m, kingpin))
         return before is not None and abs(end_m - before[1]) < np.hypot(*(place - before[0]))
 
-    def _side_end(self, track: _Track, claimed: _Claimed, side: np.ndarray, width_m: float) -> float:
-        """The hindmost of the ``claimed`` points on the trailer's side whose fitted points are ``side``
+    def _side_end(self, track: _Track, m: Measurement, points: np.ndarray, side: np.ndarray, width_m: float) -> float:
+        """The hindmost of the claimed ``points`` on the trailer's side whose fitted points are ``side``
         (its frame, xy), reached from the fitted ones' hindmost without a gap longer than
         ``MAX_BODY_GAP_M``: the fit's thinned sample keeps one point in many, and its hindmost lay
         0.1-1.2 m short of a MAN's trailer's end (all its side's points: 0.0-0.2 m)."""
         trailer = track.model.trailer
         end = float(side[:, 0].min())
-        q, z_rel = claimed
+        q = trailer_frame(points, m.vector, track.model)
+        z_rel = points[:, 2] - track.ground_z_m
         on_side = (
             (np.abs(q[:, 1] - np.sign(side[0, 1]) * width_m / 2) <= self.params.fit_inlier_m)
             & _body_heights(z_rel, trailer)
@@ -853,7 +853,7 @@ class VehicleTracker:
         return float(reached[-1]) if len(reached) else end
 
     def _seen_end(
-        self, track: _Track, m: Measurement, claimed: _Claimed, sides: list[np.ndarray], width_m: float
+        self, track: _Track, m: Measurement, points: np.ndarray, sides: list[np.ndarray], width_m: float
     ) -> float | None:
         """Where the trailer ends, though its rear face is not seen (from one side it never is): at
         the first of its sides (``sides``: each seen side's fitted points, the trailer's frame) whose
@@ -863,7 +863,7 @@ class VehicleTracker:
         asked of the rays instead: a MAN's side ending 0.7 m short in a neighbour's shadow passed.)"""
         for side in sorted(sides, key=lambda points_xy: -float(points_xy[:, 0].min())):
             if self._seen_empty_behind(track, m, float(side[:, 0].min()), width_m):
-                return self._side_end(track, claimed, side, width_m)
+                return self._side_end(track, m, points, side, width_m)
         return None
 
     def _seen_empty_behind(self, track: _Track, m: Measurement, end_m: float, width_m: float) -> bool:
@@ -1958,14 +1958,6 @@ def _unit_origins(v: np.ndarray, model: VehicleModel) -> list[tuple[np.ndarray, 
 def unit_frames(points: np.ndarray, v: np.ndarray, model: VehicleModel) -> list[np.ndarray]:
     """(N, 2) coordinates of the points in each unit's frame (tractor: rear axle; trailer: kingpin)."""
     return [_in_frame(points, origin, yaw) for origin, yaw in _unit_origins(v, model)]
-
-
-_Claimed = tuple[np.ndarray, np.ndarray]  # a track's claimed points in its trailer's frame (xy) and above its ground
-
-
-def _in_trailer_frame(points: np.ndarray, m: Measurement, track: _Track) -> _Claimed:
-    """The ``points`` in the trailer's frame of the fit ``m`` and their heights above the track's ground."""
-    return trailer_frame(points, m.vector, track.model), points[:, 2] - track.ground_z_m
 
 
 def trailer_frame(points: np.ndarray, v: np.ndarray, model: VehicleModel) -> np.ndarray:
