@@ -185,6 +185,22 @@ def test_a_lost_tractor_is_found_again_around_its_kingpin():
         assert shown or abs(error + 80.0) < 5.0
 
 
+def test_no_start_is_offered_folded_beyond_the_start_limit_the_other_way_round():
+    """The start's two directions of the best model are both offered when they cost alike, but not
+    one folded beyond ``start_max_hitch_deg``: a container's end started as a car-sized cab folded
+    170 deg onto its trailer when its unfolded way round was not supported."""
+    model = volvo()
+    m = fit(
+        vehicle_points(model, 0.0, 4.0, 0.3, 0.0, sensors=SENSORS), Prior(0.0, 4.0, 0.3, 0.0, model), PARAMS.articulated
+    )
+    seed = Seed(np.array([0.0, 4.0]), np.array([0.0, 4.0]))
+    tracker = VehicleTracker(PARAMS.articulated, PARAMS.vehicles)
+    for other_hitch_deg, offered in ((170.0, 1), (10.0, 2)):
+        other = replace(m, hitch_rad=np.radians(other_hitch_deg), cost=m.cost * 1.1)
+        choices = tracker._choose([(model, None, m), (model, None, other)], seed, 0.0, True)
+        assert len(choices) == offered and choices[0][1] is m
+
+
 def test_the_search_sample_takes_half_around_the_kingpin_and_never_more_than_there_are():
     """``max_points`` rows, each once: half near the kingpin when both parts have enough; when the
     trailer has few points the cab's region gives the rest, and the other way round."""

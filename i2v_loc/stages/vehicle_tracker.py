@@ -1480,7 +1480,9 @@ class VehicleTracker:
         if best_art is not None and (best_rigid is None or best_art[2].cost < RIGID_COST_RATIO * best_rigid[2].cost):
             if abs(best_art[2].hitch_rad) > np.radians(self.params.start_max_hitch_deg):
                 return []  # it looks jack-knifed: a parked trailer beside a container, more likely
-            pool = [h for h in articulated if h[0].name == best_art[0].name]
+            # the other way round may be folded further (a container's end started as a car-sized
+            # cab folded 170 deg onto its trailer, its unfolded way not supported)
+            pool = [h for h in articulated if h[0].name == best_art[0].name and self._unfolded(h[2])]
         else:
             pool = [h for h in rigid if h[0].tractor.length_m >= self.params.rigid_min_length_m]
         pool.sort(key=lambda h: h[2].cost)
