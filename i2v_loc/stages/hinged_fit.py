@@ -369,8 +369,7 @@ def fit_hinge(frames: list[TurnFrame], model: VehicleModel, params: ArticulatedP
         xy, z_rel, starts, geometries, poses, shared0, local_weights, shared_weights,
         float(scale), float(params.fit_start_scale_m), iterations, _RANGES, CHASSIS_GAP_M, float(params.fit_top_band_m),
     )  # fmt: skip
-    inliers = residual[np.abs(residual) <= params.fit_inlier_m]
-    noise2 = max(np.median(inliers**2) / 0.455 if len(inliers) else scale**2, params.fit_noise_floor_m**2)
+    noise2 = kernels.inlier_noise2(residual, params.fit_inlier_m, scale**2, params.fit_noise_floor_m**2)
     prior_information = np.diag(shared_weights / scale**2)  # the weak prior's, in its own units
     covariance = np.linalg.inv(information / noise2 + prior_information)
     return Hinge(float(shared[0]), float(shared[1]), np.sqrt(np.diag(covariance)), fitted)

@@ -1311,10 +1311,21 @@ def fit_covariance(residual, jacobian, prior_information, scale, inlier_m, no_in
     (their median square / 0.455, else ``no_inlier_noise2``; at least ``noise_floor2``), plus the
     weak prior (``prior_information``: its diagonal, 1 / sigma^2).
     numpy's order of operations; the inverse as numpy takes it (LAPACK gesv against the identity)."""
-    n, n_params = jacobian.shape
+    n_params = jacobian.shape[1]
+    weighted = _cauchy_weighted(jacobian, residual, scale)
+    info = np.dot(weighted.T, jacobian) / inlier_noise2(residual, inlier_m, no_inlier_noise2, noise_floor2)
+    for j in range(n_params):
+        info[j, j] += prior_information[j]
+    return np.linalg.solve(info, np.eye(n_params))
+
+
+@njit(**_JIT)
+def inlier_noise2(residual, inlier_m, no_inlier_noise2, noise_floor2):
+    """The point noise of a fit: its inliers' (``inlier_m``) median square residual / 0.455, else
+    ``no_inlier_noise2``; at least ``noise_floor2`` (the hinged fit's and the joint hinge fit's)."""
+    n = residual.shape[0]
     squares = np.empty(n)
     n_in = 0
-    weighted = _cauchy_weighted(jacobian, residual, scale)
     for i in range(n):
         if abs(residual[i]) <= inlier_m:
             squares[n_in] = residual[i] * residual[i]
@@ -1322,11 +1333,7 @@ def fit_covariance(residual, jacobian, prior_information, scale, inlier_m, no_in
     sigma2 = no_inlier_noise2
     if n_in:
         sigma2 = _median(squares[:n_in]) / 0.455
-    sigma2 = max(sigma2, noise_floor2)
-    info = np.dot(weighted.T, jacobian) / sigma2
-    for j in range(n_params):
-        info[j, j] += prior_information[j]
-    return np.linalg.solve(info, np.eye(n_params))
+    return max(sigma2, noise_floor2)
 
 
 @njit(**_JIT)

@@ -38,9 +38,8 @@ class Rays:
         box = np.array(
             [*center_xy, np.cos(yaw_rad), np.sin(yaw_rad), half_length_m, half_width_m, *z_range_m], dtype=float
         )
-        rotation = np.array(self.to_level, dtype=float)  # a copy: a read-only one is another specialisation
         through, ended, front = kernels.rays_through_box(
-            self.points, self.origins, self.bounds, rotation, box, float(beyond_m)
+            self.points, self.origins, self.bounds, self._rotation, box, float(beyond_m)
         )
         return int(through), int(ended), float(front)
 
@@ -62,6 +61,8 @@ class Rays:
 
     @cached_property
     def _rotation(self) -> np.ndarray:
+        """``to_level`` as the kernels take it, once per frame (a copy: a read-only one is another
+        specialisation)."""
         return np.array(self.to_level, dtype=float)
 
     @cached_property
