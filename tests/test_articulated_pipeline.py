@@ -1050,9 +1050,10 @@ def test_a_wall_beyond_the_far_side_seen_by_one_sensor_is_no_side():
             vehicle = vehicle_points(model, *axle, 0.0, sensors=sensors, spacing=0.1, seed=k)
             beyond = vehicle_points(wall_model, *wall_xy, 0.0, sensors=sensors, spacing=0.1, others=boxes, seed=k)
             tracker.process(np.vstack([vehicle, beyond]), flat, 0.1 * k, rays=rays if with_rays else None)
-        widths[with_rays] = track.model.trailer.width_m
-    assert widths[True] == model.trailer.width_m
-    assert widths[False] > model.trailer.width_m + 0.1  # without the sensors' places: the wall taken for a side
+        widths[with_rays] = track.model.trailer.width_m, list(track.widths[1].values)
+    assert widths[True] == (model.trailer.width_m, [])
+    measured = widths[False][1]  # without the sensors' places: the wall taken for a side
+    assert measured and min(measured) > model.trailer.width_m + 0.1
 
 
 def pulling_out_lengths(trailer_length_m: float, shelter: bool) -> list[float]:

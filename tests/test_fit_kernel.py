@@ -213,6 +213,27 @@ def test_fitted_dimensions_move_the_faces_like_a_rebuilt_model(free_length, free
     assert ((got.unit == 1) & (got.face == hinged_fit.REAR)).any() and got.jacobian.shape[1] == len(v)
 
 
+@pytest.mark.parametrize("hitch_deg", [0.0, 45.0, -80.0])
+def test_a_fitted_cab_length_moves_the_cabs_rear_face_like_a_rebuilt_model(hitch_deg):
+    """The joint hinge fit's layout: pose, kingpin, trailer front, cab length (not the model's)."""
+    model = models()[2]
+    prior = Prior(3.0, -2.0, 0.7, np.radians(hitch_deg), model, free_kingpin=True)
+    v = np.r_[prior.vector, [0.4, 1.3, model.tractor.length_m - 0.4]]
+    xy, z = random_points(model, v, int(hitch_deg) + 400)
+    geometry = hinged_fit._geometry(v, model, 0.0)
+    got = hinged_fit._Faces(
+        *kernels.fit_faces(
+            np.ascontiguousarray(xy), np.ascontiguousarray(z), geometry, TOP_BAND_M, 4, False, True, True, v,
+            prior.chassis_gap_m,
+        )
+    )  # fmt: skip
+    rebuilt = replace(prior, model=model.with_boxes(replace(model.tractor, length_m=float(v[-1])), model.trailer))
+    residual, jac, unit, distance, face = ref_faces_of(v[:-1], xy, z, rebuilt, TOP_BAND_M)
+    cab_rear = (unit == 0) & (face == hinged_fit.REAR)
+    assert_same(got, (residual, np.column_stack([jac, -cab_rear.astype(float)]), unit, distance, face))
+    assert cab_rear.any() and got.jacobian.shape[1] == len(v)
+
+
 def test_fit_labels_are_the_numpy_masks():
     """A fit's unit and face labels and its count of explained points on the trailer's rear face."""
     rng = np.random.default_rng(9)
@@ -231,7 +252,7 @@ def kernel_faces_of(v, xy, z, prior):
     xy, z = np.ascontiguousarray(xy, dtype=float), np.ascontiguousarray(z, dtype=float)
     return hinged_fit._Faces(
         *kernels.fit_faces(
-            xy, z, geometry, TOP_BAND_M, 4, prior.fits_length, prior.fits_kingpin, v, prior.chassis_gap_m
+            xy, z, geometry, TOP_BAND_M, 4, prior.fits_length, prior.fits_kingpin, False, v, prior.chassis_gap_m
         )
     )
 

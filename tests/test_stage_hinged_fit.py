@@ -318,6 +318,39 @@ def test_the_hinge_fitted_to_a_turns_frames_at_once_is_the_truth_where_single_fr
     assert hinge.std_m.max() < 0.05 and len(hinge.poses) == 6
 
 
+def _turn_frames(truth: VehicleModel, model: VehicleModel, sensor, hitches_deg, first: int = 0) -> list[TurnFrame]:
+    """Frames of a turn seen by one ``sensor``, each fitted with ``model`` from the true pose."""
+    frames = []
+    for k, hitch_deg in enumerate(hitches_deg, start=first):
+        yaw, hitch = TRUTH[2] + np.radians(3 * k), np.radians(hitch_deg)
+        points = vehicle_points(truth, TRUTH[0], TRUTH[1], yaw, hitch, sensors=[sensor], seed=k)
+        m = fit(points, Prior(TRUTH[0], TRUTH[1], yaw, hitch, model), PARAMS.articulated, iterations=20)
+        frames.append(TurnFrame(m.points, 0.0, m.vector))
+    return frames
+
+
+def test_the_cabs_length_fitted_with_the_hinge_keeps_a_cab_seen_from_behind_from_moving_the_kingpin():
+    """A tractor with its cab 0.3 m shorter than the catalogue's Volvo and its kingpin on the rear
+    axle (0.3 m ahead), seen by one sensor from behind (the cab's rear face shows, not its front)
+    and then from ahead. With the catalogue's cab the rear face moves the kingpin by the cab's
+    error, and frames of both views disagree; with the cab's length shared, the rear view alone pins
+    the kingpin only given the length (the length is not measured), both views pin all three."""
+    model = volvo()
+    truth = replace(model, kingpin_behind_axle_m=0.0, tractor=replace(model.tractor, length_m=2.25))
+    from_behind = _turn_frames(truth, model, (-10.0, 7.0, 4.0), [25, 30, 35, 40])
+    from_ahead = _turn_frames(truth, model, (14.0, -4.0, 4.0), [25, 30, 35, 40], first=4)
+    cab_prior = (model.tractor.length_m, 0.3)
+    assert fit_hinge(from_behind, model, PARAMS.articulated).kingpin_m == pytest.approx(0.3, abs=0.05)
+    alone = fit_hinge(from_behind, model, PARAMS.articulated, cab_prior=cab_prior)
+    assert alone.std_m.max() < 0.05 and alone.cab_std_m > 0.1
+    fixed = fit_hinge(from_behind + from_ahead, model, PARAMS.articulated)
+    assert max(abs(fixed.kingpin_m), abs(fixed.trailer_front_m - 0.9)) > 0.1
+    both = fit_hinge(from_behind + from_ahead, model, PARAMS.articulated, cab_prior=cab_prior)
+    assert both.kingpin_m == pytest.approx(0.0, abs=0.03)
+    assert both.trailer_front_m == pytest.approx(0.9, abs=0.03)
+    assert both.cab_length_m == pytest.approx(2.25, abs=0.03) and both.cab_std_m < 0.05
+
+
 def test_a_rear_end_seen_moves_the_fit_along_the_trailer_as_far_as_the_fit_is_unsure():
     """The trailer's rear end seen 0.4 m behind the fit's rear face (sigma 0.15 m): a fit unsure
     along the trailer (2 m) moves back 0.4 m along the trailer's axis (30 deg: the tractor's hitch

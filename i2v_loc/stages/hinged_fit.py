@@ -36,6 +36,8 @@ FRONT, REAR, LEFT, RIGHT = 0, 1, 2, 3  # face numbers of a unit (the face table'
 TRAILER_LENGTH_RANGE_M = (2.0, 16.5)
 KINGPIN_RANGE_M = (-1.5, 1.5)
 _RANGES = np.array([*TRAILER_LENGTH_RANGE_M, *KINGPIN_RANGE_M])
+CAB_LENGTH_RANGE_M = (1.0, 4.0)
+_HINGE_RANGES = np.array([*_RANGES, *CAB_LENGTH_RANGE_M])
 MIN_UNIT_SHARE = 0.1  # of the fit's thinned sample, for each unit that has as many points
 UNIT_SAMPLE_MARGIN_M = 0.5
 CHASSIS_GAP_M = 0.1  # a low point farther behind a tracked cab's rear face is its chassis (nearest_faces)
@@ -337,15 +339,25 @@ class TurnFrame:
 @dataclass(frozen=True)
 class Hinge:
     """The kingpin's offset behind the rear axle and the trailer's front ahead of it, fitted to
-    several frames at once, their standard deviations and the frames' poses at the solution."""
+    several frames at once, their standard deviations given the cab's length, the cab's length when
+    it was fitted too and its standard deviation (else None and inf), and the frames' poses at the
+    solution."""
 
     kingpin_m: float
     trailer_front_m: float
     std_m: np.ndarray  # (2,)
     poses: np.ndarray  # (frames, 4)
+    cab_length_m: float | None = None
+    cab_std_m: float = math.inf
 
 
-def fit_hinge(frames: list[TurnFrame], model: VehicleModel, params: ArticulatedParams, iterations: int = 10) -> Hinge:
+def fit_hinge(
+    frames: list[TurnFrame],
+    model: VehicleModel,
+    params: ArticulatedParams,
+    iterations: int = 10,
+    cab_prior: tuple[float, float] | None = None,
+) -> Hinge:
     """The hinge that explains the ``frames`` of a turn together (``kernels.joint_hinge_irls``):
     each frame has its own pose, all share the kingpin and the front, with the model's trailer
     length (free in each frame, the first frames of a sloped 10.5 m trailer's docking put its front
@@ -353,7 +365,13 @@ def fit_hinge(frames: list[TurnFrame], model: VehicleModel, params: ArticulatedP
     its two units' axes cross, and a side's error moves that point along the other axis by the
     error over the hitch's sine: frames at different hitch angles disagree but for the one point
     fixed in both units. (An unknown 6.5 m trailer's reverse docking seen by `l1`: single frames'
-    best kingpins spread from -0.1 to -0.8 m, their sum's lay at the truth, -0.70 m.)"""
+    best kingpins spread from -0.1 to -0.8 m, their sum's lay at the truth, -0.70 m.)
+    With ``cab_prior`` (its mean and standard deviation) the cab's length is shared too: a frame
+    that shows the cab's rear face and not its front pins the kingpin against that face, and the
+    model's cab length moves the kingpin by its error (an unknown 13.6 m trailer's tractor, its cab
+    0.27 m shorter than the catalogue's, seen from behind by one sensor: kingpin 0.26 m off; once
+    its front showed, its yaw ran 2-2.5 deg off for 5 s, until the window turned over). Frames
+    showing either face then pin the kingpin given the length, frames showing both the length."""
     poses = np.array([f.pose for f in frames], dtype=float)
     if poses.ndim != 2 or poses.shape[1] != 4:
         raise ValueError(f"a turn frame's pose is x, y, yaw and hitch; got shape {poses.shape}")
@@ -363,13 +381,21 @@ def fit_hinge(frames: list[TurnFrame], model: VehicleModel, params: ArticulatedP
     geometries = np.array([_geometry(f.pose, model, 0.0) for f in frames])
     scale = params.fit_loss_scale_m
     local_weights = (scale / WEAK_PRIOR_SIGMAS) ** 2
-    shared_weights = np.full(2, (scale / WEAK_KINGPIN_SIGMA_M) ** 2)
-    shared0 = np.array([model.kingpin_behind_axle_m, model.trailer.front_m])
+    shared0 = [model.kingpin_behind_axle_m, model.trailer.front_m]
+    sigmas = [WEAK_KINGPIN_SIGMA_M] * 2
+    if cab_prior is not None:
+        shared0.append(cab_prior[0])
+        sigmas.append(cab_prior[1])
+    shared_weights = (scale / np.array(sigmas)) ** 2
     shared, fitted, information, residual = kernels.joint_hinge_irls(
-        xy, z_rel, starts, geometries, poses, shared0, local_weights, shared_weights,
-        float(scale), float(params.fit_start_scale_m), iterations, _RANGES, CHASSIS_GAP_M, float(params.fit_top_band_m),
+        xy, z_rel, starts, geometries, poses, np.array(shared0), local_weights, shared_weights,
+        float(scale), float(params.fit_start_scale_m), iterations, _HINGE_RANGES, CHASSIS_GAP_M,
+        float(params.fit_top_band_m),
     )  # fmt: skip
     noise2 = kernels.inlier_noise2(residual, params.fit_inlier_m, scale**2, params.fit_noise_floor_m**2)
-    prior_information = np.diag(shared_weights / scale**2)  # the weak prior's, in its own units
-    covariance = np.linalg.inv(information / noise2 + prior_information)
-    return Hinge(float(shared[0]), float(shared[1]), np.sqrt(np.diag(covariance)), fitted)
+    total = information / noise2 + np.diag(shared_weights / scale**2)  # the weak prior's, in its own units
+    given_cab = np.sqrt(np.diag(np.linalg.inv(total[:2, :2])))
+    if cab_prior is None:
+        return Hinge(float(shared[0]), float(shared[1]), given_cab, fitted)
+    cab_std = float(np.sqrt(np.linalg.inv(total)[2, 2]))
+    return Hinge(float(shared[0]), float(shared[1]), given_cab, fitted, float(shared[2]), cab_std)

@@ -1022,18 +1022,22 @@ def nearest_faces(xy, z_rel, geometry, top_band, n_params, chassis_gap):
 
 
 @njit(**_JIT)
-def fit_faces(xy, z_rel, geometry, top_band, n_pose, fits_length, fits_kingpin, v, chassis_gap):
+def fit_faces(xy, z_rel, geometry, top_band, n_pose, fits_length, fits_kingpin, fits_cab, v, chassis_gap):
     """``nearest_faces`` of the pose and fitted dimensions ``v`` (pose, then the trailer's length,
-    then the kingpin's offset and the trailer's front), with the dimensions' Jacobian columns: the
-    rear face moves with the length; the trailer moves back along the tractor's axis with the
-    kingpin's offset and forward along its own with its front. ``geometry`` is updated in place."""
+    then the kingpin's offset and the trailer's front, then the cab's length), with the dimensions'
+    Jacobian columns: the rear face moves with the length; the trailer moves back along the
+    tractor's axis with the kingpin's offset and forward along its own with its front; the cab's
+    rear face moves back with its length. ``geometry`` is updated in place."""
     geometry[0], geometry[1], geometry[2] = v[0], v[1], v[2]
     geometry[3] = v[3] if n_pose == 4 else 0.0
     n_params = v.shape[0]
     if fits_length:
         geometry[12] = v[4]
+    hinge_end = n_params - 1 if fits_cab else n_params
     if fits_kingpin:
-        geometry[4], geometry[11] = v[n_params - 2], v[n_params - 1]
+        geometry[4], geometry[11] = v[hinge_end - 2], v[hinge_end - 1]
+    if fits_cab:
+        geometry[7] = v[n_params - 1]
     residual, pose_jacobian, unit, distance, face = nearest_faces(xy, z_rel, geometry, top_band, n_pose, chassis_gap)
     if n_params == n_pose:
         return residual, pose_jacobian, unit, distance, face
@@ -1052,6 +1056,9 @@ def fit_faces(xy, z_rel, geometry, top_band, n_pose, fits_length, fits_kingpin, 
                 along = pose_jacobian[i, 0] * c + pose_jacobian[i, 1] * s
                 jacobian[i, column] = sign * along if unit[i] == 1 and face[i] >= 0 else 0.0
             column += 1
+    if fits_cab:
+        for i in range(n):
+            jacobian[i, column] = -(1.0 if unit[i] == 0 and face[i] == 1 else 0.0)
     return residual, jacobian, unit, distance, face
 
 
@@ -1084,13 +1091,13 @@ def irls(
     v = v0.copy()
     n_params = v.shape[0]
     residual, jacobian, unit, distance, face = fit_faces(
-        xy, z_rel, geometry, top_band, n_pose, fits_length, fits_kingpin, v, chassis_gap
+        xy, z_rel, geometry, top_band, n_pose, fits_length, fits_kingpin, False, v, chassis_gap
     )
     for k in range(iterations):
         c = max(scale, start_scale * 0.5**k)
         if k > 0:
             residual, jacobian, unit, distance, face = fit_faces(
-                xy, z_rel, geometry, top_band, n_pose, fits_length, fits_kingpin, v, chassis_gap
+                xy, z_rel, geometry, top_band, n_pose, fits_length, fits_kingpin, False, v, chassis_gap
             )
         weighted = _cauchy_weighted(jacobian, residual, c)
         normal = np.dot(weighted.T, jacobian) + prior_info
@@ -1126,7 +1133,9 @@ def joint_hinge_irls(
 ):
     """Reweighted Gauss-Newton steps of the hinged model fitted to several frames at once: each
     frame ``f`` (its points ``starts[f]:starts[f + 1]``) has its own pose (``locals0[f]``: x, y,
-    yaw, hitch), all share the kingpin's offset and the trailer's front (``shared0``). Each
+    yaw, hitch), all share the kingpin's offset and the trailer's front, and the cab's length when
+    ``shared0`` holds three (``ranges``' last two bound it as its third and fourth bound the
+    kingpin's). Each
     frame's own parameters are eliminated from its normal equations (the Schur complement), the
     shared step solved from their sum, then each frame's step from it.
     Weak priors (``local_weights``, ``shared_weights``: the diagonal of their information) pull
@@ -1135,14 +1144,15 @@ def joint_hinge_irls(
     20 frames took all 10 steps, 2-3 ms, for the same hinge). Returns the shared parameters, the
     frames' own, the shared parameters' information (unweighted by the noise) and the residuals."""
     n_frames, n_local = locals0.shape
-    n_params = n_local + 2
+    n_shared = shared0.shape[0]
+    n_params = n_local + n_shared
     local = locals0.copy()
     shared = shared0.copy()
     v = np.empty(n_params)
     residual = np.empty(xy.shape[0])
-    information = np.zeros((2, 2))
+    information = np.zeros((n_shared, n_shared))
     h_ll_inv = np.empty((n_frames, n_local, n_local))
-    h_ls = np.empty((n_frames, n_local, 2))
+    h_ls = np.empty((n_frames, n_local, n_shared))
     g_l = np.empty((n_frames, n_local))
     for k in range(iterations):
         c = max(scale, start_scale * 0.5**k)
@@ -1153,7 +1163,7 @@ def joint_hinge_irls(
             v[:n_local] = local[f]
             v[n_local:] = shared
             r, jacobian, _, _, _ = fit_faces(
-                xy[a:b], z_rel[a:b], geometries[f], top_band, 4, False, True, v, chassis_gap
+                xy[a:b], z_rel[a:b], geometries[f], top_band, 4, False, True, n_shared == 3, v, chassis_gap
             )
             residual[a:b] = r
             weighted = _cauchy_weighted(jacobian, r, c)
@@ -1171,7 +1181,9 @@ def joint_hinge_irls(
         step = np.linalg.solve(information, -gradient)
         shared = shared + step
         shared[0] = min(max(shared[0], ranges[2]), ranges[3])
-        moved = max(abs(step[0]), abs(step[1]))
+        if n_shared == 3:
+            shared[2] = min(max(shared[2], ranges[4]), ranges[5])
+        moved = np.max(np.abs(step))
         for f in range(n_frames):
             local_step = -np.dot(h_ll_inv[f], g_l[f] + np.dot(h_ls[f], step))
             local[f] += local_step
@@ -1889,7 +1901,7 @@ def warm_up() -> None:
     )
     fit_labels(np.zeros(3, dtype=np.int64), np.zeros(3, dtype=np.int64), residual[:3], residual[:3], 0.1, 1)
     observed_directions(np.eye(4), np.ones(4), np.ones(4))
-    fit_faces(xy, z, geometry, 0.25, 4, True, True, v0, 0.1)  # the tests call it on its own
+    fit_faces(xy, z, geometry, 0.25, 4, True, True, False, v0, 0.1)  # the tests call it on its own
     any_closer(xy, xy, 0.5)  # the tests call it on its own
     fullest_bin(np.ones((3, 2)), 0.1)
     rays_through_box(p32, p64[:1], np.array([0, 3]), np.eye(3), np.array([0.0, 0.0, 1.0, 0.0, 1.0, 1.0, 0.0, 1.0]), 0.3)

@@ -84,6 +84,9 @@ KINGPIN_MIN_HITCH_RAD = np.radians(8.0)
 HINGE_FRAME_STEPS = (2, 5)
 HINGE_FRAMES = 20  # the latest kept frames fitted
 HINGE_MAX_STD_M = 0.05  # a joint fit pinning the kingpin or the front no better than this measures nothing
+# the spread of tractors' cab lengths (2.3-2.8 m): the prior of a cab's length the joint hinge fit
+# learns with the kingpin until both its faces were seen in one frame
+CAB_LENGTH_SIGMA_M = 0.3
 REACH_SETTLED = 50  # straight frames' reaches of the trailer's front ahead of the rear axle: learned
 REACH_MAX_HITCH_RAD = np.radians(5.0)  # nearly straight: the trailer's front reach ahead of the rear axle shows
 GAP_TEST_MAX_HITCH_RAD = np.radians(10.0)  # beyond, a trailer's front corner swings into the gap
@@ -399,14 +402,18 @@ class _Track:
     def dimensions_seen(self) -> tuple[tuple[bool, bool, bool], ...]:
         """Per unit, which of its length, width and height its points measured: a rigid one's as it
         started (one face shows one of its length and width) and its width once both sides showed;
-        an articulated one's lengths and widths once observed, its heights never (the catalogue's)."""
+        an articulated one's lengths and widths once observed (the cab's length also once the hinge's
+        fit pins it within ``HINGE_MAX_STD_M``), its heights never (the catalogue's)."""
         width = [w.observed for w in self.widths]
         if self.trailer_length is None:
             return ((self.rigid_seen[0], self.rigid_seen[1] or width[0], self.rigid_seen[2]),)
         return (
-            (self.cab_length.median is not None, width[0], False),
+            (self.cab_length.median is not None or self._cab_fitted(), width[0], False),
             (self.trailer_length.median is not None, width[1], False),
         )
+
+    def _cab_fitted(self) -> bool:
+        return self.hinge is not None and self.hinge.cab_std_m <= HINGE_MAX_STD_M
 
 
 class VehicleTracker:
@@ -606,7 +613,7 @@ class VehicleTracker:
         tractor = {"width_m": widths[0]}
         if track.cab_length is not None:
             self._learn_cab_length(track, m, local[0])
-            tractor["length_m"] = track.cab_length.estimate
+            tractor["length_m"] = _cab_length(track)
         learned = {"tractor": _changed(model.tractor, **tractor)}
         if model.trailer is not None:
             trailer = {"width_m": widths[1]}
@@ -744,7 +751,9 @@ class VehicleTracker:
     def _fit_turn(self, track: _Track, prior: Prior, own: Measurement) -> None:
         """``own`` kept as a frame of the turn, and the hinge fitted to the frames kept (``_learn_hinge``)."""
         track.turn.append(TurnFrame(own.points, prior.ground_z_m, own.vector))
-        hinge = fit_hinge(list(track.turn), track.model, self.params)
+        cab = track.cab_length
+        cab_prior = None if cab.counted else (cab.prior, CAB_LENGTH_SIGMA_M)
+        hinge = fit_hinge(list(track.turn), track.model, self.params, cab_prior=cab_prior)
         if hinge.std_m.max() <= HINGE_MAX_STD_M:
             track.hinge = hinge
             # the next fit starts where this one ended (each frame's pose was the model's then)
@@ -1546,6 +1555,14 @@ def _hinge(track: _Track) -> tuple[float, float]:
         return track.hinge.kingpin_m, track.hinge.trailer_front_m
     kingpin, front = track.hinge_prior
     return kingpin, (track.reach.estimate + kingpin if track.reach.values else front)
+
+
+def _cab_length(track: _Track) -> float:
+    """The cab's length: measured between its faces once counted, else the hinge's (fitted with it),
+    else the catalogue's (or at least the lower bound the faces gave)."""
+    if not track.cab_length.counted and track.hinge is not None and track.hinge.cab_length_m is not None:
+        return track.hinge.cab_length_m
+    return track.cab_length.estimate
 
 
 def _changed(obj, **values):
