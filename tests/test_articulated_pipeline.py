@@ -1560,6 +1560,39 @@ def test_while_a_cheaper_fit_lacks_points_none_the_other_way_round_starts(monkey
     assert start((man, 1.0, right), (volvo_model, -1.0, flipped)) == (man, right)
 
 
+def test_no_fit_bent_otherwise_than_the_cheapest_models_starts(monkeypatch):
+    """Fits of one vehicle by different catalogue models bend alike. A 16 m parked trailer's points
+    were fitted best by a MAN's straight (refuted: its gap filled) and started as a Volvo bent
+    32 deg on them at eight times the cost; a Volvo straight like the refuted MAN's starts, and
+    so does a bent one that is the cheapest."""
+    from i2v_loc.stages import vehicle_tracker as vt
+
+    man, volvo_model = VehicleModel.from_config("man_tgx", PARAMS.vehicles["man_tgx"]), volvo()
+    points = vehicle_points(man, 0.0, 0.0, np.pi, sensors=SENSORS)
+    straight = fit(points, Prior(0.0, 0.0, np.pi, 0.0, man), PARAMS.articulated, iterations=20)
+    bent = replace(straight, hitch_rad=np.radians(-32.0), cost=8 * straight.cost)
+    also_straight = replace(straight, hitch_rad=np.radians(-2.0), cost=8 * straight.cost)
+    refuted = {id(straight)}
+    monkeypatch.setattr(vt, "_supported", lambda m, *a, **k: True)
+    monkeypatch.setattr(vt, "_gap_filled", lambda c, m, *a: id(m) in refuted)
+    tracker = VehicleTracker(PARAMS.articulated, PARAMS.vehicles)
+    for name in ("_hinge_shown", "_stands_on_wheels", "_explains"):
+        monkeypatch.setattr(tracker, name, lambda *a: True)
+    monkeypatch.setattr(tracker, "_seen_through", lambda *a: False)
+    monkeypatch.setattr(tracker, "_allowed_to_start", lambda *a: True)
+    rect = vt.min_area_rect(points[:, :2])
+    moving = _seed_that_moved(points, 2.0)
+
+    def start(*fits):
+        monkeypatch.setattr(tracker, "_hypotheses", lambda *a: list(fits))
+        return tracker._candidate(points, rect, moving, 0.0, True, True)
+
+    assert start((man, 1.0, straight), (volvo_model, 1.0, bent)) is None
+    assert start((man, 1.0, straight), (volvo_model, 1.0, also_straight)) == (volvo_model, also_straight)
+    cheapest_bent = replace(bent, cost=straight.cost / 2)
+    assert start((man, 1.0, straight), (volvo_model, 1.0, cheapest_bent)) == (volvo_model, cheapest_bent)
+
+
 def test_a_width_counts_from_its_third_frame_and_brackets_from_their_tenth():
     """A dock shelter's wall can pass for a side in one frame (a Twizy's 1.75 m trailer, 1.99 m):
     both sides' widths count from the third, their median then; one side's brackets count from
