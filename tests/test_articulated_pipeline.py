@@ -1560,11 +1560,12 @@ def test_while_a_cheaper_fit_lacks_points_none_the_other_way_round_starts(monkey
     assert start((man, 1.0, right), (volvo_model, -1.0, flipped)) == (man, right)
 
 
-def test_no_fit_bent_otherwise_than_the_cheapest_models_starts(monkeypatch):
+def test_no_fit_bent_further_than_the_cheapest_models_starts(monkeypatch):
     """Fits of one vehicle by different catalogue models bend alike. A 16 m parked trailer's points
     were fitted best by a MAN's straight (refuted: its gap filled) and started as a Volvo bent
     32 deg on them at eight times the cost; a Volvo straight like the refuted MAN's starts, and
-    so does a bent one that is the cheapest."""
+    so does a bent one that is the cheapest, and a straight one after a cheaper bent misfit (an
+    unknown 13.6 m trailer's Volvo fit bent 12 deg, seen through; its MAN fit straight)."""
     from i2v_loc.stages import vehicle_tracker as vt
 
     man, volvo_model = VehicleModel.from_config("man_tgx", PARAMS.vehicles["man_tgx"]), volvo()
@@ -1591,6 +1592,10 @@ def test_no_fit_bent_otherwise_than_the_cheapest_models_starts(monkeypatch):
     assert start((man, 1.0, straight), (volvo_model, 1.0, also_straight)) == (volvo_model, also_straight)
     cheapest_bent = replace(bent, cost=straight.cost / 2)
     assert start((man, 1.0, straight), (volvo_model, 1.0, cheapest_bent)) == (volvo_model, cheapest_bent)
+    misfit = replace(straight, hitch_rad=np.radians(12.0), cost=straight.cost / 2)
+    refuted.add(id(misfit))
+    refuted.discard(id(straight))
+    assert start((man, 1.0, straight), (volvo_model, 1.0, misfit)) == (man, straight)
 
 
 def test_a_width_counts_from_its_third_frame_and_brackets_from_their_tenth():

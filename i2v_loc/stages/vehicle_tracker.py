@@ -1510,12 +1510,13 @@ class VehicleTracker:
 
 
 def _bent_against(m: Measurement, best: Measurement) -> bool:
-    """Whether the fit ``m`` bends more than ``START_BEND_TOLERANCE_RAD`` otherwise than ``best``, the
-    cheapest catalogue model's: fits of one vehicle bend alike, whichever model's (a Volvo whose
-    points a MAN's stretched trailer explains best is straight in both). A 16 m parked trailer's
-    points, fitted best by a MAN's straight (its gap filled, or its cab's box seen through), were
-    started as a Volvo bent 32-34 deg on them, at eight times the cost: 14 s of false vehicle."""
-    return abs(abs(m.hitch_rad or 0.0) - abs(best.hitch_rad or 0.0)) > START_BEND_TOLERANCE_RAD
+    """Whether the fit ``m`` bends more than ``START_BEND_TOLERANCE_RAD`` further than ``best``, the
+    cheapest catalogue model's: a straighter fit explaining the points better shows a straighter
+    body (parked 16 m trailers, fitted best by a MAN straight, its gap filled or its cab's box seen
+    through, started as Volvos bent 32-34 deg on them at eight times the cost: 14 s of false
+    vehicle). Not the other way: a cheapest fit bent 12 deg and seen through was a misfit of an
+    unknown 13.6 m trailer, a MAN's straight fit the right one."""
+    return abs(m.hitch_rad or 0.0) - abs(best.hitch_rad or 0.0) > START_BEND_TOLERANCE_RAD
 
 
 def _same_way(a: Measurement, b: Measurement) -> bool:
