@@ -1598,6 +1598,30 @@ def test_no_fit_bent_further_than_the_cheapest_models_starts(monkeypatch):
     assert start((man, 1.0, straight), (volvo_model, 1.0, misfit)) == (man, straight)
 
 
+def test_a_start_that_saw_no_rear_face_takes_its_trailers_reach_as_a_lower_bound():
+    """A start fit fits the trailer's length to where its points reach. Seen the rear face, that is
+    the length (the track is named by it); not seen, it is how long the trailer is at least, and the
+    catalogue's longer length stands until the end shows: a MAN entering the region, its rear beyond
+    it, was named ``unknown`` with the 11.1 m its points reached. A reach beyond the catalogue's is
+    the length's prior either way."""
+    man = VehicleModel.from_config("man_tgx", PARAMS.vehicles["man_tgx"])
+    tracker = VehicleTracker(PARAMS.articulated, PARAMS.vehicles)
+    points = vehicle_points(man, 0.0, 0.0, 0.0, sensors=SENSORS)
+    m = fit(points, Prior(0.0, 0.0, 0.0, 0.0, man), PARAMS.articulated, iterations=10)
+    named = {}
+    for reach, rear_points in ((11.1, 0), (11.1, 5), (15.0, 0)):
+        model = replace(man, trailer=replace(man.trailer, length_m=reach))
+        track = tracker._track(1, model, replace(m, rear_points=rear_points), 0.0, 0.0, 0.0)
+        named[reach, rear_points] = (
+            tracker._type_name(track),
+            track.model.trailer.length_m,
+            track.trailer_length.estimate,
+        )
+    assert named[11.1, 0] == ("man_tgx", man.trailer.length_m, man.trailer.length_m)
+    assert named[11.1, 5] == ("unknown", 11.1, 11.1)
+    assert named[15.0, 0] == ("unknown", 15.0, 15.0)
+
+
 def test_a_width_counts_from_its_third_frame_and_brackets_from_their_tenth():
     """A dock shelter's wall can pass for a side in one frame (a Twizy's 1.75 m trailer, 1.99 m):
     both sides' widths count from the third, their median then; one side's brackets count from

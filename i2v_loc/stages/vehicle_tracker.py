@@ -1330,10 +1330,9 @@ class VehicleTracker:
         length = reach = None
         hinge_prior = (0.0, 0.0)
         if model.trailer is not None:
-            length = _Extent(model.trailer.length_m, window)
+            length = self._start_length(model, m)
+            model = _with_trailer_length(model, length.prior)
             hinge_prior, reach = _hinge_priors(model, window)
-            if m.rear_points >= REAR_FACE_MIN_POINTS:  # the start fit saw where the trailer ends
-                length.add(model.trailer.length_m)
         return _Track(
             track_id,
             model,
@@ -1349,6 +1348,21 @@ class VehicleTracker:
             hinge_prior,
             reach,
         )
+
+    def _start_length(self, model: VehicleModel, m: Measurement) -> _Extent:
+        """The trailer's length as the start fit ``m`` shows it (``model`` carries the fitted one):
+        measured where it saw the rear face; else its points reach that far at least, and the
+        catalogue's longer length stands until the end shows (a MAN entering the region, its rear
+        beyond it, was named ``unknown`` with the 11.1 m its points reached, for 8 s)."""
+        window, fitted = self.params.dimension_window, model.trailer.length_m
+        if m.rear_points >= REAR_FACE_MIN_POINTS:  # the start fit saw where the trailer ends
+            length = _Extent(fitted, window)
+            length.add(fitted)
+            return length
+        listed = self.catalogue.get(model.name)
+        length = _Extent(max(fitted, listed.trailer.length_m) if listed is not None else fitted, window)
+        length.add_bound(fitted)
+        return length
 
     def _recheck_rigid(self, track: _Track, points: np.ndarray, free: np.ndarray, stamp_s: float) -> _Track:
         """A rigid track is fitted again as every model every ``RECHECK_FRAMES`` frames while it
