@@ -1611,7 +1611,8 @@ def test_a_start_that_saw_no_rear_face_takes_its_trailers_reach_as_a_lower_bound
     named = {}
     for reach, rear_points in ((11.1, 0), (11.1, 5), (15.0, 0)):
         model = replace(man, trailer=replace(man.trailer, length_m=reach))
-        track = tracker._track(1, model, replace(m, rear_points=rear_points), 0.0, 0.0, 0.0)
+        start = replace(m, rear_points=rear_points, trailer_length_m=reach)  # fitted with its length free
+        track = tracker._track(1, model, start, 0.0, 0.0, 0.0)
         named[reach, rear_points] = (
             tracker._type_name(track),
             track.model.trailer.length_m,

@@ -1350,18 +1350,20 @@ class VehicleTracker:
         )
 
     def _start_length(self, model: VehicleModel, m: Measurement) -> _Extent:
-        """The trailer's length as the start fit ``m`` shows it (``model`` carries the fitted one):
-        measured where it saw the rear face; else its points reach that far at least, and the
+        """The trailer's length as the start fit ``m`` shows it (``model`` carries it): measured
+        where it saw the rear face; else, fitted free, its points reach that far at least, and the
         catalogue's longer length stands until the end shows (a MAN entering the region, its rear
         beyond it, was named ``unknown`` with the 11.1 m its points reached, for 8 s)."""
-        window, fitted = self.params.dimension_window, model.trailer.length_m
-        if m.rear_points >= REAR_FACE_MIN_POINTS:  # the start fit saw where the trailer ends
-            length = _Extent(fitted, window)
-            length.add(fitted)
-            return length
+        window, length_m = self.params.dimension_window, model.trailer.length_m
         listed = self.catalogue.get(model.name)
-        length = _Extent(max(fitted, listed.trailer.length_m) if listed is not None else fitted, window)
-        length.add_bound(fitted)
+        if m.rear_points >= REAR_FACE_MIN_POINTS:  # the start fit saw where the trailer ends
+            length = _Extent(length_m, window)
+            length.add(length_m)
+        elif m.trailer_length_m is not None and listed is not None:
+            length = _Extent(max(m.trailer_length_m, listed.trailer.length_m), window)
+            length.add_bound(m.trailer_length_m)
+        else:
+            length = _Extent(length_m, window)
         return length
 
     def _recheck_rigid(self, track: _Track, points: np.ndarray, free: np.ndarray, stamp_s: float) -> _Track:
