@@ -1331,7 +1331,8 @@ class VehicleTracker:
         hinge_prior = (0.0, 0.0)
         if model.trailer is not None:
             length = self._start_length(model, m)
-            model = _with_trailer_length(model, length.prior)
+            if length.prior != model.trailer.length_m:  # the catalogue's, longer than the points reach
+                model = _with_trailer_length(model, length.prior)
             hinge_prior, reach = _hinge_priors(model, window)
         return _Track(
             track_id,
