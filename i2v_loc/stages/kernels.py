@@ -1140,10 +1140,8 @@ def joint_hinge_irls(
     shared step solved from their sum, then each frame's step from it.
     Weak priors (``local_weights``, ``shared_weights``: the diagonal of their information) pull
     towards the start; the loss scale as ``irls``'s; stops once a step at the final scale moved
-    the kingpin and the front by less than 1 mm (the frames' poses are a means: followed to 1 mm
-    too, 20 frames took all 10 steps, 2-3 ms, for the same hinge; so is the cab's length, which
-    creeps on along its valley while only one of its faces shows: followed too, the generated
-    docking's p95 rose by 0.9 ms, for the same figures). Returns the shared parameters, the
+    the shared parameters by less than 1 mm (the frames' poses are a means: followed to 1 mm too,
+    20 frames took all 10 steps, 2-3 ms, for the same hinge). Returns the shared parameters, the
     frames' own, the shared parameters' information (unweighted by the noise) and the residuals."""
     n_frames, n_local = locals0.shape
     n_shared = shared0.shape[0]
@@ -1185,7 +1183,7 @@ def joint_hinge_irls(
         shared[0] = min(max(shared[0], ranges[2]), ranges[3])
         if n_shared == 3:
             shared[2] = min(max(shared[2], ranges[4]), ranges[5])
-        moved = max(abs(step[0]), abs(step[1]))  # the cab's length creeps on along its valley
+        moved = np.max(np.abs(step))
         for f in range(n_frames):
             local_step = -np.dot(h_ll_inv[f], g_l[f] + np.dot(h_ls[f], step))
             local[f] += local_step
