@@ -501,7 +501,8 @@ class ArticulatedParams(Section):
         3,
         ge=1,
         le=100,
-        description="After this many gated-out fits in a row the filter restarts its pose and hitch from the fit",
+        description="After this many gated-out fits in a row that see the tractor the filter restarts its pose "
+        "and hitch from the fit",
     )
     accel_sigma_m_s2: float = Field(0.5, gt=0.0, le=20.0, description="Process noise: longitudinal acceleration")
     curvature_rate_sigma_1_m_s: float = Field(

@@ -188,6 +188,23 @@ def test_far_measurement_is_gated_then_taken_after_repeats():
     assert f.ukf.P[CURVATURE, CURVATURE] > 0
 
 
+def test_gated_fits_that_may_not_restart_never_do():
+    """A fit that does not see the tractor (the tracker's ``may_restart``: no point on its cab) is
+    gated as any other but never counts towards the restart: with the cab hidden, fits folded
+    their cab 68 deg onto nothing, and the filter restarted from one after three."""
+    truth = np.array([0.0, 0.0, 0.0, 0.0])
+    f = new_filter(truth)
+    f.predict(0.1)
+    before = f.ukf.x.copy()
+    folded = np.array([0.0, 0.0, 0.0, np.radians(70.0)])
+    for _ in range(3 * PARAMS.articulated.reset_after_rejections):
+        assert not f.update(folded, R, may_restart=False)
+    np.testing.assert_array_equal(f.ukf.x, before)
+    for _ in range(PARAMS.articulated.reset_after_rejections):
+        f.update(folded, R)
+    assert abs(f.state.hitch_rad - np.radians(70.0)) < 1e-9  # the ones that may, do
+
+
 def test_rigid_vehicle_has_no_hitch():
     f = KinematicFilter(np.array([1.0, 2.0, 0.5]), R[:3, :3], 0.0, 0.0, 1.0, False, PARAMS.articulated, 2.0)
     for k in range(1, 11):

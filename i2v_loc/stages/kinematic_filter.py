@@ -253,12 +253,20 @@ class KinematicFilter:
             self.stamp_s = stamp_s
         return self.state
 
-    def update(self, z: np.ndarray, r: np.ndarray, observed: tuple[np.ndarray, np.ndarray] | None = None) -> bool:
+    def update(
+        self,
+        z: np.ndarray,
+        r: np.ndarray,
+        observed: tuple[np.ndarray, np.ndarray] | None = None,
+        may_restart: bool = True,
+    ) -> bool:
         """Fuse one fit, ``z`` with covariance ``r``, or only its ``observed`` directions (rows and
         their noise: what its points measured); False (state unchanged) when it lies outside the
         innovation gate. After ``reset_after_rejections`` rejections in a row the fits are right and
         the prediction is not: the pose and hitch restart from the fit (speed and curvature kept,
-        their variance reset)."""
+        their variance reset). Only fits that ``may_restart`` count (the tracker's: those that see
+        the tractor at all; with the cab hidden behind its trailer, fits folded their cab 68 deg onto
+        nothing, and after three such fits the filter restarted from one)."""
         z = np.asarray(z, dtype=float)
         if isinstance(self._first, tuple):
             self._motion_of_two_fits(z)
@@ -270,7 +278,7 @@ class KinematicFilter:
         if self.ukf.mahalanobis**2 > self.params.innovation_gate:
             self.ukf.x, self.ukf.P = x, p
             self.rejected += 1
-            self._in_a_row += 1
+            self._in_a_row = self._in_a_row + 1 if may_restart else 0
             if self._in_a_row >= self.params.reset_after_rejections:
                 self.restart(z, r, observed)
             return False

@@ -498,7 +498,8 @@ class VehicleTracker:
         measured = False
         if found is None and m is not None:
             m = self._with_seen_end(track, m, points)
-            measured = track.filter.update(m.vector, m.covariance, m.observed)
+            # a fit whose cab explains no point says nothing of where the cab is
+            measured = track.filter.update(m.vector, m.covariance, m.observed, may_restart=bool(np.any(m.unit == 0)))
             self.rejected += not measured
             if not (measured or lost) and prior.model.articulated:  # warm-started in the wrong place?
                 found = self._better(self._reacquired(points, prior, m), m)
