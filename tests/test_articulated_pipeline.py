@@ -1522,20 +1522,16 @@ def test_both_directions_are_checked_when_they_cost_alike():
     assert [h.cost for _, h in tracker._choose(clear, seed, 0.0, True)] == [0.0040]
 
 
-def test_while_a_cheaper_fit_lacks_points_none_the_other_way_round_starts(monkeypatch):
-    """The catalogue models are tried cheapest first. One that is only not supported yet (too few
-    points: neither its gap filled nor a unit seen through) keeps every fit the other way round
-    from starting, not those its way; one its points refute does not: seen by one LiDAR ahead of
-    its cab, a MAN's right fit waited for its trailer's side to show and a Volvo the wrong way
-    round, at 16 times its cost, started instead."""
+def _start_of_a_man(monkeypatch, lacking: set, refuted: set):
+    """A MAN standing with its cab towards -x, its right fit, and ``start(*hypotheses)``: the
+    tracker's ``_candidate`` on its points with those hypotheses, every start check passing but
+    support (none for the fits whose ids are in ``lacking``) and the gap (filled for those in
+    ``refuted``)."""
     from i2v_loc.stages import vehicle_tracker as vt
 
-    man, volvo_model = VehicleModel.from_config("man_tgx", PARAMS.vehicles["man_tgx"]), volvo()
+    man = VehicleModel.from_config("man_tgx", PARAMS.vehicles["man_tgx"])
     points = vehicle_points(man, 0.0, 0.0, np.pi, sensors=SENSORS)
     right = fit(points, Prior(0.0, 0.0, np.pi, 0.0, man), PARAMS.articulated, iterations=20)
-    flipped = replace(right, yaw_rad=0.1, hitch_rad=0.02, cost=16 * right.cost)
-    same_way = replace(right, yaw_rad=np.pi - 0.05, cost=16 * right.cost)
-    lacking, refuted = set(), set()
     monkeypatch.setattr(vt, "_supported", lambda m, *a, **k: id(m) not in lacking)
     monkeypatch.setattr(vt, "_gap_filled", lambda c, m, *a: id(m) in refuted)
     tracker = VehicleTracker(PARAMS.articulated, PARAMS.vehicles)
@@ -1550,6 +1546,20 @@ def test_while_a_cheaper_fit_lacks_points_none_the_other_way_round_starts(monkey
         monkeypatch.setattr(tracker, "_hypotheses", lambda *a: list(fits))
         return tracker._candidate(points, rect, moving, 0.0, True, True)
 
+    return man, right, start
+
+
+def test_while_a_cheaper_fit_lacks_points_none_the_other_way_round_starts(monkeypatch):
+    """The catalogue models are tried cheapest first. One that is only not supported yet (too few
+    points: neither its gap filled nor a unit seen through) keeps every fit the other way round
+    from starting, not those its way; one its points refute does not: seen by one LiDAR ahead of
+    its cab, a MAN's right fit waited for its trailer's side to show and a Volvo the wrong way
+    round, at 16 times its cost, started instead."""
+    lacking, refuted = set(), set()
+    man, right, start = _start_of_a_man(monkeypatch, lacking, refuted)
+    volvo_model = volvo()
+    flipped = replace(right, yaw_rad=0.1, hitch_rad=0.02, cost=16 * right.cost)
+    same_way = replace(right, yaw_rad=np.pi - 0.05, cost=16 * right.cost)
     lacking.add(id(right))
     assert start((man, 1.0, right), (volvo_model, -1.0, flipped)) is None
     assert start((man, 1.0, right), (volvo_model, 1.0, same_way)) == (volvo_model, same_way)
@@ -1566,28 +1576,12 @@ def test_no_fit_bent_further_than_the_cheapest_models_starts(monkeypatch):
     32 deg on them at eight times the cost; a Volvo straight like the refuted MAN's starts, and
     so does a bent one that is the cheapest, and a straight one after a cheaper bent misfit (an
     unknown 13.6 m trailer's Volvo fit bent 12 deg, seen through; its MAN fit straight)."""
-    from i2v_loc.stages import vehicle_tracker as vt
-
-    man, volvo_model = VehicleModel.from_config("man_tgx", PARAMS.vehicles["man_tgx"]), volvo()
-    points = vehicle_points(man, 0.0, 0.0, np.pi, sensors=SENSORS)
-    straight = fit(points, Prior(0.0, 0.0, np.pi, 0.0, man), PARAMS.articulated, iterations=20)
+    refuted = set()
+    man, straight, start = _start_of_a_man(monkeypatch, set(), refuted)
+    volvo_model = volvo()
     bent = replace(straight, hitch_rad=np.radians(-32.0), cost=8 * straight.cost)
     also_straight = replace(straight, hitch_rad=np.radians(-2.0), cost=8 * straight.cost)
-    refuted = {id(straight)}
-    monkeypatch.setattr(vt, "_supported", lambda m, *a, **k: True)
-    monkeypatch.setattr(vt, "_gap_filled", lambda c, m, *a: id(m) in refuted)
-    tracker = VehicleTracker(PARAMS.articulated, PARAMS.vehicles)
-    for name in ("_hinge_shown", "_stands_on_wheels", "_explains"):
-        monkeypatch.setattr(tracker, name, lambda *a: True)
-    monkeypatch.setattr(tracker, "_seen_through", lambda *a: False)
-    monkeypatch.setattr(tracker, "_allowed_to_start", lambda *a: True)
-    rect = vt.min_area_rect(points[:, :2])
-    moving = _seed_that_moved(points, 2.0)
-
-    def start(*fits):
-        monkeypatch.setattr(tracker, "_hypotheses", lambda *a: list(fits))
-        return tracker._candidate(points, rect, moving, 0.0, True, True)
-
+    refuted.add(id(straight))
     assert start((man, 1.0, straight), (volvo_model, 1.0, bent)) is None
     assert start((man, 1.0, straight), (volvo_model, 1.0, also_straight)) == (volvo_model, also_straight)
     cheapest_bent = replace(bent, cost=straight.cost / 2)

@@ -535,7 +535,7 @@ class VehicleTracker:
             or rear_sigma_m(m, model, self.params) <= END_ALONG_SIGMA_M
         ):
             return m
-        local = unit_frames(m.points, m.vector, model)[1]
+        local = trailer_frame(m.points, m.vector, model)
         sides = [local[(m.unit == 1) & (m.face == face)] for face in (LEFT, RIGHT)]
         sides = [side for side in sides if len(side)]
         end = self._seen_end(track, m, points, sides, model.trailer.width_m)
@@ -1357,15 +1357,15 @@ class VehicleTracker:
         catalogue's longer length stands until the end shows (a MAN entering the region, its rear
         beyond it, was named ``unknown`` with the 11.1 m its points reached, for 8 s)."""
         window, length_m = self.params.dimension_window, model.trailer.length_m
+        seen_end = m.rear_points >= REAR_FACE_MIN_POINTS  # the start fit saw where the trailer ends
         listed = self.catalogue.get(model.name)
-        if m.rear_points >= REAR_FACE_MIN_POINTS:  # the start fit saw where the trailer ends
-            length = _Extent(length_m, window)
-            length.add(length_m)
-        elif m.trailer_length_m is not None and listed is not None:
+        if not seen_end and m.trailer_length_m is not None and listed is not None:
             length = _Extent(max(m.trailer_length_m, listed.trailer.length_m), window)
             length.add_bound(m.trailer_length_m)
-        else:
-            length = _Extent(length_m, window)
+            return length
+        length = _Extent(length_m, window)
+        if seen_end:
+            length.add(length_m)
         return length
 
     def _recheck_rigid(self, track: _Track, points: np.ndarray, free: np.ndarray, stamp_s: float) -> _Track:
