@@ -1,4 +1,5 @@
-"""Reading single point-cloud files: PCD and PLY (open3d), NPY (N, 3+), KITTI BIN (float32 x y z i)."""
+"""Reading single point-cloud files: PCD and PLY (open3d), NPY (N, 3+), KITTI or nuScenes BIN
+(``formats.files.read_bin``: the layout from the content unless given)."""
 
 from __future__ import annotations
 
@@ -13,8 +14,9 @@ class CloudError(ValueError):
     """A point-cloud file is missing, of an unknown kind, or unreadable."""
 
 
-def read_cloud(path: str | Path) -> np.ndarray:
-    """(N, 3) float32 points of a cloud file; non-finite points are kept (the pipeline counts them)."""
+def read_cloud(path: str | Path, bin_layout: str | None = None) -> np.ndarray:
+    """(N, 3) float32 points of a cloud file; non-finite points are kept (the pipeline counts them).
+    ``bin_layout``: ``kitti`` or ``nuscenes`` for a ``.bin`` whose content does not tell."""
     path = Path(path)
     if not path.is_file():
         raise CloudError(f"{path}: no such file")
@@ -22,7 +24,9 @@ def read_cloud(path: str | Path) -> np.ndarray:
     if suffix not in SUFFIXES:
         raise CloudError(f"{path}: unknown cloud format {suffix!r}; expected one of {', '.join(SUFFIXES)}")
     try:
-        points = {".npy": _read_npy, ".bin": _read_kitti_bin}.get(suffix, _read_open3d)(path)
+        points = (
+            _read_bin(path, bin_layout) if suffix == ".bin" else {".npy": _read_npy}.get(suffix, _read_open3d)(path)
+        )
     except CloudError:
         raise
     except Exception as err:  # numpy / open3d raise many kinds on corrupt files
@@ -39,19 +43,14 @@ def _read_npy(path: Path) -> np.ndarray:
     return data[:, :3].astype(np.float32)
 
 
-POINT_BYTES_KITTI = 16  # float32 x, y, z, intensity
+def _read_bin(path: Path, layout: str | None) -> np.ndarray:
+    from i2v_loc.formats.base import FormatError
+    from i2v_loc.formats.files import read_bin
 
-
-def _read_kitti_bin(path: Path) -> np.ndarray:
-    size = path.stat().st_size
-    if size == 0:
-        raise CloudError(f"{path}: empty file, no points")
-    if size % POINT_BYTES_KITTI:
-        raise CloudError(
-            f"{path}: {size} bytes is not a multiple of {POINT_BYTES_KITTI} "
-            "(KITTI points are 4 float32: x, y, z, intensity)"
-        )
-    return np.fromfile(path, dtype=np.float32).reshape(-1, 4)[:, :3].copy()
+    try:
+        return read_bin(path, layout).astype(np.float32)
+    except FormatError as err:
+        raise CloudError(str(err)) from None
 
 
 PCD_HEADER_LINES_MAX = 20

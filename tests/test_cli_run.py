@@ -192,16 +192,39 @@ def test_detect_reads_npy_and_kitti_bin_and_reports_errors(tmp_path, capsys):
         assert len(report["clusters"]) == 1 and report["clusters"][0]["center"][:2] == pytest.approx([4, 4], abs=0.1)
     assert main(["detect", str(tmp_path / "missing.pcd")]) == 2
     assert "no such file" in capsys.readouterr().err
-    for size in (3, 6, 20):
+    for size in (3, 6):
         (tmp_path / "bad.bin").write_bytes(b"\x00" * size)
         assert main(["detect", str(tmp_path / "bad.bin")]) == 2
-        assert f"{size} bytes is not a multiple of 16" in capsys.readouterr().err
+        assert f"{size} bytes is not a whole number of float32 values" in capsys.readouterr().err
+    (tmp_path / "bad.bin").write_bytes(b"\x00" * 24)  # 6 values: neither 4 nor 5 per point
+    assert main(["detect", str(tmp_path / "bad.bin")]) == 2
+    err = capsys.readouterr().err
+    assert "fits neither or both" in err and "--bin-layout kitti|nuscenes" in err
     (tmp_path / "empty.bin").write_bytes(b"")
     assert main(["detect", str(tmp_path / "empty.bin")]) == 2
     assert "empty file" in capsys.readouterr().err
     np.save(tmp_path / "empty.npy", np.zeros((0, 3), np.float32))
     assert main(["detect", str(tmp_path / "empty.npy")]) == 2
     assert "no points" in capsys.readouterr().err
+
+
+def test_detect_reads_a_nuscenes_bin_by_its_content_or_as_told(tmp_path, capsys):
+    """nuScenes rows are 5 float32 (x y z intensity ring): read as KITTI's 4, the columns slide and
+    the cloud is garbage of as many points again; the layout is taken from the content."""
+    rng = np.random.default_rng(3)
+    ground = np.column_stack([rng.uniform(-10, 10, (4000, 2)), rng.normal(-1.8, 0.02, 4000)])
+    box = np.column_stack([rng.uniform(3, 5, (801, 2)), rng.uniform(-1.3, 0.2, 801)])
+    xyz = np.vstack([ground, box])
+    rows = np.column_stack([xyz, rng.integers(0, 256, len(xyz)), rng.integers(0, 32, len(xyz))])
+    rows.astype(np.float32).tofile(tmp_path / "sweep.pcd.bin")
+    for extra in ([], ["--bin-layout", "nuscenes"]):
+        assert main(["detect", str(tmp_path / "sweep.pcd.bin"), "--method", "paper", *extra]) == 0
+        report = json.loads(capsys.readouterr().out)
+        assert report["points"] == len(xyz) and report["ground_found"]
+        assert report["ground_below_origin_m"] == pytest.approx(1.8, abs=0.03)
+        assert len(report["clusters"]) == 1 and report["clusters"][0]["center"][:2] == pytest.approx([4, 4], abs=0.1)
+    assert main(["detect", str(tmp_path / "sweep.pcd.bin"), "--bin-layout", "kitti"]) == 2  # 5 x 4801 values
+    assert "is not a multiple of 16 (kitti: 4 float32 per point)" in capsys.readouterr().err
 
 
 def test_detect_reports_nan_points_like_the_state_line_and_names_known_sensors(tmp_path, capsys):
@@ -265,8 +288,9 @@ def test_detect_on_a_real_roadside_ouster_frame(tmp_path, capsys):
 
 def test_detect_with_the_default_method_measures_a_tractor_and_trailer_and_ignores_a_wall(tmp_path, capsys):
     """One sweep of a Volvo FH at a 25 deg hitch angle seen by the paper's four sensors, beside a
-    6 m tall, 14 m long wall: the default finds one articulated vehicle at the true pose (no history,
-    no background: by its shape alone); the wall is no vehicle."""
+    6 m tall, 14 m long wall, merged into one cloud (``--merged``: no ray runs from its origin): the
+    default finds one articulated vehicle at the true pose (no history, no background: by its shape
+    alone); the wall is no vehicle."""
     from hinged_points import vehicle_points
 
     from i2v_loc.params import Params
@@ -281,7 +305,7 @@ def test_detect_with_the_default_method_measures_a_tractor_and_trailer_and_ignor
     wx, wz = np.meshgrid(np.arange(-7.0, 7.0, 0.15), np.linspace(0.1, 6.0, 40))
     wall = np.column_stack([wx.ravel(), np.full(wx.size, -15.0), wz.ravel()])
     np.save(tmp_path / "c.npy", np.vstack([ground, vehicle, wall]).astype(np.float32))
-    assert main(["detect", str(tmp_path / "c.npy")]) == 0
+    assert main(["detect", str(tmp_path / "c.npy"), "--merged"]) == 0
     report = json.loads(capsys.readouterr().out)
     assert len(report["vehicles"]) == 1
     v = report["vehicles"][0]

@@ -130,3 +130,19 @@ def test_a_container_set_down_before_a_parked_trailer_is_no_tractor(tmp_path, ca
     axle = along - 2.99 / 2 + vehicle.truck.wheelbase_m  # its rear axle about where the container stands
     (v,) = _detect(tmp_path, capsys, cm.articulated(name, x + axle * np.cos(yaw), y + axle * np.sin(yaw), yaw))
     assert v["kind"] == "articulated" and v["vehicle"] == name
+
+
+def test_a_sweep_given_as_it_is_is_levelled_and_seen_from_its_origin(tmp_path, capsys):
+    """A new user's sweep: no sensor configured, the cloud in its sensor's frame, the ground 1.8 m
+    below its origin. The ground is found from the points and the rays run from the origin: the
+    bus's side is found as with its sensor configured. Given as a merged cloud (``--merged``: no
+    rays), one face is no vehicle."""
+    np.save(tmp_path / "sweep.npy", cm.sweep(cm.bus(3.0, 8.0, 0.0)))
+    assert main(["detect", str(tmp_path / "sweep.npy")]) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert report["ground_below_origin_m"] == pytest.approx(cm.SENSOR_HEIGHT_M, abs=0.03)
+    (v,) = report["vehicles"]
+    assert v["kind"] == "rigid" and abs(v["truck"]["dimensions"][0] - 12.0) < 0.2
+    assert np.hypot(v["truck"]["center"][0] - 3.0, v["truck"]["center"][1] - 8.0) < 0.15
+    assert main(["detect", str(tmp_path / "sweep.npy"), "--merged"]) == 0
+    assert json.loads(capsys.readouterr().out)["vehicles"] == []

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from i2v_loc.params import Params, ParamsError, RegionParams, apply_patch
-from i2v_loc.stages.region import Region
+from i2v_loc.stages.region import Region, ground_below_origin_m
 
 
 def plane_of(tilt_deg, n=4000, seed=0):
@@ -77,3 +77,23 @@ def test_the_ground_is_fitted_until_found_then_refitted_every_n_frames_over_two_
     assert sampled == [0, 1, 2, 5, 8, 10, 13]
     assert fitted == [(0, 0), (1, 1), (2, 2), (6, 5), (9, 8), (10, 10), (14, 13)]
     assert planes[:2] == [None, None] and planes[9] is None and planes[10] == planes[14] == "plane"
+
+
+def _street(ground_z_m: float, seed: int = 4) -> np.ndarray:
+    """A sweep's cloud in its sensor's frame: the ground ``ground_z_m`` below it and, on both sides,
+    building fronts 8 m up whose 0.5 m voxels outnumber the ground's nine to one."""
+    rng = np.random.default_rng(seed)
+    ground = np.column_stack([rng.uniform(-30, 30, (3000, 2)), rng.normal(ground_z_m, 0.02, 3000)])
+    fronts = []
+    for y in (-9.0, 9.0):
+        x, z = np.meshgrid(np.arange(-30, 30, 0.1), np.arange(ground_z_m, ground_z_m + 8.0, 0.1))
+        fronts.append(np.column_stack([x.ravel(), np.full(x.size, y) + rng.normal(0, 0.5, x.size), z.ravel()]))
+    return np.vstack([ground, *fronts]).astype(np.float32)
+
+
+def test_the_ground_below_a_sweeps_origin_is_found_among_walls_that_outnumber_it():
+    cloud = _street(-1.9)
+    region = Region(RegionParams(z_min_m=-20, z_max_m=20))
+    assert region.ground(cloud, region.roi_mask(cloud)) is None  # a hundred triples miss it
+    assert ground_below_origin_m(cloud, RegionParams()) == pytest.approx(1.9, abs=0.02)
+    assert ground_below_origin_m(plane_of(20.0), RegionParams()) is None  # no ground at all

@@ -479,7 +479,8 @@ def _turned(points, azimuth_rad: float, elevation_rad: float):
 
 def bench_realdata(root: Path, method: str, param_files: list[str]) -> dict:
     """The real frames of ``root`` through the pipeline, each set as one sequence, the sensor at its
-    height (estimated: the 5th percentile of z below it) and the default region."""
+    height (its first cloud's ground plane below the origin: ``region.ground_below_origin_m``) and the
+    default region."""
     if not root.is_dir():
         print(f"bench: no real frames at {root}; skipped", file=sys.stderr)
         return {}
@@ -500,12 +501,13 @@ def _bench_files(files: list[Path], method: str, param_files: list[str]) -> dict
     from i2v_loc.frame import Frame, SensorScan
     from i2v_loc.params import Extrinsics, SensorConfig, load_params
     from i2v_loc.pipelines import build_pipeline
+    from i2v_loc.stages.region import ground_below_origin_m
 
     clouds = [read_cloud(f) for f in files]
-    z = np.concatenate([c[:, 2] for c in clouds])
-    height_m = float(-np.nanpercentile(z, 5))
+    params = load_params(*param_files)
+    height_m = ground_below_origin_m(clouds[0], params.region) or 0.0
     sensor = SensorConfig(name="real", extrinsics=Extrinsics(z_m=height_m), min_range_m=0.0, max_range_m=300.0)
-    params = load_params(*param_files).model_copy(update={"sensors": [sensor]})
+    params = params.model_copy(update={"sensors": [sensor]})
     pipeline = build_pipeline(params, method)
     latencies = []
     for i, cloud in enumerate(clouds):

@@ -40,7 +40,7 @@ def read_cloud_file(path: Path, bin_layout: str | None = None) -> tuple[np.ndarr
         if suffix == ".pcd":
             xyz, t = _read_pcd(path)
         elif suffix == ".bin":
-            xyz, t = _read_bin(path, bin_layout), None
+            xyz, t = read_bin(path, bin_layout), None
         elif suffix == ".npy":
             xyz, t = _read_npy(path), None
         elif suffix == ".ply":
@@ -97,7 +97,8 @@ def bin_layout_of(path: Path, data: np.ndarray) -> str | None:
         if len(data) % width:
             continue
         rows = data.reshape(-1, width)
-        if not np.isfinite(rows).all() or (np.abs(rows[:, :3]) > 1000).any():
+        rows = rows[np.isfinite(rows).all(axis=1)]  # a missing return (NaN) says nothing of the layout
+        if len(rows) == 0 or (np.abs(rows[:, :3]) > 1000).any():
             continue
         intensity = rows[:, 3]
         if intensity.min() < 0 or intensity.max() > 255:
@@ -110,7 +111,9 @@ def bin_layout_of(path: Path, data: np.ndarray) -> str | None:
     return fits[0] if len(fits) == 1 else None
 
 
-def _read_bin(path: Path, layout: str | None) -> np.ndarray:
+def read_bin(path: Path, layout: str | None = None) -> np.ndarray:
+    """(N, 3) points of a KITTI or nuScenes ``.bin`` (``layout``, else taken from its content:
+    ``bin_layout_of``); a row's non-finite values stay."""
     size = path.stat().st_size
     if size == 0:
         raise FormatError(f"{path}: empty file, no points")

@@ -12,9 +12,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from i2v_loc.params import RegionParams
+from i2v_loc.params import MAST_HEIGHT_M, RegionParams
 from i2v_loc.stages import kernels
 from i2v_loc.stages.primitives import voxel_centroids
+
+LEVELLING_RANSAC_ITERATIONS = 1000  # one fit per cloud (``ground_below_origin_m``)
 
 
 @dataclass
@@ -140,3 +142,17 @@ class Region:
                 normal, offset = refined, -float(refined @ centre)
         tilt = float(np.degrees(np.arccos(np.clip(normal[2], -1.0, 1.0))))
         return GroundPlane(normal.astype(np.float64), float(offset), tilt, float(fraction))
+
+
+def ground_below_origin_m(points: np.ndarray, params: RegionParams) -> float | None:
+    """How far below a cloud's origin its ground plane lies, the plane fitted in the region's x and
+    y at any height: a cloud in the frame of a sensor on a car's roof or a pole. None without one.
+    At any height, walls and crowns outnumber the ground's samples in a street (a tenth of them in
+    an Argoverse 2 sweep), and so do the triples that miss it: ``LEVELLING_RANSAC_ITERATIONS`` at least."""
+    iterations = max(params.ransac_iterations, LEVELLING_RANSAC_ITERATIONS)
+    anywhere_up = params.model_copy(
+        update={"z_min_m": -MAST_HEIGHT_M, "z_max_m": MAST_HEIGHT_M, "ransac_iterations": iterations}
+    )
+    region = Region(anywhere_up)
+    plane = region.ground(points, region.roi_mask(points))
+    return None if plane is None else -plane.height_at(0.0, 0.0)
