@@ -57,6 +57,35 @@ def bus(x: float, y: float, yaw: float, length_m: float = 12.0, width_m: float =
     return [m.transformed(part, _pose(x, y, yaw)) for part in [body, *wheels]]
 
 
+def box_truck(
+    x: float,
+    y: float,
+    yaw: float,
+    length_m: float = 10.0,
+    gap_m: float = 0.1,
+    floor_m: float = 1.1,
+    box_width_m: float = 2.5,
+) -> list[m.Mesh]:
+    """A rigid truck (centre at x, y): a cab 2.5 m wide and 2.3 m long from 0.5 to 2.9 m, ``gap_m``
+    behind it a cargo box ``box_width_m`` wide from ``floor_m`` to 3.6 m, two axles."""
+    front, width_m = length_m / 2, 2.5
+    cab = m.box_between(front - 2.3, front, -width_m / 2, width_m / 2, 0.5, 2.9, "white_paint")
+    cargo = m.box_between(-front, front - 2.3 - gap_m, -box_width_m / 2, box_width_m / 2, floor_m, 3.6, "white_paint")
+    wheels = m.wheel_pair(front - 1.4, width_m / 2 - 0.2, 0.5, 0.3)
+    wheels += m.wheel_pair(-front + 2.5, box_width_m / 2 - 0.2, 0.5, 0.3)
+    return [m.transformed(part, _pose(x, y, yaw)) for part in [cab, cargo, *wheels]]
+
+
+def person(x: float, y: float) -> list[m.Mesh]:
+    """A 1.7 m tall cylinder 0.6 m across."""
+    return [m.cylinder((x, y, 0.85), 0.3, 1.7, surface="concrete")]
+
+
+def car(x: float, y: float, yaw: float) -> list[m.Mesh]:
+    """A 4.5 m long, 1.8 m wide body from 0.3 to 1.5 m (centre at x, y)."""
+    return [m.transformed(m.box_between(-2.25, 2.25, -0.9, 0.9, 0.3, 1.5, "white_paint"), _pose(x, y, yaw))]
+
+
 def wall(x0: float, y0: float, x1: float, y1: float, height_m: float) -> list[m.Mesh]:
     length = math.hypot(x1 - x0, y1 - y0)
     centre = ((x0 + x1) / 2, (y0 + y1) / 2, height_m / 2)

@@ -10,7 +10,7 @@ import numpy as np
 from i2v_loc.params import ArticulatedParams
 from i2v_loc.stages.hinged_fit import Measurement
 from i2v_loc.stages.primitives import Rect, l_shape_yaw, rect_along
-from i2v_loc.stages.vehicle_model import MAX_VEHICLE_HEIGHT_M, RIGID_MAX_LENGTH_M, VehicleModel
+from i2v_loc.stages.vehicle_model import MAX_VEHICLE_HEIGHT_M, RIGID_MAX_LENGTH_M, Box, VehicleModel
 from i2v_loc.stages.visibility import Rays
 
 # a vehicle's end seen alone: a van's to the widest catalogue trailer's (2.77 m), with noise
@@ -37,6 +37,9 @@ FACE_SPAN_SHARE = 0.5  # a face's points span this share of it to be asked about
 GROUNDED_BAND_M = (0.08, 0.25)  # above the ground: the ground's noise below, road vehicles' clearance above
 GROUNDED_SHARE = 0.6  # of a face's columns (a cab's wheels fill about a third of its side's)
 GROUNDED_MIN_FLOOR_M = 0.25  # a unit's box this high or higher has no body in the band
+END_SHARE = 0.25  # of a rigid body's length at each end (``low_at_both_ends``)
+END_LOW_M = 0.8  # a body's lower edge this low, or its wheels: a bus's skirt 0.3 m, a cab's bumper 0.5 m
+END_LOW_COLUMNS = 0.2  # of an end's columns (a semitrailer's landing legs: 1 of 11; a cab 15 m off, sparse: 2 of 7)
 
 
 def one_face_sized(rect: Rect, params: ArticulatedParams) -> bool:
@@ -168,6 +171,14 @@ def unit_grounded(
     0.1 m up)."""
     if model.boxes[unit].floor_m < GROUNDED_MIN_FLOOR_M:
         return False
+    return faces_grounded(rays, cluster, m, model, unit, ground_z_m)
+
+
+def faces_grounded(
+    rays: Rays, cluster: np.ndarray, m: Measurement, model: VehicleModel, unit: int, ground_z_m: float
+) -> bool:
+    """``unit_grounded`` whatever the unit's box's floor (a rigid box stands on the ground: the body
+    it stands for, a bus's or a van's, is 0.3 m up)."""
     ends = rays.level_points
     low = (ends[:, 2] - ground_z_m >= GROUNDED_BAND_M[0]) & (ends[:, 2] - ground_z_m <= GROUNDED_BAND_M[1])
     ends = ends[low]
@@ -239,6 +250,27 @@ def _column_min(along: np.ndarray, values: np.ndarray) -> np.ndarray:
     least = np.full(columns.max() + 1, np.inf)
     np.minimum.at(least, columns, values)
     return least
+
+
+def low_at_both_ends(cluster: np.ndarray, m: Measurement, box: Box, ground_z_m: float) -> bool:
+    """Whether a rigid fit's body reaches ``END_LOW_M`` above the ground in ``END_LOW_COLUMNS`` of
+    the ``FACE_BAND_M`` columns its points show in each ``END_SHARE`` of its length at either end
+    (an end without points is not refuted). A bus, a van or a rigid truck has wheels under both ends,
+    its front reaching down to the bumper; a semitrailer standing alone has its wheels at the rear
+    only and stands on thin legs at the front, its floor 1.2 m up (parked ones, taken apart from
+    a pole beside them in one sweep, started as rigid vehicles)."""
+    axis = np.array([np.cos(m.yaw_rad), np.sin(m.yaw_rad)])
+    along = (cluster[:, :2] - np.array([m.x_m, m.y_m])) @ axis - box.center_x_m
+    height = cluster[:, 2] - ground_z_m
+    end_m = END_SHARE * box.length_m
+    for end in (along >= box.length_m / 2 - end_m, along <= -box.length_m / 2 + end_m):
+        if not np.any(end):
+            continue
+        lowest = _column_min(along[end], height[end])
+        shown = lowest[np.isfinite(lowest)]
+        if np.count_nonzero(shown <= END_LOW_M) < END_LOW_COLUMNS * len(shown):
+            return False
+    return True
 
 
 def face_foot(cluster: np.ndarray, point_xy: np.ndarray, direction_xy: np.ndarray, ground_z_m: float) -> float:

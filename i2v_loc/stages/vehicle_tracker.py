@@ -30,7 +30,9 @@ from i2v_loc.stages.faces import (
     end_face,
     face_foot,
     face_line,
+    faces_grounded,
     l_shaped,
+    low_at_both_ends,
     one_face_sized,
     passes_under,
     rigid_seen,
@@ -75,6 +77,8 @@ REAR_FACE_MIN_POINTS = 3
 SIDE_MIN_POINTS = 5
 SIDE_MAX_SLOPE = np.tan(np.radians(5.0))  # a side's points run along its unit's axis (the fits' yaw: within 2 deg)
 LOW_SEED_SLACK_M = 0.5  # a seed shorter than a rigid vehicle and this much lower than every articulated one is none
+REFIT_SIZE_CHANGE_M = 0.1  # a rigid start's box refitted on the footprint its fit explains (``_rigid_fits``)
+APART_VOXEL_M = 0.3  # a seed taken apart in one sweep (``_start_apart``): lanes 0.6 m apart stay apart
 TALL_COLUMN_MIN_POINTS = 2  # points above a vehicle's height that make a column a structure (not one noise point)
 RIGID_MIN_WIDTH_M = 1.6  # a rigid vehicle starts once its width is seen (an end face or both sides)
 # the kingpin's offset shows only at a hitch angle; from this one the joint fit's own standard
@@ -964,12 +968,38 @@ class VehicleTracker:
         for seed, cluster, rect, shape in ready:
             center = seed.center_xy
             track = self._new_track(cluster, rect, seed, float(ground(center[0], center[1])), stamp_s, rigid_allowed)
+            if track is None and self._one_sweep():
+                reports += self._start_apart(cluster, ground, stamp_s, rigid_allowed)
             if track is None:  # no vehicle (yet): fitted again after a while if its shape changed
                 seed.failed, seed.failed_frame = shape, seed.frames
                 continue
             self.seeds.remove(seed)
             self.tracks.append(track)
             reports.append(track.report(True))
+        return reports
+
+    def _start_apart(self, cluster: np.ndarray, ground, stamp_s: float, rigid_allowed: bool) -> list[VehicleReport]:
+        """The vehicles among a seed that is none, taken apart at ``APART_VOXEL_M`` (one sweep: no
+        frame to come in which vehicles side by side drive apart). Its voxels bridge a cab's gap, and
+        a street's lanes too: a bus 1.6 m beside a car was one seed 18.7 m by 5.0 m in an Argoverse 2
+        sweep, which no model explains."""
+        p = self.params
+        reports = []
+        for rows in seed_group_rows(cluster, ground, APART_VOXEL_M, p.start_min_height_m, p.fit_min_points, 0.0, 0.0):
+            if len(rows) == len(cluster):
+                return []  # one piece: the seed itself
+            part = cluster[rows]
+            rect = min_area_rect(part[:, :2])
+            if not self._seen_wide(rect):
+                continue  # one face split off: a crown beside another, seen as an end, started as one
+            seed = Seed(
+                rect.center_xy, rect.center_xy, first_points=thin(part, SEED_FIRST_POINTS), points=part, rect=rect
+            )
+            ground_z_m = float(ground(*rect.center_xy))
+            track = self._new_track(part, rect, seed, ground_z_m, stamp_s, rigid_allowed)
+            if track is not None:
+                self.tracks.append(track)
+                reports.append(track.report(True))
         return reports
 
     def moving_seeds(self) -> list[Rect]:
@@ -1022,12 +1052,14 @@ class VehicleTracker:
         ):
             cluster = points[rows]
             rect = min_area_rect(cluster[:, :2])
-            seen_wide = (
-                p.start_min_length_m <= rect.length_m <= p.start_max_length_m and rect.width_m >= p.start_min_width_m
-            )
-            if seen_wide or one_face_sized(rect, p):
+            if self._seen_wide(rect) or one_face_sized(rect, p):
                 out.append((cluster, rect))
         return out
+
+    def _seen_wide(self, rect: Rect) -> bool:
+        """A footprint of a vehicle's length and at least ``start_min_width_m`` wide."""
+        p = self.params
+        return p.start_min_length_m <= rect.length_m <= p.start_max_length_m and rect.width_m >= p.start_min_width_m
 
     def _new_track(
         self, cluster: np.ndarray, rect: Rect, seed: Seed, ground_z_m: float, stamp_s: float, rigid_allowed: bool
@@ -1084,6 +1116,7 @@ class VehicleTracker:
         if may_be_rigid:
             two = self._two_units(hypotheses, cluster, seed, ground_z_m, top_seen)
             choices = [two] if two is not None else self._choose(hypotheses, seed, ground_z_m, top_seen)
+            choices += self._rigid_after(choices, hypotheses)
         waiting = None  # a cheaper fit that only lacks points yet: no fit the other way round starts
         for model, m in choices:
             if not self._allowed_to_start(seed, model, m, rigid_allowed):
@@ -1132,6 +1165,8 @@ class VehicleTracker:
             return None
         if not self._explains(m) or self._seen_through(m, model, ground_z_m):
             return None
+        if not (end_face(rect) or low_at_both_ends(cluster, m, model.tractor, ground_z_m)):
+            return None  # a side standing on legs at one end: a semitrailer's
         if not self._one_sweep() and not seed.moved(self.params.start_travel_m, self._rays):
             return None  # a face's points come and go as things pass before it: where it was must be seen empty
         return model, m
@@ -1163,9 +1198,11 @@ class VehicleTracker:
         if not model.articulated:
             if np.ptp(cluster[:, 2]) < UNIT_SUPPORT * model.tractor.height_m:
                 return False  # a plate of points at one height (a canopy, a gantry's deck) is no body
-            return roof_shown(cluster, m, model, ground_z_m) or unit_raised(
+            raised = roof_shown(cluster, m, model, ground_z_m) or unit_raised(
                 self._rays, cluster, m, model, 0, ground_z_m
             )
+            body = low_at_both_ends(cluster, m, model.tractor, ground_z_m)
+            return raised and body and not faces_grounded(self._rays, cluster, m, model, 0, ground_z_m)
         heights_shown = top_seen or _supported(m, model, ground_z_m)
         return heights_shown or unit_raised(self._rays, cluster, m, model, 1, ground_z_m)
 
@@ -1472,21 +1509,31 @@ class VehicleTracker:
     def _rigid_fits(
         self, sample: np.ndarray, rect: Rect, height_m: float, ground_z_m: float
     ) -> list[tuple[VehicleModel, float, Measurement]]:
-        """One rigid box of the footprint's size, in both directions."""
-        rigid = VehicleModel.rigid("rigid", rect.length_m, rect.width_m, height_m)
+        """One rigid box of the footprint's size in both directions, fitted again on the footprint of
+        the points its fit explains when that is another, if it explains them better (a bollard
+        beside a nuScenes truck turned its group's rectangle 10 deg and widened it by 0.3 m: the
+        box reached past the truck's corner, and rays crossed it there)."""
         out = []
         for sign in (1.0, -1.0):
-            yaw = rect.yaw_rad + (0.0 if sign > 0 else np.pi)
-            m = fit(
-                sample,
-                Prior(*rect.center_xy, yaw, 0.0, rigid, ground_z_m),
-                self.params,
-                START_ITERATIONS,
-                START_SCALE_M,
-            )
-            if m is not None:
-                out.append((rigid, sign, m))
+            fitted = self._rigid_fit(sample, rect, rect.yaw_rad + (0.0 if sign > 0 else np.pi), height_m, ground_z_m)
+            if fitted is None:
+                continue
+            own = _explained_footprint(fitted[1], self.params.fit_min_points)
+            if own is not None and not _same_size(own, rect):
+                again = self._rigid_fit(sample, own, fitted[1].yaw_rad, height_m, ground_z_m)
+                fitted = again if again is not None and again[1].cost <= fitted[1].cost else fitted
+            out.append((fitted[0], sign, fitted[1]))
         return out
+
+    def _rigid_fit(
+        self, sample: np.ndarray, rect: Rect, heading_rad: float, height_m: float, ground_z_m: float
+    ) -> tuple[VehicleModel, Measurement] | None:
+        """A rigid box of ``rect``'s size fitted from its centre, along its axis the way ``heading_rad`` points."""
+        rigid = VehicleModel.rigid("rigid", rect.length_m, rect.width_m, height_m)
+        yaw = rect.yaw_rad + (0.0 if np.cos(rect.yaw_rad - heading_rad) >= 0.0 else np.pi)
+        prior = Prior(*rect.center_xy, yaw, 0.0, rigid, ground_z_m)
+        m = fit(sample, prior, self.params, START_ITERATIONS, START_SCALE_M)
+        return None if m is None else (rigid, m)
 
     def _choose(
         self, hypotheses, seed: Seed, ground_z_m: float, top_seen: bool
@@ -1525,6 +1572,29 @@ class VehicleTracker:
             heading = [np.array([np.cos(h[2].yaw_rad), np.sin(h[2].yaw_rad)]) @ travel for h in pair]
             pair = pair[::-1] if heading[1] > heading[0] else pair
         return [(h[0], h[2]) for h in pair]
+
+    def _rigid_after(self, choices, hypotheses) -> list[tuple[VehicleModel, Measurement]]:
+        """In one sweep, after articulated ``choices``, the cheapest rigid box of the ``hypotheses``
+        long enough that explains the points: tried if the start's checks refute the two units, as
+        no frame to come will show more (a nuScenes rigid truck was fitted best as a Volvo with a
+        3.7 m trailer, seen through, and nothing was reported)."""
+        if not (self._one_sweep() and choices and choices[0][0].articulated):
+            return []
+        rigid = [
+            h for h in hypotheses if not h[0].articulated and h[0].tractor.length_m >= self.params.rigid_min_length_m
+        ]
+        best = min(rigid, key=lambda h: h[2].cost, default=None)
+        return [(best[0], best[2])] if best is not None and self._explains(best[2]) else []
+
+
+def _explained_footprint(m: Measurement, min_points: int) -> Rect | None:
+    """The smallest rectangle around the points the fit ``m`` explains, if there are ``min_points``."""
+    explained = m.points[m.explained, :2]
+    return min_area_rect(explained) if len(explained) >= min_points else None
+
+
+def _same_size(a: Rect, b: Rect) -> bool:
+    return abs(a.length_m - b.length_m) <= REFIT_SIZE_CHANGE_M and abs(a.width_m - b.width_m) <= REFIT_SIZE_CHANGE_M
 
 
 def _bent_against(m: Measurement, best: Measurement) -> bool:
