@@ -12,8 +12,10 @@ from i2v_loc.params import Params
 from i2v_loc.stages.hinged_fit import (
     CHASSIS_GAP_M,
     REAR,
+    Measurement,
     Prior,
     TurnFrame,
+    explained_share,
     faces,
     fit,
     fit_hinge,
@@ -370,3 +372,22 @@ def test_a_rear_end_seen_moves_the_fit_along_the_trailer_as_far_as_the_fit_is_un
         assert step[:2] @ axis == pytest.approx(moved, abs=0.005)
         assert abs(step[:2] @ np.array([-axis[1], axis[0]])) < 0.005 and np.abs(step[2:]).max() < 1e-3
         assert rear_sigma_m(fused, model, params) < min(along_sigma, 0.15)
+
+
+def test_a_rigid_boxs_lower_roof_step_is_explained_and_a_crowns_inside_is_not():
+    """A rigid box explains the points inside its footprint that are the highest of their column
+    (a truck's cab roof 1 m below its cargo box's), not those with others above them (a crown's
+    inside), nor anything outside it; an articulated fit's share is its own labels'."""
+    model = VehicleModel.rigid("rigid", 10.0, 2.5, 3.6)
+    side = np.column_stack([np.linspace(-4.9, 4.9, 50), np.full(50, -1.25), np.full(50, 2.0)])
+    cab_roof = np.column_stack([np.linspace(3.0, 4.8, 10), np.zeros(10), np.full(10, 2.6)])
+    below_it = cab_roof - [0.0, 0.0, 1.0]  # inside, under the roof's points: no body's surface
+    outside = np.array([[6.0, 0.0, 2.6], [0.0, 3.0, 2.6]])
+    points = np.vstack([side, cab_roof, below_it, outside])
+    unit = np.r_[np.zeros(50), np.full(22, -1)].astype(np.int8)
+    m = Measurement(0.0, 0.0, 0.0, None, np.eye(3), points, unit, 0.0)
+    assert explained_share(m, model) == pytest.approx(60 / 72)
+    turned = replace(m, yaw_rad=np.pi / 2)  # the same points, the box across them: the roof outside
+    assert explained_share(turned, model) < 55 / 72
+    hinged = VehicleModel.from_config("man_tgx", Params().vehicles["man_tgx"])
+    assert explained_share(replace(m, hitch_rad=0.0), hinged) == pytest.approx(50 / 72)

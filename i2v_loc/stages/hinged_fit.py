@@ -40,6 +40,7 @@ CAB_LENGTH_RANGE_M = (1.0, 4.0)
 _HINGE_RANGES = np.array([*_RANGES, *CAB_LENGTH_RANGE_M])
 MIN_UNIT_SHARE = 0.1  # of the fit's thinned sample, for each unit that has as many points
 UNIT_SAMPLE_MARGIN_M = 0.5
+ROOF_STEP_CELL_M, ROOF_STEP_BAND_M = 0.5, 0.2  # a rigid body's upper surface (``explained_share``)
 CHASSIS_GAP_M = 0.1  # a low point farther behind a tracked cab's rear face is its chassis (nearest_faces)
 
 
@@ -256,6 +257,28 @@ def fit(
         face,
         _observed(marginal, sigmas[:n_pose], floor),
     )
+
+
+def explained_share(m: Measurement, model: VehicleModel) -> float:
+    """The share of the fit's points it explains; for a rigid box, also those inside its footprint
+    that are the highest of their ``ROOF_STEP_CELL_M`` column (within ``ROOF_STEP_BAND_M``): a
+    body's upper surface steps, and the box's roof is only its highest step (a nuScenes rigid
+    truck's cab roof, 1 m below its cargo box's, left its box explaining 79.95 % of its points).
+    A crown's inside is not the top of its column."""
+    explained = m.unit >= 0
+    if model.articulated:
+        return float(np.mean(explained))
+    centre, _ = model.box_centers(m.x_m, m.y_m, m.yaw_rad)
+    c, s = math.cos(m.yaw_rad), math.sin(m.yaw_rad)
+    d = m.points[:, :2] - centre
+    box = model.tractor
+    inside = (np.abs(d @ [c, s]) <= box.length_m / 2) & (np.abs(d @ [-s, c]) <= box.width_m / 2)
+    _, column = np.unique(np.floor(m.points[:, :2] / ROOF_STEP_CELL_M).astype(np.int64), axis=0, return_inverse=True)
+    column = column.ravel()
+    highest = np.full(column.max() + 1, -np.inf)
+    np.maximum.at(highest, column, m.points[:, 2])
+    step = inside & (m.points[:, 2] >= highest[column] - ROOF_STEP_BAND_M)
+    return float(np.mean(explained | step))
 
 
 def rear_sigma_m(m: Measurement, model: VehicleModel, params: ArticulatedParams) -> float:

@@ -17,6 +17,7 @@ from i2v_loc.stages import kernels
 from i2v_loc.stages.primitives import voxel_centroids
 
 LEVELLING_RANSAC_ITERATIONS = 1000  # one fit per cloud (``ground_below_origin_m``)
+LEVELLING_REACH_M = 30.0
 
 
 @dataclass
@@ -145,14 +146,20 @@ class Region:
 
 
 def ground_below_origin_m(points: np.ndarray, params: RegionParams) -> float | None:
-    """How far below a cloud's origin its ground plane lies, the plane fitted in the region's x and
-    y at any height: a cloud in the frame of a sensor on a car's roof or a pole. None without one.
+    """How far below a cloud's origin its ground plane lies, the plane fitted within
+    ``LEVELLING_REACH_M`` of the origin at any height: a cloud in the frame of a sensor on a car's
+    roof or a pole (farther out, the ground below a freeway's viaduct outnumbered its road: Chengdu's
+    sensor was put 6.8 m up, not 3.7 m). None without one.
     At any height, walls and crowns outnumber the ground's samples in a street (a tenth of them in
     an Argoverse 2 sweep), and so do the triples that miss it: ``LEVELLING_RANSAC_ITERATIONS`` at least."""
     iterations = max(params.ransac_iterations, LEVELLING_RANSAC_ITERATIONS)
+    reach = LEVELLING_REACH_M
     anywhere_up = params.model_copy(
-        update={"z_min_m": -MAST_HEIGHT_M, "z_max_m": MAST_HEIGHT_M, "ransac_iterations": iterations}
-    )
+        update={
+            "x_min_m": -reach, "x_max_m": reach, "y_min_m": -reach, "y_max_m": reach,
+            "z_min_m": -MAST_HEIGHT_M, "z_max_m": MAST_HEIGHT_M, "ransac_iterations": iterations,
+        }
+    )  # fmt: skip
     region = Region(anywhere_up)
     plane = region.ground(points, region.roi_mask(points))
     return None if plane is None else -plane.height_at(0.0, 0.0)

@@ -51,6 +51,7 @@ from i2v_loc.stages.hinged_fit import (
     Measurement,
     Prior,
     TurnFrame,
+    explained_share,
     fit,
     fit_hinge,
     in_unit_box,
@@ -1131,7 +1132,7 @@ class VehicleTracker:
                 waiting = waiting or (None if refuted else m)
                 continue
             if (
-                self._explains(m)
+                self._explains(m, model)
                 and not filled
                 # without rays a hole and a gap look alike: the points alone decide
                 and (self._rays is None or self._hinge_shown(seed, m, model, ground_z_m))
@@ -1163,7 +1164,7 @@ class VehicleTracker:
             return None
         if not self._allowed_to_start(seed, model, m, rigid_allowed):
             return None
-        if not self._explains(m) or self._seen_through(m, model, ground_z_m):
+        if not self._explains(m, model) or self._seen_through(m, model, ground_z_m):
             return None
         if not (end_face(rect) or low_at_both_ends(cluster, m, model.tractor, ground_z_m)):
             return None  # a side standing on legs at one end: a semitrailer's
@@ -1178,9 +1179,9 @@ class VehicleTracker:
         fit_moved = self._fit_moved(seed, m)
         return fit_moved and self._may_start(seed, rigid_allowed)
 
-    def _explains(self, m: Measurement) -> bool:
-        """The fit explains ``start_min_explained`` of its points."""
-        return float(np.mean(m.unit >= 0)) >= self.params.start_min_explained
+    def _explains(self, m: Measurement, model: VehicleModel) -> bool:
+        """The fit explains ``start_min_explained`` of its points (``hinged_fit.explained_share``)."""
+        return explained_share(m, model) >= self.params.start_min_explained
 
     def _stands_on_wheels(
         self, cluster: np.ndarray, m: Measurement, model: VehicleModel, ground_z_m: float, top_seen: bool
@@ -1551,7 +1552,7 @@ class VehicleTracker:
         through, either, nor the MAN's beyond the bus)."""
         articulated = [h for h in hypotheses if h[0].articulated]
         rigid = [h for h in hypotheses if not h[0].articulated]
-        if self._one_sweep() and any(self._explains(h[2]) for h in rigid):
+        if self._one_sweep() and any(self._explains(h[2], h[0]) for h in rigid):
             articulated = [h for h in articulated if _supported(h[2], h[0], ground_z_m, top_seen)]
         best_art = min(articulated, key=lambda h: h[2].cost, default=None)
         best_rigid = min(rigid, key=lambda h: h[2].cost, default=None)
@@ -1584,7 +1585,7 @@ class VehicleTracker:
             h for h in hypotheses if not h[0].articulated and h[0].tractor.length_m >= self.params.rigid_min_length_m
         ]
         best = min(rigid, key=lambda h: h[2].cost, default=None)
-        return [(best[0], best[2])] if best is not None and self._explains(best[2]) else []
+        return [(best[0], best[2])] if best is not None and self._explains(best[2], best[0]) else []
 
 
 def _explained_footprint(m: Measurement, min_points: int) -> Rect | None:
