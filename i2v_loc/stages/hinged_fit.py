@@ -268,11 +268,7 @@ def explained_share(m: Measurement, model: VehicleModel) -> float:
     explained = m.unit >= 0
     if model.articulated:
         return float(np.mean(explained))
-    centre, _ = model.box_centers(m.x_m, m.y_m, m.yaw_rad)
-    c, s = math.cos(m.yaw_rad), math.sin(m.yaw_rad)
-    d = m.points[:, :2] - centre
-    box = model.tractor
-    inside = (np.abs(d @ [c, s]) <= box.length_m / 2) & (np.abs(d @ [-s, c]) <= box.width_m / 2)
+    inside = in_unit_box(m.points, Prior(m.x_m, m.y_m, m.yaw_rad, 0.0, model), 0, 0.0)
     _, column = np.unique(np.floor(m.points[:, :2] / ROOF_STEP_CELL_M).astype(np.int64), axis=0, return_inverse=True)
     column = column.ravel()
     highest = np.full(column.max() + 1, -np.inf)

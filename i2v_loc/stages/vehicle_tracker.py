@@ -969,10 +969,10 @@ class VehicleTracker:
         for seed, cluster, rect, shape in ready:
             center = seed.center_xy
             track = self._new_track(cluster, rect, seed, float(ground(center[0], center[1])), stamp_s, rigid_allowed)
-            if track is None and self._one_sweep():
-                reports += self._start_apart(cluster, ground, stamp_s, rigid_allowed)
             if track is None:  # no vehicle (yet): fitted again after a while if its shape changed
                 seed.failed, seed.failed_frame = shape, seed.frames
+                if self._one_sweep():
+                    reports += self._start_apart(cluster, ground, stamp_s, rigid_allowed)
                 continue
             self.seeds.remove(seed)
             self.tracks.append(track)
