@@ -15,8 +15,8 @@ from i2v_loc.params import Params
 from i2v_loc.sim.meshes import box_center_in_axle_frame
 
 
-def _detect(tmp_path, capsys, parts, top_deg: float | None = None) -> list[dict]:
-    np.save(tmp_path / "sweep.npy", cm.sweep(parts, top_deg))
+def _detect(tmp_path, capsys, parts, top_deg: float | None = None, seed: int = 0) -> list[dict]:
+    np.save(tmp_path / "sweep.npy", cm.sweep(parts, top_deg, seed))
     (tmp_path / "roof.yaml").write_text(cm.params_yaml())
     args = ["detect", str(tmp_path / "sweep.npy"), "--params", str(tmp_path / "roof.yaml"), "--sensor", "roof"]
     assert main(args) == 0
@@ -39,6 +39,18 @@ def test_a_buss_side_seen_alone_is_one_rigid_vehicle_of_its_length(tmp_path, cap
     assert np.hypot(v["truck"]["center"][0] - 3.0, v["truck"]["center"][1] - 8.0) < 0.15
     assert _yaw_error_deg(v["truck"]["yaw_deg"], 0.0) < 1.0
     assert v["truck"]["dimensions_seen"] == [True, False, True]  # its width is a stand-in
+
+
+@pytest.mark.parametrize("x, y, yaw", [(0.0, 22.0, 0.0), (22.0, 0.0, np.pi / 2), (10.0, 20.0, -0.4)])
+def test_a_buss_side_22_m_away_is_found_though_few_rays_pass_under_it(tmp_path, capsys, x, y, yaw):
+    """From 1.8 m up, a ray passes under a body 0.3 m up only where it comes down to its clearance
+    at the side's line: 22 m away, a few beams do so, each in a column or two, spread along its
+    length (a body on wheels) but far from half of its columns. It is found, where it stands."""
+    (v,) = _detect(tmp_path, capsys, cm.bus(x, y, yaw))
+    assert v["kind"] == "rigid"
+    assert np.hypot(v["truck"]["center"][0] - x, v["truck"]["center"][1] - y) < 0.1
+    assert abs(v["truck"]["dimensions"][0] - 12.0) < 0.2
+    assert _yaw_error_deg(v["truck"]["yaw_deg"], np.degrees(yaw)) < 1.0
 
 
 def test_a_rigid_truck_seen_from_a_side_and_an_end_is_fitted_on_its_own_axes(tmp_path, capsys):
@@ -173,6 +185,16 @@ def test_a_semitrailer_standing_alone_or_a_container_is_no_rigid_vehicle(tmp_pat
     has wheels at the rear only; a container's faces reach the ground. Neither is a vehicle, in one
     sweep either (each was reported as a rigid one)."""
     assert _detect(tmp_path, capsys, parts) == []
+
+
+def test_a_parked_trailer_with_a_container_at_its_end_is_no_rigid_vehicle(tmp_path, capsys):
+    """A 20-ft container 1.4 m off a parked trailer's end: one face to the sensor, low at both ends
+    (the trailer's wheels, the container), rays passing under the trailer's floor in 19 of its 42
+    columns, spread over 25. Its columns along the container reach the ground (27): no body on wheels."""
+    x, y, yaw = 10.21, 9.72, -1.10
+    along = Params().vehicles["volvo_fh"].trailer.length_m / 2 + 1.44 + 6.06 / 2
+    container = cm.container(x + along * np.cos(yaw), y + along * np.sin(yaw), yaw, 6.06)
+    assert _detect(tmp_path, capsys, cm.parked_trailer("volvo_fh", x, y, yaw) + container, seed=17) == []
 
 
 def test_a_bus_where_a_parked_trailer_stands_is_a_rigid_vehicle(tmp_path, capsys):
