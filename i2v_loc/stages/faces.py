@@ -151,17 +151,15 @@ def passes_under(
     inside = (columns >= 0) & (columns < len(lowest))
     inside[inside] = np.isfinite(lowest[columns[inside]])  # under the face: where it shows
     columns = columns[inside][hits[inside, 1] - ground_z_m < lowest[columns[inside]]]
-    shown = np.count_nonzero(np.isfinite(lowest))
-    passed = np.unique(columns)
     if len(columns) < UNDER_BODY_MIN_RAYS:
         return False
-    closed = _grounded_columns(rays, points, face, along, ground_z_m)
+    shown, passed = np.count_nonzero(np.isfinite(lowest)), np.unique(columns)
     if passed.size >= UNDER_BODY_SHARE * shown:
         return True
     return (
         passed.size >= UNDER_BODY_MIN_COLUMNS
         and np.ptp(passed) + 1 >= UNDER_BODY_SHARE * shown
-        and closed.size <= UNDER_BODY_CLOSED_SHARE * shown
+        and _grounded_columns(rays, points, face, along, ground_z_m).size <= UNDER_BODY_CLOSED_SHARE * shown
     )
 
 
