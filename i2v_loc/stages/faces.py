@@ -139,8 +139,8 @@ def passes_under(
     A body on wheels lets rays pass along its length; a wall, a hedge or a shed reaches the ground
     in every column (a ray passing a wall's end, seen at a slant, crosses its line before the end),
     a board beside a wall lets them pass at its end only. (From 1.8 m up, rays come down to a
-    coach's 0.3 m clearance at its side's line in a column or two per beam: 22 m away, 12 rays
-    passed under an Argoverse 2 bus in 7 of its 40 columns, and it was no vehicle. A parked trailer
+    coach's 0.3 m clearance at its side's line in a column or two per beam: 12 rays passed under
+    an Argoverse 2 bus 10 m away, in 7 of its 40 columns, and it was no vehicle. A parked trailer
     with a container at its end, one face, is passed under along the trailer: the container's side
     reaches the ground in 64 % of the columns.)"""
     hits = rays.crossings(
