@@ -371,10 +371,12 @@ def test_service_udp_source_delivers_the_newest_sweeps(pcap_dir, native):
         import time
 
         sent = _send_pcaps(pcap_dir, dict(source.ports), {}, swap_every=0, received=lambda: _received(source))
-        for _ in range(200):  # until the receiver thread has decoded every packet
-            if all(source.counters[f"{n}.packets"] == sent[n] for n in sent):
-                break
+        # until the receiver thread has decoded every packet (on a loaded host, 10 s was not enough:
+        # the sweep before the newest was compared)
+        deadline = time.monotonic() + 120.0
+        while not all(source.counters[f"{n}.packets"] == sent[n] for n in sent) and time.monotonic() < deadline:
             time.sleep(0.05)
+        assert {n: source.counters[f"{n}.packets"] for n in sent} == sent
         frame = source.frame(0)
         counters = source.counters
         empty = source.frame(1)  # nothing new within the timeout: every sensor missing
