@@ -159,20 +159,23 @@ def passes_under(
     return (
         passed.size >= UNDER_BODY_MIN_COLUMNS
         and np.ptp(passed) + 1 >= UNDER_BODY_SHARE * shown
-        and _grounded_columns(rays, points, face, along, ground_z_m).size <= UNDER_BODY_CLOSED_SHARE * shown
+        and _grounded_columns(_ground_band_ends(rays, ground_z_m), points, face, along).size
+        <= UNDER_BODY_CLOSED_SHARE * shown
     )
 
 
-def _grounded_columns(
-    rays: Rays, points: np.ndarray, face: np.ndarray, along: np.ndarray, ground_z_m: float
-) -> np.ndarray:
-    """The ``FACE_BAND_M`` columns along a face's line through ``face`` (from the least along of its
-    ``points``) where rays ended within ``FACE_MAX_DEPTH_M`` of it, ``GROUNDED_BAND_M`` above the
-    ground: where the face reaches down to the ground (the front end drops these returns as ground,
-    the rays keep them)."""
+def _ground_band_ends(rays: Rays, ground_z_m: float) -> np.ndarray:
+    """The frame's ray ends (level frame) ``GROUNDED_BAND_M`` above the ground: the front end drops
+    these returns as ground, the rays keep them."""
     ends = rays.level_points
     height = ends[:, 2] - ground_z_m
-    ends = ends[(height >= GROUNDED_BAND_M[0]) & (height <= GROUNDED_BAND_M[1])]
+    return ends[(height >= GROUNDED_BAND_M[0]) & (height <= GROUNDED_BAND_M[1])]
+
+
+def _grounded_columns(ends: np.ndarray, points: np.ndarray, face: np.ndarray, along: np.ndarray) -> np.ndarray:
+    """The ``FACE_BAND_M`` columns along a face's line through ``face`` (from the least along of its
+    ``points``) where some of the ray ``ends`` (``_ground_band_ends``) lie within
+    ``FACE_MAX_DEPTH_M`` of it: where the face reaches down to the ground."""
     normal = np.array([along[1], -along[0]])
     spread = (points[:, :2] - face) @ along
     across, at = ((ends[:, :2] - face) @ np.column_stack([normal, along])).T
@@ -213,9 +216,10 @@ def faces_grounded(
 ) -> bool:
     """``unit_grounded`` whatever the unit's box's floor (a rigid box stands on the ground: the body
     it stands for, a bus's or a van's, is 0.3 m up)."""
+    ends = _ground_band_ends(rays, ground_z_m)
     for face, along, _, on_face in _faces_shown(rays, cluster, m, model, unit):
         spread = (cluster[on_face, :2] - face) @ along  # the face as far as its points show it
-        columns = _grounded_columns(rays, cluster[on_face], face, along, ground_z_m)
+        columns = _grounded_columns(ends, cluster[on_face], face, along)
         if len(columns) >= GROUNDED_SHARE * np.ceil(np.ptp(spread) / FACE_BAND_M):
             return True
     return False

@@ -27,6 +27,7 @@ import numpy as np
 from i2v_loc.geometry import wrap_rad
 from i2v_loc.params import ArticulatedParams
 from i2v_loc.stages import kernels
+from i2v_loc.stages.primitives import voxel_keys
 from i2v_loc.stages.vehicle_model import VehicleModel
 
 WEAK_PRIOR_SIGMAS = np.array([2.0, 2.0, np.radians(20.0), np.radians(30.0)])  # m, m, rad, rad
@@ -265,16 +266,15 @@ def explained_share(m: Measurement, model: VehicleModel) -> float:
     body's upper surface steps, and the box's roof is only its highest step (a nuScenes rigid
     truck's cab roof, 1 m below its cargo box's, left its box explaining 79.95 % of its points).
     A crown's inside is not the top of its column."""
-    explained = m.unit >= 0
     if model.articulated:
-        return float(np.mean(explained))
+        return float(np.mean(m.explained))
     inside = in_unit_box(m.points, Prior(m.x_m, m.y_m, m.yaw_rad, 0.0, model), 0, 0.0)
-    _, column = np.unique(np.floor(m.points[:, :2] / ROOF_STEP_CELL_M).astype(np.int64), axis=0, return_inverse=True)
-    column = column.ravel()
+    cells = voxel_keys(np.floor(m.points[:, :2] / ROOF_STEP_CELL_M), 1.0)  # a grid through the origin
+    _, column = np.unique(cells, return_inverse=True)
     highest = np.full(column.max() + 1, -np.inf)
     np.maximum.at(highest, column, m.points[:, 2])
     step = inside & (m.points[:, 2] >= highest[column] - ROOF_STEP_BAND_M)
-    return float(np.mean(explained | step))
+    return float(np.mean(m.explained | step))
 
 
 def rear_sigma_m(m: Measurement, model: VehicleModel, params: ArticulatedParams) -> float:

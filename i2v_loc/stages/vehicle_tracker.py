@@ -975,9 +975,13 @@ class VehicleTracker:
                     reports += self._start_apart(cluster, ground, stamp_s, rigid_allowed)
                 continue
             self.seeds.remove(seed)
-            self.tracks.append(track)
-            reports.append(track.report(True))
+            reports.append(self._started(track))
         return reports
+
+    def _started(self, track: _Track) -> VehicleReport:
+        """``track`` tracked from this frame on: its first report."""
+        self.tracks.append(track)
+        return track.report(True)
 
     def _start_apart(self, cluster: np.ndarray, ground, stamp_s: float, rigid_allowed: bool) -> list[VehicleReport]:
         """The vehicles among a seed that is none, taken apart at ``APART_VOXEL_M`` (one sweep: no
@@ -999,8 +1003,7 @@ class VehicleTracker:
             ground_z_m = float(ground(*rect.center_xy))
             track = self._new_track(part, rect, seed, ground_z_m, stamp_s, rigid_allowed)
             if track is not None:
-                self.tracks.append(track)
-                reports.append(track.report(True))
+                reports.append(self._started(track))
         return reports
 
     def moving_seeds(self) -> list[Rect]:
