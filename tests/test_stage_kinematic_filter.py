@@ -174,6 +174,19 @@ def test_the_first_two_fits_give_a_new_vehicles_speed_and_curvature():
     assert abs(f.state.speed_m_s - 3.0) < 0.1 and abs(f.state.curvature_1_m - 0.2) < 0.02
 
 
+@pytest.mark.parametrize("speed", [0.0, 2.0])
+def test_a_new_vehicles_motion_is_measured_between_fits_of_one_model(speed):
+    """Renamed before its second fit (``shift_reference``: the new model's reference point), a new
+    vehicle's first motion is measured between the new model's fits, not from the old model's fit
+    moved: that lay 0.25 m behind the new one's, and a standing truck drove off at 2.5 m/s."""
+    f = new_filter(np.array([-0.35, 0.0, 0.0, 0.0]))  # the old model's fit of a truck at x = 0 (new reference)
+    f.shift_reference(0.1)  # the old pose moved to the new reference point: 0.25 m behind the new model's fit
+    for k in (1, 2):  # the new model's first two fits
+        f.predict(k * 0.1)
+        assert f.update(np.array([speed * (k - 1) * 0.1, 0.0, 0.0, 0.0]), R)
+    assert abs(f.state.speed_m_s - speed) < 0.1
+
+
 def test_far_measurement_is_gated_then_taken_after_repeats():
     truth = np.array([0.0, 0.0, 0.0, 0.0])
     f = new_filter(truth)
