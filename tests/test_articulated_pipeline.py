@@ -1502,6 +1502,26 @@ def test_a_trailer_longer_than_every_catalogue_one_starts_with_the_cab_on_its_ca
     assert position < 0.3 and abs(yaw) < 1.0 and abs(hitch) < 1.0
 
 
+def test_a_direction_placed_off_the_body_is_fitted_again_on_the_other_directions_body():
+    """A MAN seen by one distant LiDAR, its group's rectangle 4 m aside and 10 deg off its axis (a
+    kerb or a car beside it in the group): placed on it, the right way round converges 1 m aside at
+    three times the cost of the wrong way round, whose cab lies on the trailer's rear. Fitted again
+    on the wrong way's body, the right way is found at the truth, the cheaper, and starts."""
+    from i2v_loc.stages import vehicle_tracker as vt
+
+    man = VehicleModel.from_config("man_tgx", PARAMS.vehicles["man_tgx"])
+    points = vehicle_points(man, 0.0, 0.0, np.pi, sensors=((-15.0, -25.0, 4.0),), seed=3, spacing=0.3)
+    rect = vt.min_area_rect(points[:, :2])
+    aside = replace(rect, center_xy=np.asarray(rect.center_xy) + [0.0, -4.0], yaw_rad=rect.yaw_rad + np.radians(10.0))
+    tracker = VehicleTracker(PARAMS.articulated, PARAMS.vehicles)
+    fits = tracker._catalogue_fits(vt.thin(points, PARAMS.articulated.fit_max_points), points, aside, man, 0.0, True)
+    right = [m for _, _, m in fits if np.cos(m.yaw_rad - np.pi) > 0.9]
+    wrong = [m for _, _, m in fits if np.cos(m.yaw_rad - np.pi) < -0.9]
+    assert len(right) == len(wrong) == 1
+    assert np.hypot(right[0].x_m, right[0].y_m) < 0.05 and abs(angle_deg(right[0].yaw_rad - np.pi)) < 0.3
+    assert np.hypot(wrong[0].x_m, wrong[0].y_m) > 5.0 and right[0].cost < wrong[0].cost
+
+
 def _hypothesis(model, sign, cost, yaw_rad=0.0):
     return model, sign, SimpleNamespace(cost=cost, hitch_rad=0.0, yaw_rad=yaw_rad)
 
