@@ -1479,9 +1479,11 @@ class VehicleTracker:
         top_seen: bool,
     ) -> list[tuple[VehicleModel, float, Measurement]]:
         """``model`` placed on the footprint ``rect`` in both directions: per direction the best of the
-        start hitches, refined with the trailer's length fitted too. A direction whose fit costs more
-        than the other's is placed again on the other's body (the rectangle around its boxes) and
-        kept if it costs less there: a MAN seen by paper `l2` 25 m away, its group's rectangle 2 m
+        start hitches, refined with the trailer's length fitted too. Each direction in turn, if its fit
+        costs more than the other's as it stands, is placed again on the other's body (the rectangle
+        around its boxes) and kept if it costs less there; a direction bettered first so gives the
+        other a place on its new body (decided from the first fits alone, generalization `l1`+`l3`
+        kept 8.4 false vehicle-s). A MAN seen by paper `l2` 25 m away, its group's rectangle 2 m
         off its axis, converged 3 m aside the right way round at four times the cost of the wrong
         way round (its cab on the trailer's rear), started driving backwards and was 14 m off for
         12 s."""
