@@ -1590,6 +1590,28 @@ def test_while_a_cheaper_fit_lacks_points_none_the_other_way_round_starts(monkey
     assert start((man, 1.0, right), (volvo_model, -1.0, flipped)) == (man, right)
 
 
+def test_directions_that_cost_alike_wait_for_the_one_lacking_points_unless_a_gap_shows(monkeypatch):
+    """A fit the other way round that only lacks points and costs alike (not undercut by
+    ``DIRECTION_COST_RATIO``) is waited for too, whichever was tried first: a reversing MAN seen by
+    one LiDAR, its cab hidden, started the wrong way round (its "cab" on the trailer's rear) at
+    0.92 times the cost of the right way. A fit whose gap shows open starts; so does one clearly
+    cheaper."""
+    from i2v_loc.stages import vehicle_tracker as vt
+
+    lacking = set()
+    man, right, start = _start_of_a_man(monkeypatch, lacking, set())
+    volvo_model = volvo()
+    alike = replace(right, yaw_rad=0.1, hitch_rad=0.02, cost=0.92 * right.cost)
+    cheaper = replace(alike, cost=0.7 * right.cost)
+    lacking.add(id(right))
+    shown = set()
+    monkeypatch.setattr(vt.VehicleTracker, "_gap_shown", lambda self, c, m, *a: id(m) in shown)
+    assert start((volvo_model, -1.0, alike), (man, 1.0, right)) is None
+    assert start((volvo_model, -1.0, cheaper), (man, 1.0, right)) == (volvo_model, cheaper)
+    shown.add(id(alike))
+    assert start((volvo_model, -1.0, alike), (man, 1.0, right)) == (volvo_model, alike)
+
+
 def test_no_fit_bent_further_than_the_cheapest_models_starts(monkeypatch):
     """Fits of one vehicle by different catalogue models bend alike. A 16 m parked trailer's points
     were fitted best by a MAN's straight (refuted: its gap filled) and started as a Volvo bent

@@ -1103,11 +1103,11 @@ class VehicleTracker:
         """The best-explaining model and its fit, if it passes the start's checks (``rect``: the
         cluster's minimum-area rectangle; ``top_seen``: no point at a sensor's view top). A seed
         longer than any rigid vehicle is articulated: the catalogue models are tried cheapest first
-        (an unknown tractor's cab puts a model's gap on the real trailer's front), but while a
-        cheaper one only lacks points (not supported, yet neither its gap filled nor a unit seen
-        through) none the other way round starts: seen by one LiDAR ahead of its cab, a MAN's
-        right fit waited for its trailer's side to show, and a Volvo the wrong way round, at 16
-        times its cost, started instead."""
+        (an unknown tractor's cab puts a model's gap on the real trailer's front), but while one
+        that costs alike or less only lacks points (``_lacks_points``), none the other way round
+        starts unless its own gap shows (``_waits_for``): seen by one LiDAR ahead of its cab, a
+        MAN's right fit waited for its trailer's side to show, and a Volvo the wrong way round, at
+        16 times its cost, started instead."""
         if one_face_sized(rect, self.params):
             return self._one_face(cluster, rect, seed, ground_z_m, rigid_allowed, top_seen)
         may_be_rigid = rect.length_m <= RIGID_MAX_LENGTH_M
@@ -1121,19 +1121,19 @@ class VehicleTracker:
             two = self._two_units(hypotheses, cluster, seed, ground_z_m, top_seen)
             choices = [two] if two is not None else self._choose(hypotheses, seed, ground_z_m, top_seen)
             choices += self._rigid_after(choices, hypotheses)
-        waiting = None  # a cheaper fit that only lacks points yet: no fit the other way round starts
+        waiting = [
+            m
+            for model, m in choices
+            if not _bent_against(m, choices[0][1]) and self._lacks_points(cluster, m, model, ground_z_m, top_seen)
+        ]
         for model, m in choices:
             if not self._allowed_to_start(seed, model, m, rigid_allowed):
                 return None
-            if waiting is not None and not _same_way(m, waiting):
+            if _bent_against(m, choices[0][1]) or not _supported(m, model, ground_z_m, top_seen):
                 continue
-            if _bent_against(m, choices[0][1]):
+            if _waits_for(m, waiting) and not self._gap_shown(cluster, m, model, ground_z_m):
                 continue
             filled = _gap_filled(cluster, m, model, ground_z_m)
-            if not _supported(m, model, ground_z_m, top_seen):
-                refuted = filled or self._seen_through(m, model, ground_z_m)
-                waiting = waiting or (None if refuted else m)
-                continue
             if (
                 self._explains(m, model)
                 and not filled
@@ -1145,6 +1145,22 @@ class VehicleTracker:
             ):
                 return model, m
         return None
+
+    def _lacks_points(
+        self, cluster: np.ndarray, m: Measurement, model: VehicleModel, ground_z_m: float, top_seen: bool
+    ) -> bool:
+        """Whether a start's fit is not supported (``_supported``) yet not refuted either: neither its
+        gap filled nor a unit seen through. More of the vehicle may show in the frames to come."""
+        if _supported(m, model, ground_z_m, top_seen):
+            return False
+        return not (_gap_filled(cluster, m, model, ground_z_m) or self._seen_through(m, model, ground_z_m))
+
+    def _gap_shown(self, cluster: np.ndarray, m: Measurement, model: VehicleModel, ground_z_m: float) -> bool:
+        """Whether the points show the fit's gap open (``_gap_open``) or rays crossed it
+        (``_gap_seen_empty``): the hinge is where the fit puts it."""
+        return model.articulated and (
+            _gap_open(cluster, m, model, ground_z_m) or self._gap_seen_empty(m, model, ground_z_m)
+        )
 
     def _one_face(
         self, cluster: np.ndarray, rect: Rect, seed: Seed, ground_z_m: float, rigid_allowed: bool, top_seen: bool
@@ -1650,6 +1666,17 @@ def _bent_against(m: Measurement, best: Measurement) -> bool:
     vehicle). Not the other way: a cheapest fit bent 12 deg and seen through was a misfit of an
     unknown 13.6 m trailer, a MAN's straight fit the right one."""
     return abs(m.hitch_rad or 0.0) - abs(best.hitch_rad or 0.0) > START_BEND_TOLERANCE_RAD
+
+
+def _waits_for(m: Measurement, waiting: list[Measurement]) -> bool:
+    """Whether the fit ``m`` waits for one of the ``waiting`` fits that only lack points yet
+    (``_lacks_points``): one the other way round that ``m`` does not undercut by
+    ``DIRECTION_COST_RATIO``. Which of two directions that cost alike starts is then left to
+    the points to come (``_candidate`` lets a fit whose gap shows start), not to the order they
+    were tried in (the direction of travel first: a reversing MAN seen by paper `l3`, its cab
+    hidden, started the wrong way round, its "cab" on the trailer's rear, at 0.92 times the cost
+    of the right way)."""
+    return any(not _same_way(m, w) and m.cost > DIRECTION_COST_RATIO * w.cost for w in waiting)
 
 
 def _same_way(a: Measurement, b: Measurement) -> bool:
