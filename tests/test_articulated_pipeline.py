@@ -1407,6 +1407,27 @@ def test_a_unit_whose_points_lie_mostly_under_its_floor_is_not_supported():
     assert not _supported(replace(m, points=kerbs), model, 0.0)
 
 
+def test_a_trailers_side_seen_sparse_beside_a_dense_cab_supports_it_but_a_few_cab_points_do_not():
+    """One LiDAR near a MAN's cab sees the cab's faces densely and its trailer's side along it,
+    far and sparse: the side spans the trailer's length and height, and supports it however few
+    its points are beside the cab's (a lane change was reported as a rigid box 4.3 m off for 7 s).
+    A cab of a few points among its trailer's is no cab (a parked trailer's landing gear)."""
+    from i2v_loc.stages.vehicle_tracker import UNIT_SUPPORT, _supported
+
+    man = VehicleModel.from_config("man_tgx", PARAMS.vehicles["man_tgx"])
+    points = vehicle_points(man, 0.0, 0.0, 0.0, sensors=SENSORS)
+    m = fit(points, Prior(0.0, 0.0, 0.0, 0.0, man), PARAMS.articulated, iterations=20)
+    assert _supported(m, man, 0.0)
+    areas = np.array([box.length_m * box.height_m for box in man.boxes])
+    every = np.arange(len(m.points)) % 10 == 0
+    for thin_unit in (1, 0):
+        keep = (m.unit != thin_unit) | every
+        thinned = replace(m, points=m.points[keep], unit=m.unit[keep])
+        share = np.mean(thinned.unit[thinned.unit >= 0] == thin_unit)
+        assert share < UNIT_SUPPORT * areas[thin_unit] / areas.sum()  # fewer than their side's share
+        assert _supported(thinned, man, 0.0) == (thin_unit == 1)
+
+
 def test_a_reach_that_stays_put_while_moving_is_the_trailers_end():
     """Seen from one side the rear face never shows: the trailer's points reaching 10.5 m behind
     its front frame after moving frame is its length (the prior, 13.68 m, was the catalogue's); a
