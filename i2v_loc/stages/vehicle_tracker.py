@@ -1104,10 +1104,10 @@ class VehicleTracker:
         cluster's minimum-area rectangle; ``top_seen``: no point at a sensor's view top). A seed
         longer than any rigid vehicle is articulated: the catalogue models are tried cheapest first
         (an unknown tractor's cab puts a model's gap on the real trailer's front), but while one
-        that costs alike or less only lacks points (``_lacks_points``), none the other way round
-        starts unless its own gap shows (``_waits_for``): seen by one LiDAR ahead of its cab, a
-        MAN's right fit waited for its trailer's side to show, and a Volvo the wrong way round, at
-        16 times its cost, started instead."""
+        that costs alike or less only lacks points (not supported, nor ``_refuted``), none the
+        other way round starts unless its own gap shows (``_waits_for``): seen by one LiDAR ahead
+        of its cab, a MAN's right fit waited for its trailer's side to show, and a Volvo the wrong
+        way round, at 16 times its cost, started instead."""
         if one_face_sized(rect, self.params):
             return self._one_face(cluster, rect, seed, ground_z_m, rigid_allowed, top_seen)
         may_be_rigid = rect.length_m <= RIGID_MAX_LENGTH_M
@@ -1121,17 +1121,17 @@ class VehicleTracker:
             two = self._two_units(hypotheses, cluster, seed, ground_z_m, top_seen)
             choices = [two] if two is not None else self._choose(hypotheses, seed, ground_z_m, top_seen)
             choices += self._rigid_after(choices, hypotheses)
-        waiting = [
+        bent = [_bent_against(m, choices[0][1]) for _, m in choices]
+        supported = [_supported(m, model, ground_z_m, top_seen) for model, m in choices]
+        waiting = [  # fits that only lack points yet: more of the vehicle may show in the frames to come
             m
-            for model, m in choices
-            if not _bent_against(m, choices[0][1]) and self._lacks_points(cluster, m, model, ground_z_m, top_seen)
+            for (model, m), b, s in zip(choices, bent, supported)
+            if not (b or s or self._refuted(cluster, m, model, ground_z_m))
         ]
-        for model, m in choices:
+        for (model, m), b, s in zip(choices, bent, supported):
             if not self._allowed_to_start(seed, model, m, rigid_allowed):
                 return None
-            if _bent_against(m, choices[0][1]) or not _supported(m, model, ground_z_m, top_seen):
-                continue
-            if _waits_for(m, waiting) and not self._gap_shown(cluster, m, model, ground_z_m):
+            if b or not s or (_waits_for(m, waiting) and not self._gap_shown(cluster, m, model, ground_z_m)):
                 continue
             filled = _gap_filled(cluster, m, model, ground_z_m)
             if (
@@ -1146,14 +1146,10 @@ class VehicleTracker:
                 return model, m
         return None
 
-    def _lacks_points(
-        self, cluster: np.ndarray, m: Measurement, model: VehicleModel, ground_z_m: float, top_seen: bool
-    ) -> bool:
-        """Whether a start's fit is not supported (``_supported``) yet not refuted either: neither its
-        gap filled nor a unit seen through. More of the vehicle may show in the frames to come."""
-        if _supported(m, model, ground_z_m, top_seen):
-            return False
-        return not (_gap_filled(cluster, m, model, ground_z_m) or self._seen_through(m, model, ground_z_m))
+    def _refuted(self, cluster: np.ndarray, m: Measurement, model: VehicleModel, ground_z_m: float) -> bool:
+        """Whether the points rule a start's fit out, however many more show: its gap filled or a
+        unit seen through."""
+        return _gap_filled(cluster, m, model, ground_z_m) or self._seen_through(m, model, ground_z_m)
 
     def _gap_shown(self, cluster: np.ndarray, m: Measurement, model: VehicleModel, ground_z_m: float) -> bool:
         """Whether the points show the fit's gap open (``_gap_open``) or rays crossed it
@@ -1669,8 +1665,8 @@ def _bent_against(m: Measurement, best: Measurement) -> bool:
 
 
 def _waits_for(m: Measurement, waiting: list[Measurement]) -> bool:
-    """Whether the fit ``m`` waits for one of the ``waiting`` fits that only lack points yet
-    (``_lacks_points``): one the other way round that ``m`` does not undercut by
+    """Whether the fit ``m`` waits for one of the ``waiting`` fits that only lack points yet (not
+    supported, nor ``_refuted``): one the other way round that ``m`` does not undercut by
     ``DIRECTION_COST_RATIO``. Which of two directions that cost alike starts is then left to
     the points to come (``_candidate`` lets a fit whose gap shows start), not to the order they
     were tried in (the direction of travel first: a reversing MAN seen by paper `l3`, its cab
