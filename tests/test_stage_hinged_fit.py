@@ -11,6 +11,7 @@ from hinged_points import vehicle_points
 from i2v_loc.params import Params
 from i2v_loc.stages.hinged_fit import (
     CHASSIS_GAP_M,
+    LEFT,
     REAR,
     Measurement,
     Prior,
@@ -312,7 +313,7 @@ def test_the_hinge_fitted_to_a_turns_frames_at_once_is_the_truth_where_single_fr
         free = fit(points, replace(Prior(m.x_m, m.y_m, m.yaw_rad, m.hitch_rad, model), free_kingpin=True),
                    PARAMS.articulated, iterations=20)  # fmt: skip
         single_kingpins.append(free.kingpin_m)
-        frames.append(TurnFrame(m.points, 0.0, m.vector))
+        frames.append(TurnFrame.of(m, 0.0, model))
     hinge = fit_hinge(frames, model, PARAMS.articulated)
     assert hinge.kingpin_m == pytest.approx(0.0, abs=0.03)
     assert hinge.trailer_front_m == pytest.approx(1.5, abs=0.03)
@@ -327,7 +328,7 @@ def _turn_frames(truth: VehicleModel, model: VehicleModel, sensor, hitches_deg, 
         yaw, hitch = TRUTH[2] + np.radians(3 * k), np.radians(hitch_deg)
         points = vehicle_points(truth, TRUTH[0], TRUTH[1], yaw, hitch, sensors=[sensor], seed=k)
         m = fit(points, Prior(TRUTH[0], TRUTH[1], yaw, hitch, model), PARAMS.articulated, iterations=20)
-        frames.append(TurnFrame(m.points, 0.0, m.vector))
+        frames.append(TurnFrame.of(m, 0.0, model))
     return frames
 
 
@@ -351,6 +352,40 @@ def test_the_cabs_length_fitted_with_the_hinge_keeps_a_cab_seen_from_behind_from
     assert both.kingpin_m == pytest.approx(0.0, abs=0.03)
     assert both.trailer_front_m == pytest.approx(0.9, abs=0.03)
     assert both.cab_length_m == pytest.approx(2.25, abs=0.03) and both.cab_std_m < 0.05
+
+
+def test_the_cabs_length_is_fitted_with_the_hinge_only_once_its_rear_face_showed():
+    """The same tractor (cab 0.3 m shorter than the catalogue's) seen from ahead only: nothing shows
+    the cab's rear face, so its length is not fitted (the catalogue's stays; fitted, a cab could grow
+    back into the gap unseen); the kingpin and the front are those fitted without it. The frames
+    seen from behind show the face below the cab's roof, and count its points."""
+    model = volvo()
+    truth = replace(model, kingpin_behind_axle_m=0.0, tractor=replace(model.tractor, length_m=2.25))
+    from_ahead = _turn_frames(truth, model, (14.0, -4.0, 4.0), [25, 30, 35, 40])
+    from_behind = _turn_frames(truth, model, (-10.0, 7.0, 4.0), [25, 30, 35, 40])
+    assert [f.cab_rear_points for f in from_ahead] == [0, 0, 0, 0]
+    assert sum(f.cab_rear_points for f in from_behind) >= 3 * len(from_behind)
+    ahead = fit_hinge(from_ahead, model, PARAMS.articulated, cab_prior=(model.tractor.length_m, 0.3))
+    assert ahead.cab_length_m is None and ahead.cab_std_m == np.inf
+    without = fit_hinge(from_ahead, model, PARAMS.articulated)
+    assert (ahead.kingpin_m, ahead.trailer_front_m) == (without.kingpin_m, without.trailer_front_m)
+    assert ahead.kingpin_m == pytest.approx(0.0, abs=0.05)
+    behind = fit_hinge(from_behind, model, PARAMS.articulated, cab_prior=(model.tractor.length_m, 0.3))
+    assert behind.cab_length_m is not None
+
+
+def test_a_turn_frame_counts_the_cabs_rear_points_below_its_roof_only():
+    """Points a fit put on the cab's rear face above its roof are not on it (a trailer's front seen
+    above a lower cab): ``TurnFrame.of`` does not count them, nor the trailer's or another face's."""
+    model = volvo()
+    top = model.tractor.top_m
+    heights = np.array([1.0, 1.5, 2.0, top - 0.05, top + 0.1, top + 0.2, 2.0, 2.0])
+    points = np.column_stack([np.zeros((len(heights), 2)), heights + 0.4])  # on ground 0.4 m high
+    unit = np.array([0, 0, 0, 0, 0, 0, 1, 0], dtype=np.int8)
+    face = np.array([REAR] * 7 + [LEFT], dtype=np.int8)
+    m = Measurement(*TRUTH, 0.0, np.eye(4), points, unit, 0.0, face=face)
+    assert TurnFrame.of(m, 0.4, model).cab_rear_points == 4
+    assert TurnFrame.of(m, 0.0, model).cab_rear_points == 3
 
 
 def test_a_rear_end_seen_moves_the_fit_along_the_trailer_as_far_as_the_fit_is_unsure():

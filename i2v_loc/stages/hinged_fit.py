@@ -43,6 +43,7 @@ MIN_UNIT_SHARE = 0.1  # of the fit's thinned sample, for each unit that has as m
 UNIT_SAMPLE_MARGIN_M = 0.5
 ROOF_STEP_CELL_M, ROOF_STEP_BAND_M = 0.5, 0.2  # a rigid body's upper surface (``explained_share``)
 CHASSIS_GAP_M = 0.1  # a low point farther behind a tracked cab's rear face is its chassis (nearest_faces)
+CAB_REAR_MIN_POINTS = 3  # on the cab's rear face, in a turn's frames together, before its length is fitted
 
 
 @dataclass(frozen=True)
@@ -348,11 +349,21 @@ def _observed(marginal: np.ndarray, prior_sigmas: np.ndarray, floor: np.ndarray)
 @dataclass(frozen=True)
 class TurnFrame:
     """One frame of a turn kept for the joint hinge fit (``fit_hinge``): its fit's thinned points,
-    the ground under them and its pose (x, y, yaw, hitch)."""
+    the ground under them, its pose (x, y, yaw, hitch) and how many of the points it explained
+    lie on the cab's rear face below the cab's roof."""
 
     points: np.ndarray
     ground_z_m: float
     pose: np.ndarray
+    cab_rear_points: int
+
+    @classmethod
+    def of(cls, m: Measurement, ground_z_m: float, model: VehicleModel) -> TurnFrame:
+        """The frame of the fit ``m``, made with ``model``."""
+        cab = model.tractor
+        below_roof = m.points[:, 2] - ground_z_m <= cab.floor_m + cab.height_m
+        on_rear = int(np.count_nonzero((m.unit == 0) & (m.face == REAR) & below_roof))
+        return cls(m.points, ground_z_m, m.vector, on_rear)
 
 
 @dataclass(frozen=True)
@@ -390,7 +401,14 @@ def fit_hinge(
     model's cab length moves the kingpin by its error (an unknown 13.6 m trailer's tractor, its cab
     0.27 m shorter than the catalogue's, seen from behind by one sensor: kingpin 0.26 m off; once
     its front showed, its yaw ran 2-2.5 deg off for 5 s, until the window turned over). Frames
-    showing either face then pin the kingpin given the length, frames showing both the length."""
+    showing either face then pin the kingpin given the length, frames showing both the length.
+    Only once the frames show ``CAB_REAR_MIN_POINTS`` on the cab's rear face below its roof: else
+    nothing measures the length, and a cab grown back into the gap takes the trailer's front for
+    its own (an unknown 16 m trailer's tractor seen from ahead by one sensor, the trailer's front
+    showing above the cab: the cab grew from 2.77 to 3.66 m (true 2.7), claimed within 1.5 cm; its
+    roof explained those points, and its rear face one of them a frame, above the roof)."""
+    if sum(f.cab_rear_points for f in frames) < CAB_REAR_MIN_POINTS:
+        cab_prior = None
     poses = np.array([f.pose for f in frames], dtype=float)
     if poses.ndim != 2 or poses.shape[1] != 4:
         raise ValueError(f"a turn frame's pose is x, y, yaw and hitch; got shape {poses.shape}")

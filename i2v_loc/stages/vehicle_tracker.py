@@ -757,7 +757,7 @@ class VehicleTracker:
 
     def _fit_turn(self, track: _Track, prior: Prior, own: Measurement) -> None:
         """``own`` kept as a frame of the turn, and the hinge fitted to the frames kept (``_learn_hinge``)."""
-        track.turn.append(TurnFrame(own.points, prior.ground_z_m, own.vector))
+        track.turn.append(TurnFrame.of(own, prior.ground_z_m, track.model))
         cab = track.cab_length
         cab_prior = None if cab.counted else (cab.prior, CAB_LENGTH_SIGMA_M)
         hinge = fit_hinge(list(track.turn), track.model, self.params, cab_prior=cab_prior)
