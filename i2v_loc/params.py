@@ -508,6 +508,13 @@ class ArticulatedParams(Section):
     curvature_rate_sigma_1_m_s: float = Field(
         0.03, gt=0.0, le=5.0, description="Process noise: rate of change of the path curvature"
     )
+    reverse_curvature_rate_sigma_1_m_s: float = Field(
+        0.09,
+        gt=0.0,
+        le=5.0,
+        description="Process noise: rate of change of the path curvature while reversing (a driver steers "
+        "to set the hitch angle: full lock, about 0.18 1/m, within 2 s)",
+    )
     reverse_hold_m: float = Field(
         1.5,
         gt=0.0,
