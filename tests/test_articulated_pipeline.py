@@ -1695,3 +1695,25 @@ def test_a_width_counts_from_its_third_frame_and_brackets_from_their_tenth():
     assert width.observed and width.estimate == pytest.approx(1.80)
     width.add(1.74)
     assert width.estimate == pytest.approx(1.76)  # the median of 1.99, 1.76, 1.74
+
+
+def test_a_rigid_fit_is_refuted_where_something_stands_against_an_end():
+    """A 9 m box seen from one side (no end face shows) may start as a rigid vehicle, and so may
+    it with another box 3 m beyond its end. With a cab hinged at 40 deg against its front (a
+    reversing trailer whose cab hides), or a wall across it, rays end in the metre beyond that end
+    and none cross it: the box is a part of something longer."""
+    box = VehicleModel.rigid("rigid", 9.0, 2.5, 3.5)
+    (x, y), sensor = ONE_SIDE_AXLE, ONE_SIDE_SENSOR
+    body = world_boxes(box, x, y, 0.0)
+    front = body[0].center_xy + [4.5, 0.0]
+    cab_yaw = np.radians(40.0)
+    cab = WorldBox(front + 1.3 * np.array([np.cos(cab_yaw), np.sin(cab_yaw)]), cab_yaw, Box(1.3, 2.6, 2.5, 0.5, 3.0), 0)
+    wall = WorldBox(front + [0.5, 0.0], 0.0, Box(0.3, 0.6, 6.0, 0.0, 5.0), 2)
+    apart = WorldBox(front + [5.0, 0.0], 0.0, Box(2.0, 4.0, 2.5, 0.3, 3.0), 2)
+    points = vehicle_points(box, x, y, 0.0, sensors=sensor)
+    m = fit(points, Prior(x, y, 0.0, 0.0, box), PARAMS.articulated, iterations=20)
+    assert not np.any((m.unit == 0) & np.isin(m.face, [FRONT, REAR]))  # its side only
+    tracker = VehicleTracker(PARAMS.articulated, PARAMS.vehicles)
+    for others, free in (([], True), ([apart], True), ([cab], False), ([wall], False)):
+        tracker._rays = cast_rays(body + others, sensor)
+        assert tracker._ends_free(m, box, 0.0) == free, others

@@ -115,6 +115,7 @@ GAP_SIDES_REACH_M = 2.5  # the body's sides next to the gap: about a cab's lengt
 GAP_SIDE_INSET_M = 0.1
 GAP_LOOKED_MIN_POINTS = 8  # on a face across the gap, seen through its opening (one sweep: no motion to wait for)
 GAP_FACE_MARGIN_M = 0.15  # the faces bounding the gap: their points' noise and the fit's error along
+END_SLAB_M = 1.0  # beyond a rigid body's end: a ray ending there and none crossing, it goes on (``_ends_free``)
 SOLID_INSET_M = 0.5  # a unit's box this far inside its faces is crossed by no ray (a sweep's motion blurs them)
 SEEN_THROUGH_RATIO = 0.1  # of the rays ending on a unit, at most this many cross it (real ones: under 0.01)
 CAB_SLICE_MIN_M = 1.0
@@ -1142,9 +1143,35 @@ class VehicleTracker:
                 and not self._seen_through(m, model, ground_z_m)
                 and self._stands_on_wheels(cluster, m, model, ground_z_m, top_seen)
                 and not self._cab_grounded(cluster, m, model, ground_z_m)
+                and self._ends_free(m, model, ground_z_m)
             ):
                 return model, m
         return None
+
+    def _ends_free(self, m: Measurement, model: VehicleModel, ground_z_m: float) -> bool:
+        """Whether nothing stands against a rigid fit's ends: at each end whose face does not show
+        (``_face_seen``), no ray ended in the slab ``END_SLAB_M`` beyond it (within the box's width
+        and height, ``SOLID_INSET_M`` inside) unless rays also crossed it. A body going on there, or
+        a unit hinged to it, makes the box a part of a longer vehicle: seen by `l3` and `l4`, a
+        reversing MAN's trailer alone, its cab hidden at -40 deg in that slab, started as a 13.85 m
+        rigid box for 6 s. An end the view does not reach (no ray in the slab: a truck seen from its
+        side and end hides its far end) is not refuted. Articulated fits and frames without rays: True."""
+        if self._rays is None or model.articulated:
+            return True
+        box = model.tractor
+        axis = np.array([np.cos(m.yaw_rad), np.sin(m.yaw_rad)])
+        centre, _ = model.box_centers(m.x_m, m.y_m, m.yaw_rad, 0.0)
+        heights = (ground_z_m + box.floor_m + SOLID_INSET_M, ground_z_m + box.top_m - SOLID_INSET_M)
+        for face, sign in ((FRONT, 1.0), (REAR, -1.0)):
+            if _face_seen(m, model, 0, face):
+                continue
+            beyond = centre + sign * (box.length_m + END_SLAB_M) / 2 * axis
+            through, ended, _ = self._rays.through(
+                tuple(beyond), m.yaw_rad, END_SLAB_M / 2, box.width_m / 2 - SOLID_INSET_M, heights, GAP_SEEN_BEYOND_M
+            )
+            if ended and through < GAP_SEEN_MIN_RAYS:
+                return False
+        return True
 
     def _refuted(self, cluster: np.ndarray, m: Measurement, model: VehicleModel, ground_z_m: float) -> bool:
         """Whether the points rule a start's fit out, however many more show: its gap filled or a
