@@ -78,34 +78,48 @@ def test_at_the_holding_curvature_the_hitch_holds_still_at_any_speed(hitch_deg):
         assert np.sign(curvature) == -np.sign(hitch)
 
 
-def drive_reversing_and_hold(reverse_hold_m: float, seed: int) -> list[float]:
-    """A driver reversing folds the trailer (the steering at its limit) for 2 s, seen whole, then
-    holds the hitch where it is for 8 s while the cab is hidden: the filter gets the trailer's yaw
+def reverse_with_cab_hidden(
+    params, speed: float, start_hitch: float, target, frames: int, seen_frames: int, seed: int
+) -> np.ndarray:
+    """A driver reversing at ``speed`` from ``start_hitch``, each frame ``k`` steering towards the
+    hitch ``target(k, hitch)`` (the curvature that holds it and a correction towards it), seen
+    whole for ``seen_frames`` frames, then with the cab hidden: the filter gets the trailer's yaw
     and the kingpin's position only. Per hidden frame, the filter's hitch error (deg)."""
     rng = np.random.default_rng(seed)
-    params = PARAMS.articulated.model_copy(update={"reverse_hold_m": reverse_hold_m})
-    kingpin, axle, speed = ART.hitch_behind_axle_m, ART.trailer_hitch_to_axle_m, -1.2
-    truth = np.array([0.0, 0.0, 0.3, 0.3])
-    f = KinematicFilter(np.array([0.0, 0.0, 0.3, 0.0]), R, 0.0, kingpin, axle, True, params, speed)
-    target, errors = np.radians(-80.0), []
-    for k in range(1, 101):
+    kingpin, axle = ART.hitch_behind_axle_m, ART.trailer_hitch_to_axle_m
+    truth = np.array([0.0, 0.0, 0.3, 0.3 + start_hitch])
+    f = KinematicFilter(np.array([0.0, 0.0, 0.3, start_hitch]), R, 0.0, kingpin, axle, True, params, speed)
+    errors = []
+    for k in range(1, frames + 1):
         hitch = truth[3] - truth[2]
-        if k == 21:
-            target = hitch
-        # the driver: the curvature that holds the target, and a correction towards it
-        curvature = -np.sin(target) / (axle + kingpin * np.cos(target)) - 2.0 * (hitch - target) / axle
+        goal = target(k, hitch)
+        curvature = -np.sin(goal) / (axle + kingpin * np.cos(goal)) - 2.0 * (hitch - goal) / axle
         steer = np.clip(np.arctan(curvature * ART.wheelbase_m), -np.radians(35.0), np.radians(35.0))
         truth = step(truth, speed, steer, ART, 0.1)
         f.predict(k * 0.1)
         z = np.array([truth[0], truth[1], truth[2], truth[3] - truth[2]]) + rng.normal(0, np.sqrt(np.diag(R)))
-        if k <= 20:
+        if k <= seen_frames:
             f.update(z, R)
             continue
         yaw = truth[2]
         rows = np.array([[0, 0, 1, 1], [1, 0, kingpin * np.sin(yaw), 0], [0, 1, -kingpin * np.cos(yaw), 0]], float)
         f.update(z, R, (rows, rows @ R @ rows.T))
         errors.append(angle_deg(f.state.hitch_rad - (truth[3] - truth[2])))
-    return errors
+    return np.array(errors)
+
+
+def drive_reversing_and_hold(reverse_hold_m: float, seed: int) -> np.ndarray:
+    """A driver reversing folds the trailer (the steering at its limit) for 2 s, seen whole, then
+    holds the hitch where it is for 8 s while the cab is hidden (``reverse_with_cab_hidden``)."""
+    params = PARAMS.articulated.model_copy(update={"reverse_hold_m": reverse_hold_m})
+    held = {}
+
+    def target(k: int, hitch: float) -> float:
+        if k >= 21:
+            return held.setdefault("hitch", hitch)
+        return np.radians(-80.0)
+
+    return reverse_with_cab_hidden(params, -1.2, 0.0, target, 100, 20, seed)
 
 
 @pytest.mark.parametrize("seed", [0, 1])
@@ -120,33 +134,16 @@ def test_reversing_with_the_cab_hidden_the_hitch_does_not_run_off(seed):
 
 
 def drive_reversing_and_fold(curvature_rate: float, seed: int) -> np.ndarray:
-    """A driver reversing at -17 deg, seen whole for 1 s, then with the cab hidden (the trailer's
-    yaw and the kingpin's position only) folds the trailer on to -45 deg within 3 s and holds it:
-    per hidden frame, the filter's hitch error (deg) with ``curvature_rate`` the reversing
-    curvature's process noise."""
-    rng = np.random.default_rng(seed)
+    """A driver reversing at -17 deg, seen whole for 1 s, then with the cab hidden folds the
+    trailer on to -45 deg within 3 s and holds it (``reverse_with_cab_hidden``), with
+    ``curvature_rate`` the reversing curvature's process noise."""
     params = PARAMS.articulated.model_copy(update={"reverse_curvature_rate_sigma_1_m_s": curvature_rate})
-    kingpin, axle, speed = ART.hitch_behind_axle_m, ART.trailer_hitch_to_axle_m, -1.5
     start, end = np.radians(-17.0), np.radians(-45.0)
-    truth = np.array([0.0, 0.0, 0.3, 0.3 + start])
-    f = KinematicFilter(np.array([0.0, 0.0, 0.3, start]), R, 0.0, kingpin, axle, True, params, speed)
-    errors = []
-    for k in range(1, 81):
-        hitch = truth[3] - truth[2]
-        target = start + (end - start) * min(max((k - 20) / 30, 0.0), 1.0)
-        curvature = -np.sin(target) / (axle + kingpin * np.cos(target)) - 2.0 * (hitch - target) / axle
-        steer = np.clip(np.arctan(curvature * ART.wheelbase_m), -np.radians(35.0), np.radians(35.0))
-        truth = step(truth, speed, steer, ART, 0.1)
-        f.predict(k * 0.1)
-        z = np.array([truth[0], truth[1], truth[2], truth[3] - truth[2]]) + rng.normal(0, np.sqrt(np.diag(R)))
-        if k <= 10:
-            f.update(z, R)
-            continue
-        yaw = truth[2]
-        rows = np.array([[0, 0, 1, 1], [1, 0, kingpin * np.sin(yaw), 0], [0, 1, -kingpin * np.cos(yaw), 0]], float)
-        f.update(z, R, (rows, rows @ R @ rows.T))
-        errors.append(angle_deg(f.state.hitch_rad - (truth[3] - truth[2])))
-    return np.array(errors)
+
+    def target(k: int, hitch: float) -> float:
+        return start + (end - start) * min(max((k - 20) / 30, 0.0), 1.0)
+
+    return reverse_with_cab_hidden(params, -1.5, start, target, 80, 10, seed)
 
 
 @pytest.mark.parametrize("seed", [0, 1])
