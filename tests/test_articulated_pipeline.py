@@ -16,6 +16,7 @@ from i2v_loc.pipelines import build_pipeline
 from i2v_loc.pipelines.articulated import ArticulatedPipeline
 from i2v_loc.pipelines.paper import PaperPipeline
 from i2v_loc.sim.kinematics import Articulation, step
+from i2v_loc.stages import vehicle_tracker as vt
 from i2v_loc.stages.hinged_fit import FRONT, REAR, Measurement, Prior, fit
 from i2v_loc.stages.vehicle_model import Box, VehicleModel
 from i2v_loc.stages.vehicle_tracker import (
@@ -33,9 +34,11 @@ from i2v_loc.stages.vehicle_tracker import (
     _shift_along_m,
     _sides_along,
     _supported,
+    _with_trailer_length,
 )
 
 PARAMS = Params()
+ONE_SWEEP = apply_patch(PARAMS, {"articulated": {"start_frames": 1, "start_travel_m": 0.0}}).articulated  # as `detect`
 SENSORS = ((0.0, -15.0, 4.0), (-22.0, 22.0, 4.0), (22.0, 22.0, 4.0))
 FLAT = staticmethod(lambda x, y: 0.0)
 
@@ -633,8 +636,7 @@ def test_in_one_sweep_a_face_seen_through_the_gap_shows_the_hinge():
     assert not _gap_looked_into(parked, on_front, man, 0.0)
 
     rays = Rays(points.astype(np.float32), np.array([sensor]), np.array([0, len(points)]), np.eye(3))  # none beyond
-    one_sweep = apply_patch(PARAMS, {"articulated": {"start_frames": 1, "start_travel_m": 0.0}}).articulated
-    (report,) = VehicleTracker(one_sweep, PARAMS.vehicles).process(points, flat, 0.0, rays=rays)
+    (report,) = VehicleTracker(ONE_SWEEP, PARAMS.vehicles).process(points, flat, 0.0, rays=rays)
     assert report.model.articulated and abs(report.state.hitch_rad) < np.radians(2.0)
     yard = VehicleTracker(PARAMS.articulated, PARAMS.vehicles)
     assert not any(yard.process(points, flat, 0.1 * k, background_ready=False, rays=rays) for k in range(5))
@@ -1528,7 +1530,6 @@ def test_a_direction_placed_off_the_body_is_fitted_again_on_the_other_directions
     kerb or a car beside it in the group): placed on it, the right way round converges 1 m aside at
     three times the cost of the wrong way round, whose cab lies on the trailer's rear. Fitted again
     on the wrong way's body, the right way is found at the truth, the cheaper, and starts."""
-    from i2v_loc.stages import vehicle_tracker as vt
 
     man = VehicleModel.from_config("man_tgx", PARAMS.vehicles["man_tgx"])
     points = vehicle_points(man, 0.0, 0.0, np.pi, sensors=((-15.0, -25.0, 4.0),), seed=3, spacing=0.3)
@@ -1568,7 +1569,6 @@ def _start_of_a_man(monkeypatch, lacking: set, refuted: set):
     tracker's ``_candidate`` on its points with those hypotheses, every start check passing but
     support (none for the fits whose ids are in ``lacking``) and the gap (filled for those in
     ``refuted``)."""
-    from i2v_loc.stages import vehicle_tracker as vt
 
     man = VehicleModel.from_config("man_tgx", PARAMS.vehicles["man_tgx"])
     points = vehicle_points(man, 0.0, 0.0, np.pi, sensors=SENSORS)
@@ -1617,7 +1617,6 @@ def test_directions_that_cost_alike_wait_for_the_one_lacking_points_unless_a_gap
     one LiDAR, its cab hidden, started the wrong way round (its "cab" on the trailer's rear) at
     0.92 times the cost of the right way. A fit whose gap shows open starts; so does one clearly
     cheaper."""
-    from i2v_loc.stages import vehicle_tracker as vt
 
     lacking = set()
     man, right, start = _start_of_a_man(monkeypatch, lacking, set())
@@ -1656,28 +1655,28 @@ def test_no_fit_bent_further_than_the_cheapest_models_starts(monkeypatch):
 
 
 def test_a_start_that_saw_no_rear_face_takes_its_trailers_reach_as_a_lower_bound():
-    """A start fit fits the trailer's length to where its points reach. Seen the rear face, that is
-    the length (the track is named by it); not seen, it is how long the trailer is at least, and the
-    catalogue's longer length stands until the end shows: a MAN entering the region, its rear beyond
-    it, was named ``unknown`` with the 11.1 m its points reached. A reach beyond the catalogue's is
-    the length's prior either way."""
+    """A start fit fits the trailer's length too. Seen the rear face, that is the length (the track
+    is named by it). Not seen, nothing holds the fitted length beyond the points (a standing MAN's
+    start kept 14.81 m, its points reaching 13.6, and it was named ``unknown``): how far the points
+    reach is how long the trailer is at least, and the catalogue's longer length stands until the
+    end shows (a MAN entering the region, its rear beyond it, was named ``unknown`` with the 11.1 m
+    its points reached). A reach beyond the catalogue's is the length's prior either way."""
     man = VehicleModel.from_config("man_tgx", PARAMS.vehicles["man_tgx"])
     tracker = VehicleTracker(PARAMS.articulated, PARAMS.vehicles)
-    points = vehicle_points(man, 0.0, 0.0, 0.0, sensors=SENSORS)
-    m = fit(points, Prior(0.0, 0.0, 0.0, 0.0, man), PARAMS.articulated, iterations=10)
     named = {}
-    for reach, rear_points in ((11.1, 0), (11.1, 5), (15.0, 0)):
-        model = replace(man, trailer=replace(man.trailer, length_m=reach))
-        start = replace(m, rear_points=rear_points, trailer_length_m=reach)  # fitted with its length free
-        track = tracker._track(1, model, start, 0.0, 0.0, 0.0)
-        named[reach, rear_points] = (
-            tracker._type_name(track),
-            track.model.trailer.length_m,
-            track.trailer_length.estimate,
+    for length, rear_seen in ((11.1, False), (man.trailer.length_m, False), (11.1, True), (15.0, False)):
+        points = vehicle_points(
+            _with_trailer_length(man, length), 0.0, 0.0, 0.0, sensors=SENSORS, drop=() if rear_seen else ((1, "rear"),)
         )
-    assert named[11.1, 0] == ("man_tgx", man.trailer.length_m, man.trailer.length_m)
-    assert named[11.1, 5] == ("unknown", 11.1, 11.1)
-    assert named[15.0, 0] == ("unknown", 15.0, 15.0)
+        drifted = Prior(0.0, 0.0, 0.0, 0.0, _with_trailer_length(man, length + 1.1), free_trailer_length=True)
+        m = fit(points, drifted, PARAMS.articulated, iterations=10)
+        track = tracker._track(1, _with_trailer_length(man, m.trailer_length_m), m, 0.0, 0.0, 0.0, points)
+        named[length, rear_seen] = (tracker._type_name(track), track.trailer_length.estimate)
+    assert named[11.1, False] == ("man_tgx", man.trailer.length_m)
+    assert named[man.trailer.length_m, False] == ("man_tgx", man.trailer.length_m)
+    for length in (11.1, 15.0):
+        name, estimate = named[length, length == 11.1]
+        assert name == "unknown" and estimate == pytest.approx(length, abs=0.1)
 
 
 def test_a_width_counts_from_its_third_frame_and_brackets_from_their_tenth():
@@ -1717,3 +1716,74 @@ def test_a_rigid_fit_is_refuted_where_something_stands_against_an_end():
     for others, free in (([], True), ([apart], True), ([cab], False), ([wall], False)):
         tracker._rays = cast_rays(body + others, sensor)
         assert tracker._ends_free(m, box, 0.0) == free, others
+
+
+def test_with_frames_to_come_an_end_face_alone_waits_for_a_side():
+    """Seen from behind, a vehicle's end face alone (no side, no roof) is a rigid vehicle in one
+    sweep (a car-mounted sensor sees a truck so). With frames to come it waits for a side to
+    show, though it moves: a semitrailer's rear face is one too, its tractor hidden ahead of it."""
+    box = VehicleModel.rigid("rigid", 8.0, 2.5, 3.8)
+    box = replace(box, tractor=replace(box.tractor, floor_m=0.6))
+    sensor = [(-20.0, 0.0, 3.6)]
+    points = vehicle_points(box, 0.0, 0.0, 0.0, sensors=sensor, spacing=0.1)
+    rect = vt.min_area_rect(points[:, :2])
+    rays = cast_rays(world_boxes(box, 0.0, 0.0, 0.0), sensor)
+    started = {}
+    for name, params in (("one sweep", ONE_SWEEP), ("frames to come", PARAMS.articulated)):
+        tracker = VehicleTracker(params, PARAMS.vehicles)
+        tracker._rays = rays
+        seed = replace(_seed_that_moved(points, 3.0), moving=True, first_fit=np.array([-4.0, 0.0]))  # its box moved 3 m
+        started[name] = tracker._candidate(points, rect, seed, 0.0, True, True)
+    model, m = started["one sweep"]
+    assert not model.articulated and abs(m.yaw_rad) < np.radians(3.0)
+    assert started["frames to come"] is None
+
+
+def test_with_frames_to_come_a_rigid_fit_waits_for_its_far_end_to_show():
+    """Seen from ahead and aside, a 9 m box hides its own rear end: in one sweep it may start as a
+    rigid vehicle; with frames to come it waits for rays to cross the metre beyond that end above
+    the box's mid-height (rays passing under a semitrailer's floor, its body going on above them,
+    are no end): a MAN seen from ahead, its trailer's side past its cab, started as an 11.2 m
+    rigid box for 4 s."""
+    box = VehicleModel.rigid("rigid", 9.0, 2.5, 3.5)
+    sensor = [(20.0, 4.0, 4.0)]
+    points = vehicle_points(box, 0.0, 0.0, 0.0, sensors=sensor)
+    m = fit(points, Prior(0.0, 0.0, 0.0, 0.0, box), PARAMS.articulated, iterations=20)
+    body = world_boxes(box, 0.0, 0.0, 0.0)
+    trailer_on = WorldBox(np.array([-4.5 - 3.0, 0.0]), 0.0, replace(box.tractor, length_m=6.0, floor_m=1.2), 1)
+    free = {}
+    for name, params in (("one sweep", ONE_SWEEP), ("frames to come", PARAMS.articulated)):
+        tracker = VehicleTracker(params, PARAMS.vehicles)
+        for others in ([], [trailer_on]):
+            tracker._rays = cast_rays(body + others, sensor)
+            free[name, len(others)] = tracker._ends_free(m, box, 0.0)
+    assert free == {
+        ("one sweep", 0): True,
+        ("one sweep", 1): True,
+        ("frames to come", 0): False,
+        ("frames to come", 1): False,
+    }
+    seen_from_side = VehicleTracker(PARAMS.articulated, PARAMS.vehicles)
+    (x, y), side = ONE_SIDE_AXLE, ONE_SIDE_SENSOR
+    seen_from_side._rays = cast_rays(world_boxes(box, x, y, 0.0), side)
+    beside = fit(
+        vehicle_points(box, x, y, 0.0, sensors=side), Prior(x, y, 0.0, 0.0, box), PARAMS.articulated, iterations=20
+    )
+    assert seen_from_side._ends_free(beside, box, 0.0)
+
+
+def test_a_trailers_front_face_seen_from_straight_ahead_is_no_end():
+    """Seen from straight ahead, a trailer shows its front face above its cab and no side: how far
+    back its points reach (under 1.5 m) stays put while it drives, and is no trailer's end (a
+    Volvo was named ``unknown``, 0.04 m long, after 10 s). Its length stays the catalogue's."""
+    model = volvo()
+    tracker = VehicleTracker(PARAMS.articulated, PARAMS.vehicles)
+    frames = drive([(model, (-14.0, 0.0, 0.0, 0.0))], 8.0, 2.0, 0.0, sensors=((40.0, 0.0, 3.0),))
+    t, _, (truth,) = next(frames)
+    whole = vehicle_points(model, *truth[:3], sensors=SENSORS, drop=((1, "rear"),))  # its length not measured
+    start = fit(whole, Prior(*truth[:3], 0.0, model), PARAMS.articulated, iterations=20)
+    tracker.tracks.append(tracker._track(1, model, start, 0.0, t, 2.0))
+    errs = [errors(tracker.process(points, flat, t)[0], truth) for t, points, (truth,) in frames]
+    report = tracker.tracks[0].report(True)
+    assert max(e[0] for e in errs) < 0.1 and report.state.speed_m_s > 1.5
+    assert report.model.name == "volvo_fh" and report.model.trailer.length_m == model.trailer.length_m
