@@ -20,6 +20,7 @@ from i2v_loc.stages import vehicle_tracker as vt
 from i2v_loc.stages.hinged_fit import FRONT, REAR, Measurement, Prior, fit
 from i2v_loc.stages.vehicle_model import Box, VehicleModel
 from i2v_loc.stages.vehicle_tracker import (
+    LENGTH_CONVERGED_OBSERVATIONS,
     SEED_RETRY_FRAMES,
     SETTLED_SLACK_M,
     TURN_MAX_SPEED_STD_M_S,
@@ -1787,3 +1788,23 @@ def test_a_trailers_front_face_seen_from_straight_ahead_is_no_end():
     report = tracker.tracks[0].report(True)
     assert max(e[0] for e in errs) < 0.1 and report.state.speed_m_s > 1.5
     assert report.model.name == "volvo_fh" and report.model.trailer.length_m == model.trailer.length_m
+
+
+def test_a_lower_bound_in_as_many_frames_as_a_length_needs_rules_a_shorter_type_out():
+    """A Volvo's start that saw no rear face is named a Volvo. Its trailer's body then reaches
+    13.3 m behind its front frame after frame (a MAN entering `l4`'s view cab first, its trailer
+    in part, started as a Volvo and was one for 5.5 s): once that bound counts in as many frames
+    as a length needs, the Volvo is ruled out and the MAN, within ``type_max_error_m`` of it, is
+    named; a bound in fewer frames (a dock's bumpers right behind a trailer reach on from it for
+    some frames) names nothing."""
+    model = volvo()
+    tracker = VehicleTracker(PARAMS.articulated, PARAMS.vehicles)
+    points = vehicle_points(model, 0.0, 0.0, 0.0, sensors=SENSORS, drop=((1, "rear"),))
+    m = fit(points, Prior(0.0, 0.0, 0.0, 0.0, model, free_trailer_length=True), PARAMS.articulated, iterations=10)
+    track = tracker._track(1, _with_trailer_length(model, m.trailer_length_m), m, 0.0, 0.0, 0.0, points)
+    assert len(track.trailer_length.bounds) == 1  # the start's reach
+    names = [tracker._type_name(track)]
+    for _ in range(LENGTH_CONVERGED_OBSERVATIONS - 1):
+        track.trailer_length.add_bound(13.3)
+        names.append(tracker._type_name(track))
+    assert names == ["volvo_fh"] * (LENGTH_CONVERGED_OBSERVATIONS - 1) + ["man_tgx"]

@@ -922,11 +922,15 @@ class VehicleTracker:
         """The catalogue vehicle whose sizes all lie within ``type_max_error_m`` of the measured
         ones, else ``unknown``. The trailer's length is the measured one (the start's before any),
         not a lower bound: a bound says how long at least, not what it is (a Twizy pulling out of
-        its dock, the door jamb in line with its trailer's side, was named ``unknown``)."""
+        its dock, the door jamb in line with its trailer's side, was named ``unknown``); once a
+        bound counts in as many frames as a length needs, it says where the trailer does not end:
+        a MAN entering the view cab first, its trailer in part, started as a Volvo and stayed one
+        for 5.5 s while its body reached up to 13.1 m."""
         model = track.model
         if model.trailer is None:
             return "rigid"
-        length = track.trailer_length.measured
+        extent = track.trailer_length
+        length = extent.estimate if len(extent.bounds) >= LENGTH_CONVERGED_OBSERVATIONS else extent.measured
         best, best_err = "unknown", self.params.type_max_error_m
         for name, c in self.catalogue.items():
             if c.trailer is None:
