@@ -1458,10 +1458,11 @@ class VehicleTracker:
         )
 
     def _start_length(self, model: VehicleModel, m: Measurement, points: np.ndarray, ground_z_m: float) -> _Extent:
-        """The trailer's length as the start fit ``m`` shows it (``model`` carries it): measured
-        where it saw the rear face; else, fitted free, its points reach that far at least, and the
-        catalogue's longer length stands until the end shows (a MAN entering the region, its rear
-        beyond it, was named ``unknown`` with the 11.1 m its points reached, for 8 s)."""
+        """The trailer's length as the start fit ``m`` of ``points`` shows it (``model`` carries it):
+        measured where it saw the rear face; else the trailer reaches at least as far as its points
+        do (``_trailer_reach``), and the catalogue's longer length stands until the end shows (a MAN
+        entering the region, its rear beyond it, was named ``unknown`` with the 11.1 m its points
+        reached, for 8 s)."""
         window, length_m = self.params.dimension_window, model.trailer.length_m
         seen_end = m.rear_points >= REAR_FACE_MIN_POINTS  # the start fit saw where the trailer ends
         listed = self.catalogue.get(model.name)
