@@ -867,10 +867,7 @@ class VehicleTracker:
             & _body_heights(z_rel, trailer)
             & (q[:, 0] < end)
         )
-        behind = np.sort(q[on_side, 0])[::-1]
-        gaps = np.flatnonzero(-np.diff(np.r_[end, behind]) > MAX_BODY_GAP_M)
-        reached = behind[: gaps[0]] if len(gaps) else behind
-        return float(reached[-1]) if len(reached) else end
+        return _reached_back(end, q[on_side, 0])
 
     def _seen_end(
         self, track: _Track, m: Measurement, points: np.ndarray, sides: list[np.ndarray], width_m: float
@@ -1490,11 +1487,9 @@ class VehicleTracker:
             & _body_heights(points[:, 2] - ground_z_m, trailer)
             & (q[:, 0] <= trailer.front_m)
         )
-        along = np.sort(q[on_body, 0])[::-1]
-        if len(along) == 0:
+        if not on_body.any():
             return trailer.length_m
-        gaps = np.flatnonzero(-np.diff(along) > MAX_BODY_GAP_M)
-        hindmost = along[gaps[0]] if len(gaps) else along[-1]
+        hindmost = _reached_back(float(q[on_body, 0].max()), q[on_body, 0])
         return float(min(trailer.front_m - hindmost, trailer.length_m))
 
     def _recheck_rigid(self, track: _Track, points: np.ndarray, free: np.ndarray, stamp_s: float) -> _Track:
@@ -1822,6 +1817,15 @@ def _changed(obj, **values):
 def _body_band(trailer: Box) -> tuple[float, float]:
     """The heights above the ground within ``END_BAND_M`` of the trailer body's floor to roof."""
     return trailer.floor_m - END_BAND_M, trailer.top_m + END_BAND_M
+
+
+def _reached_back(start_m: float, along: np.ndarray) -> float:
+    """The hindmost of the positions ``along`` a unit (its frame's x) reached from ``start_m`` backwards
+    without a gap longer than ``MAX_BODY_GAP_M``; ``start_m`` if none is."""
+    behind = np.sort(along[along <= start_m])[::-1]
+    gaps = np.flatnonzero(-np.diff(np.r_[start_m, behind]) > MAX_BODY_GAP_M)
+    reached = behind[: gaps[0]] if len(gaps) else behind
+    return float(reached[-1]) if len(reached) else start_m
 
 
 def _body_heights(z_rel: np.ndarray, trailer: Box) -> np.ndarray:
