@@ -1740,6 +1740,18 @@ def test_with_frames_to_come_an_end_face_alone_waits_for_a_side():
     assert started["frames to come"] is None
 
 
+def _ends_free_alone_and_with(m, box, body, other, sensors) -> dict:
+    """``_ends_free`` of the rigid fit ``m`` (of ``box``) in one sweep and with frames to come, the rays
+    cast on ``body`` alone (0) and with ``other`` beyond it (1)."""
+    free = {}
+    for name, params in (("one sweep", ONE_SWEEP), ("frames to come", PARAMS.articulated)):
+        tracker = VehicleTracker(params, PARAMS.vehicles)
+        for others in ([], [other]):
+            tracker._rays = cast_rays(body + others, sensors)
+            free[name, len(others)] = tracker._ends_free(m, box, 0.0)
+    return free
+
+
 def test_with_frames_to_come_a_rigid_fit_waits_for_its_far_end_to_show():
     """Seen from ahead and aside, a 9 m box hides its own rear end: in one sweep it may start as a
     rigid vehicle; with frames to come it waits for rays to cross the metre beyond that end above
@@ -1752,13 +1764,7 @@ def test_with_frames_to_come_a_rigid_fit_waits_for_its_far_end_to_show():
     m = fit(points, Prior(0.0, 0.0, 0.0, 0.0, box), PARAMS.articulated, iterations=20)
     body = world_boxes(box, 0.0, 0.0, 0.0)
     trailer_on = WorldBox(np.array([-4.5 - 3.0, 0.0]), 0.0, replace(box.tractor, length_m=6.0, floor_m=1.2), 1)
-    free = {}
-    for name, params in (("one sweep", ONE_SWEEP), ("frames to come", PARAMS.articulated)):
-        tracker = VehicleTracker(params, PARAMS.vehicles)
-        for others in ([], [trailer_on]):
-            tracker._rays = cast_rays(body + others, sensor)
-            free[name, len(others)] = tracker._ends_free(m, box, 0.0)
-    assert free == {
+    assert _ends_free_alone_and_with(m, box, body, trailer_on, sensor) == {
         ("one sweep", 0): True,
         ("one sweep", 1): True,
         ("frames to come", 0): False,
@@ -1774,13 +1780,7 @@ def test_with_frames_to_come_a_rigid_fit_waits_for_its_far_end_to_show():
     beside = fit(
         vehicle_points(box, x, y, 0.0, sensors=side), Prior(x, y, 0.0, 0.0, box), PARAMS.articulated, iterations=20
     )
-    free = {}
-    for name, params in (("one sweep", ONE_SWEEP), ("frames to come", PARAMS.articulated)):
-        tracker = VehicleTracker(params, PARAMS.vehicles)
-        for others in ([], [behind]):
-            tracker._rays = cast_rays(body + others, side)
-            free[name, len(others)] = tracker._ends_free(beside, box, 0.0)
-    assert free == {
+    assert _ends_free_alone_and_with(beside, box, body, behind, side) == {
         ("one sweep", 0): True,
         ("one sweep", 1): True,
         ("frames to come", 0): True,
