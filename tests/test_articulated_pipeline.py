@@ -1823,3 +1823,65 @@ def test_a_lower_bound_in_as_many_frames_as_a_length_needs_rules_a_shorter_type_
         track.trailer_length.add_bound(13.3)
         names.append(tracker._type_name(track))
     assert names == ["volvo_fh"] * (LENGTH_CONVERGED_OBSERVATIONS - 1) + ["man_tgx"]
+
+
+def _volvo_tracked(hitch: float, frames: int = 10) -> tuple[VehicleTracker, VehicleModel]:
+    """A Volvo standing bent ``hitch`` at (0, 4), tracked for ``frames`` frames."""
+    model = volvo()
+    tracker = VehicleTracker(PARAMS.articulated, PARAMS.vehicles)
+    points = vehicle_points(model, 0.0, 4.0, 0.3, hitch, sensors=SENSORS, seed=0)
+    tracker.tracks.append(
+        tracker._track(1, model, fit(points, Prior(0.0, 4.0, 0.3, hitch, model), PARAMS.articulated), 0.0, 0.0, 0.0)
+    )
+    for k in range(1, frames):
+        tracker.process(vehicle_points(model, 0.0, 4.0, 0.3, hitch, sensors=SENSORS, seed=k), flat, 0.1 * k)
+    return tracker, model
+
+
+def test_a_fit_folded_through_its_cab_is_no_measurement(monkeypatch):
+    """No trailer swings past square to its cab: a fit that folds it so is no pose. A cab reversing
+    out of its one sensor's view, its trailer gone from it before, was fitted with its trailer
+    folded 133-140 deg onto the cab's points; those fits were gated out, and after three the filter
+    restarted from one. Here every fit folds the trailer 140 deg: the prediction is kept."""
+    hitch = np.radians(-20.0)
+    tracker, model = _volvo_tracked(hitch)
+    own_fit = vt.fit
+
+    def folded(*args, **kwargs):
+        m = own_fit(*args, **kwargs)
+        return None if m is None else replace(m, hitch_rad=np.radians(140.0))
+
+    monkeypatch.setattr(vt, "fit", folded)
+    for k in range(10, 10 + 2 * PARAMS.articulated.reset_after_rejections):
+        points = vehicle_points(model, 0.0, 4.0, 0.3, hitch, sensors=SENSORS, seed=k)
+        (report,) = tracker.process(points, flat, 0.1 * k)
+        assert abs(angle_deg(report.state.hitch_rad - hitch)) < 2.0
+
+
+def test_a_model_change_moves_no_hitch_a_trailer_without_points_shows():
+    """A learned change of the kingpin moves the pose by the difference of two fits of the frame's
+    points, before and after; with the trailer out of view (none of its points) nothing holds its
+    hitch, and the refit swung it 23 deg (a cab reversing out of its one sensor's view). Its hitch
+    stays; seen, the trailer keeps its place (the hitch moves by what its points show)."""
+    hitch = np.radians(-30.0)
+    for trailer_seen in (False, True):
+        tracker, model = _volvo_tracked(hitch)
+        (track,) = tracker.tracks
+        drop = () if trailer_seen else tuple((1, face) for face in FACES)
+        points = vehicle_points(model, 0.0, 4.0, 0.3, hitch, sensors=SENSORS, drop=drop, seed=20)
+        # a thin post 1 m out beside the trailer's middle (three points): all there is near the hidden trailer
+        side = model.box_centers(0.0, 4.0, 0.3, hitch)[1] + 2.25 * np.array([-np.sin(0.3 + hitch), np.cos(0.3 + hitch)])
+        points = np.vstack([points, np.column_stack([np.tile(side, (3, 1)), np.linspace(1.5, 3.5, 3)])])
+        prior = Prior(0.0, 4.0, 0.3, hitch, model)
+        m = fit(points, prior, PARAMS.articulated)
+        track.model = replace(model, kingpin_behind_axle_m=model.kingpin_behind_axle_m + 0.3)
+        before = track.filter.state
+        tracker._follow_model(track, prior, m, model, track.catalogue_name)
+        after = track.filter.state
+        moved = angle_deg(after.hitch_rad - before.hitch_rad)
+        if trailer_seen:  # the kingpin 0.3 m further back, the trailer where its points are: it bends
+            again = fit(m.points, replace(vt._at_pose(prior, m), model=track.model), PARAMS.articulated)
+            assert moved == pytest.approx(angle_deg(again.hitch_rad - m.hitch_rad), abs=1e-9) and abs(moved) > 0.1
+        else:
+            assert moved == 0.0
+        assert np.hypot(after.x_m - before.x_m, after.y_m - before.y_m) > 0.0  # the pose did move

@@ -72,6 +72,7 @@ START_SCALE_M = 0.8  # first loss scale of the start fits (a placed model is off
 DIRECTION_COST_RATIO = 0.8  # one end's fit must cost this much less than the other's to decide the direction
 RIGID_COST_RATIO = 0.7  # an articulated model must cost this much less than one rigid box
 START_BEND_TOLERANCE_RAD = np.radians(10.0)  # catalogue models' fits of one vehicle bend alike (within 2 deg)
+FOLDED_HITCH_RAD = np.radians(90.0)  # no trailer swings further round its kingpin: its box runs through the cab
 TRACTOR_LOST_SIGMA_DEG = 1.0  # tracked, the hitch's is 0.2-0.4 deg; the cab hidden behind its trailer, 1-5 deg
 MAX_TRAILER_LENGTH_M = TRAILER_LENGTH_RANGE_M[1]
 REAR_FACE_MIN_POINTS = 3
@@ -504,8 +505,11 @@ class VehicleTracker:
         measured = False
         if found is None and m is not None:
             m = self._with_seen_end(track, m, points)
-            # a fit whose cab explains no point says nothing of where the cab is
-            measured = track.filter.update(m.vector, m.covariance, m.observed, may_restart=bool(np.any(m.unit == 0)))
+            # a fit whose cab explains no point says nothing of where the cab is; one folded through
+            # its cab is no pose at all
+            measured = not _folded(m) and track.filter.update(
+                m.vector, m.covariance, m.observed, may_restart=bool(np.any(m.unit == 0))
+            )
             self.rejected += not measured
             if not (measured or lost) and prior.model.articulated:  # warm-started in the wrong place?
                 found = self._better(self._reacquired(points, prior, m), m)
@@ -696,8 +700,12 @@ class VehicleTracker:
         if track.catalogue_name != name or _shift_along_m(before, track.model) <= MODEL_FOLLOW_MIN_M:
             return
         again = fit(m.points, replace(_at_pose(prior, m), model=track.model), self.params)
-        if again is not None:
-            track.filter.move_pose(again.vector - m.vector)
+        if again is None:
+            return
+        delta = again.vector - m.vector
+        if len(delta) == 4 and min(_trailer_body_points(f) for f in (m, again)) < SIDE_MIN_POINTS:
+            delta[3] = 0.0  # a trailer none of whose points are seen is held nowhere: its hitch stays
+        track.filter.move_pose(delta)
 
     def _sides_faced(self, m: Measurement, model: VehicleModel) -> list[bool]:
         """Per unit, whether both its sides face a sensor of the frame (each is outside one of its
@@ -1750,6 +1758,18 @@ def _same_way(a: Measurement, b: Measurement) -> bool:
     """Whether two fits' mean axes (between tractor and trailer) point the same way."""
     axis = [m.yaw_rad + (m.hitch_rad or 0.0) / 2 for m in (a, b)]
     return bool(np.cos(axis[0] - axis[1]) > 0.0)
+
+
+def _trailer_body_points(m: Measurement) -> int:
+    """The fit's points on the trailer's faces but its front: that face stands right behind the
+    cab's rear face, and explains the cab's points when the trailer is out of view."""
+    return int(np.count_nonzero((m.unit == 1) & (m.face != FRONT)))
+
+
+def _folded(m: Measurement) -> bool:
+    """The trailer's box swung past square to its cab's: through the cab (a fit of a reversing cab
+    whose trailer had left the view folded the trailer 133-140 deg onto the cab's points)."""
+    return m.hitch_rad is not None and abs(m.hitch_rad) > FOLDED_HITCH_RAD
 
 
 def _tractor_around(prior: Prior) -> list[Prior]:
