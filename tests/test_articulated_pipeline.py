@@ -1885,3 +1885,22 @@ def test_a_model_change_moves_no_hitch_a_trailer_without_points_shows():
         else:
             assert moved == 0.0
         assert np.hypot(after.x_m - before.x_m, after.y_m - before.y_m) > 0.0  # the pose did move
+
+
+def test_a_trailer_whose_own_points_are_not_seen_measures_no_hitch():
+    """A Volvo standing bent -30 deg, then its trailer out of view: only its cab's points and a thin
+    post beside where the trailer is (three points). Fits then bent the trailer onto the post, or
+    onto the cab's points by its front face (right behind the cab's rear face); fused, they swung
+    the hidden trailer (a cab reversing out of `l2`'s view: its hitch 0-55 deg against -29 to
+    -15). A fit whose trailer has fewer than five points off its front face measures the cab's
+    pose alone; the hitch stays the prediction's."""
+    hitch = np.radians(-30.0)
+    tracker, model = _volvo_tracked(hitch)
+    hidden = tuple((1, face) for face in FACES)
+    side = model.box_centers(0.0, 4.0, 0.3, hitch)[1] + 1.75 * np.array([-np.sin(0.3 + hitch), np.cos(0.3 + hitch)])
+    post = np.column_stack([np.tile(side, (3, 1)), np.linspace(1.5, 3.5, 3)])
+    for k in range(10, 30):
+        points = vehicle_points(model, 0.0, 4.0, 0.3, hitch, sensors=SENSORS, drop=hidden, seed=k)
+        (report,) = tracker.process(np.vstack([points, post]), flat, 0.1 * k)
+        pos, yaw, hitch_error = errors(report, (0.0, 4.0, 0.3, 0.3 + hitch))
+        assert pos < 0.05 and abs(yaw) < 0.5 and abs(hitch_error) < 0.5, (k, pos, yaw, hitch_error)

@@ -301,6 +301,15 @@ def with_rear_end(
     )  # fmt: skip
 
 
+def without_hitch(m: Measurement, params: ArticulatedParams) -> Measurement:
+    """The fit ``m`` measuring the tractor's pose only: its hitch is left out (marginalised: the
+    pose's covariance block), for a trailer whose own points do not show where it is."""
+    floor = _floor(params, 4)
+    marginal = m.covariance - np.diag(floor**2)
+    rows, noise = _observed(np.ascontiguousarray(marginal[:3, :3]), WEAK_PRIOR_SIGMAS[:3], floor[:3])
+    return replace(m, observed=(np.column_stack([rows, np.zeros(len(rows))]), noise))
+
+
 def _rear_along(m: Measurement, model: VehicleModel, params: ArticulatedParams) -> tuple[np.ndarray, np.ndarray]:
     """How the trailer's rear face moves along the trailer's axis with the pose (x, y, yaw, hitch:
     the kingpin swings about the rear axle with the yaw), and the fit's covariance without its floor."""

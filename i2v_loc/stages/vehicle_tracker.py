@@ -58,6 +58,7 @@ from i2v_loc.stages.hinged_fit import (
     rear_sigma_m,
     thin,
     with_rear_end,
+    without_hitch,
 )
 from i2v_loc.stages.kinematic_filter import FilterState, KinematicFilter, unit_motions
 from i2v_loc.stages.primitives import Rect, min_area_rect, voxel_keys
@@ -505,6 +506,8 @@ class VehicleTracker:
         measured = False
         if found is None and m is not None:
             m = self._with_seen_end(track, m, points)
+            if m.hitch_rad is not None and _trailer_body_points(m) < SIDE_MIN_POINTS:
+                m = without_hitch(m, self.params)
             # a fit whose cab explains no point says nothing of where the cab is; one folded through
             # its cab is no pose at all
             measured = not _folded(m) and track.filter.update(
