@@ -304,8 +304,7 @@ def with_rear_end(
 def without_hitch(m: Measurement, params: ArticulatedParams) -> Measurement:
     """The fit ``m`` measuring the tractor's pose only: its hitch is left out (marginalised: the
     pose's covariance block), for a trailer whose own points do not show where it is."""
-    floor = _floor(params, 4)
-    marginal = m.covariance - np.diag(floor**2)
+    floor, marginal = _floor(params, 4), _without_floor(m, params)
     rows, noise = _observed(np.ascontiguousarray(marginal[:3, :3]), WEAK_PRIOR_SIGMAS[:3], floor[:3])
     return replace(m, observed=(np.column_stack([rows, np.zeros(len(rows))]), noise))
 
@@ -315,7 +314,12 @@ def _rear_along(m: Measurement, model: VehicleModel, params: ArticulatedParams) 
     the kingpin swings about the rear axle with the yaw), and the fit's covariance without its floor."""
     along = m.yaw_rad + m.hitch_rad
     g = np.array([math.cos(along), math.sin(along), -model.kingpin_behind_axle_m * math.sin(m.hitch_rad), 0.0])
-    return g, m.covariance - np.diag(_floor(params, len(g)) ** 2)
+    return g, _without_floor(m, params)
+
+
+def _without_floor(m: Measurement, params: ArticulatedParams) -> np.ndarray:
+    """The fit's pose covariance without the floor ``fit`` added to it (what its points measured)."""
+    return m.covariance - np.diag(_floor(params, len(m.covariance)) ** 2)
 
 
 def _weak_prior_sigmas(prior: Prior) -> np.ndarray:

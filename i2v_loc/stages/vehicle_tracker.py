@@ -506,7 +506,7 @@ class VehicleTracker:
         measured = False
         if found is None and m is not None:
             m = self._with_seen_end(track, m, points)
-            if m.hitch_rad is not None and _trailer_body_points(m) < SIDE_MIN_POINTS:
+            if _trailer_hidden(m):
                 m = without_hitch(m, self.params)
             # a fit whose cab explains no point says nothing of where the cab is; one folded through
             # its cab is no pose at all
@@ -706,7 +706,7 @@ class VehicleTracker:
         if again is None:
             return
         delta = again.vector - m.vector
-        if len(delta) == 4 and min(_trailer_body_points(f) for f in (m, again)) < SIDE_MIN_POINTS:
+        if any(_trailer_hidden(f) for f in (m, again)):
             delta[3] = 0.0  # a trailer none of whose points are seen is held nowhere: its hitch stays
         track.filter.move_pose(delta)
 
@@ -1763,10 +1763,11 @@ def _same_way(a: Measurement, b: Measurement) -> bool:
     return bool(np.cos(axis[0] - axis[1]) > 0.0)
 
 
-def _trailer_body_points(m: Measurement) -> int:
-    """The fit's points on the trailer's faces but its front: that face stands right behind the
-    cab's rear face, and explains the cab's points when the trailer is out of view."""
-    return int(np.count_nonzero((m.unit == 1) & (m.face != FRONT)))
+def _trailer_hidden(m: Measurement) -> bool:
+    """An articulated fit with fewer than ``SIDE_MIN_POINTS`` points on its trailer's faces but the
+    front: that face stands right behind the cab's rear face, and explains the cab's points when
+    the trailer is out of view."""
+    return m.hitch_rad is not None and np.count_nonzero((m.unit == 1) & (m.face != FRONT)) < SIDE_MIN_POINTS
 
 
 def _folded(m: Measurement) -> bool:
