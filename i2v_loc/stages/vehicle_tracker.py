@@ -148,6 +148,9 @@ CORNER_BRACKET_M = 0.15  # a side's spacing of voxel centroids and columns seen 
 CORNER_BEYOND_M = 0.15
 SIDE_NEAR_END_M = 2.0
 END_ALONG_SIGMA_M = 0.15  # a side's end before the rays that pass behind it: its points' spacing
+FACE_APART_MIN_SLAB_M = 0.25  # of body between a trailer's side's end and a rear face, asked of the rays
+FACE_APART_GAP_M = 0.5  # along a side in the fit's thinned points, a gap: the side ends there
+FACE_APART_CLEAR_M = 0.15  # the slab ends this short of the face (its points' range noise)
 VEHICLE_WIDTH_M = (RIGID_MIN_WIDTH_M, END_FACE_WIDTH_M[1])  # a bracket outside: a fit that went astray
 FACE_SEEN_SPAN = 0.6  # an end face is seen when its points span this share of the unit's width
 END_BAND_M = 0.4
@@ -395,7 +398,8 @@ class _Track:
     turning_frames: int = 0
     hinge: Hinge | None = None  # fitted to the turn's frames
     frames: int = 0  # measured frames
-    at_wall: bool = False  # this frame: a wall ran across its trailer's body (its rear end is not seen)
+    # this frame: a wall ran across its trailer's body, or a face stood apart behind it (its rear end is not seen)
+    at_wall: bool = False
     ends: dict[str, deque] = field(
         default_factory=dict
     )  # per kind of end, those seen moving: deque of (yard xy, x, kingpin xy)
@@ -523,6 +527,8 @@ class VehicleTracker:
         if measured:
             track.missed, track.last = 0, m
             if self.params.learn_dimensions:
+                # a face apart behind the trailer (a dock's door) is no rear end of it, as a wall across it
+                track.at_wall = track.at_wall or self._face_behind(track, m)
                 self._learn_hinge(track, prior, points, m)
                 before = (track.model, track.catalogue_name)
                 self._learn(track, m, points)
@@ -664,7 +670,7 @@ class VehicleTracker:
         box, extent = model.boxes[unit], track.widths[unit]
         if not model.articulated or self._rays is None or extent.counted or len(extent.brackets) >= BRACKETS_KEPT:
             return None
-        if not _face_seen(m, model, unit, face):
+        if not _face_seen(m, model, unit, face, self._roof_below(track.ground_z_m, box)):
             return None
         _, end_m = kernels.face_median(local, 0, m.unit, m.face, unit, face, ANYWHERE)
         near_end = (end_m - SIDE_NEAR_END_M, end_m + SIDE_NEAR_END_M)
@@ -728,7 +734,8 @@ class VehicleTracker:
         seen (``_face_seen``; its front pins it in the fit; an unknown tractor's cab 0.27 m shorter
         than the MAN's put its box centre 0.13 m off). (Five points on each, before: with the chassis
         behind the cab no longer on its rear face, an unknown tractor's cab had them only after 20 s.)"""
-        if not (_face_seen(m, track.model, 0, FRONT) and _face_seen(m, track.model, 0, REAR)):
+        below = self._roof_below(track.ground_z_m, track.model.tractor)
+        if not (_face_seen(m, track.model, 0, FRONT, below) and _face_seen(m, track.model, 0, REAR, below)):
             return
         (_, front), (_, rear) = (kernels.face_median(q, 0, m.unit, m.face, 0, f, ANYWHERE) for f in (FRONT, REAR))
         track.cab_length.add(front - rear)
@@ -758,12 +765,14 @@ class VehicleTracker:
             abs(prior.hitch_rad) > REACH_MAX_HITCH_RAD
             or track.hinge is not None
             or len(track.reach.values) >= REACH_SETTLED
+            or track.at_wall  # with the hinge free, a face behind the trailer pulled its box back, front too
         ):
             return
         m = fit(points, replace(prior, free_kingpin=True), self.params)
         if m is None:
             return
-        front_seen = _face_seen(m, _changed(track.model, kingpin_behind_axle_m=m.kingpin_m), 1, FRONT)
+        below = self._roof_below(track.ground_z_m, track.model.trailer)
+        front_seen = _face_seen(m, _changed(track.model, kingpin_behind_axle_m=m.kingpin_m), 1, FRONT, below)
         if front_seen and np.sum((m.unit == 0) & (m.face == REAR)) >= REAR_FACE_MIN_POINTS:
             track.reach.add(m.trailer_front_m - m.kingpin_m)
 
@@ -810,12 +819,7 @@ class VehicleTracker:
         face are seen there (not only the ends of the two sides), else a lower bound (the trailer
         reaches at least that far back)."""
         trailer = track.model.trailer
-        z_rel = m.points[:, 2] - track.ground_z_m
-        n_band, rows, face_seen, middle = kernels.rear_face(
-            q, z_rel, m.unit, m.face, _body_band(trailer),
-            trailer.front_m + END_BAND_M, width_m / 2, self.params.fit_inlier_m, WALL_BESIDE_M, MAX_BODY_GAP_M,
-            END_BAND_M, trailer.top_m - self.params.fit_top_band_m, FACE_SEEN_SPAN * width_m,
-        )  # fmt: skip
+        n_band, rows, face_seen, middle = self._rear_face(track, m, q, width_m)
         if n_band < 5:
             return
         rear = float(q[rows[-1], 0])
@@ -835,6 +839,47 @@ class VehicleTracker:
         # deep for 10 s, and it was named ``unknown``, 0.04 m long)
         if abs(track.filter.speed_m_s) >= STILL_END_MIN_SPEED_M_S and reach >= TRAILER_LENGTH_RANGE_M[0]:
             track.trailer_length.add_reach(reach)
+
+    def _rear_face(
+        self, track: _Track, m: Measurement, q: np.ndarray, width_m: float
+    ) -> tuple[int, np.ndarray, bool, float]:
+        """The trailer body's hindmost points of the fit ``m`` (``q``: in the trailer's frame) and its
+        rear face (``kernels.rear_face``: the points in the body's band, the rows kept, whether the
+        face is seen and its middle)."""
+        trailer = track.model.trailer
+        return kernels.rear_face(
+            q, m.points[:, 2] - track.ground_z_m, m.unit, m.face, _body_band(trailer),
+            trailer.front_m + END_BAND_M, width_m / 2, self.params.fit_inlier_m, WALL_BESIDE_M, MAX_BODY_GAP_M,
+            END_BAND_M, trailer.top_m - self.params.fit_top_band_m, FACE_SEEN_SPAN * width_m,
+        )  # fmt: skip
+
+    def _face_behind(self, track: _Track, m: Measurement) -> bool:
+        """Whether the rear face the fit ``m`` shows stands apart behind the trailer's body
+        (``_face_apart``): a dock's door, not the trailer's rear."""
+        if track.model.trailer is None or track.trailer_length is None:
+            return False
+        q = trailer_frame(m.points, m.vector, track.model)
+        n_band, rows, face_seen, middle = self._rear_face(track, m, q, track.model.trailer.width_m)
+        if n_band < 5 or not face_seen:
+            return False
+        sides = rows[(m.unit[rows] == 1) & np.isin(m.face[rows], (LEFT, RIGHT))]
+        return self._face_apart(track, m, q[sides, 0], middle)
+
+    def _face_apart(self, track: _Track, m: Measurement, sides_x: np.ndarray, face_m: float) -> bool:
+        """Whether a rear face seen at ``face_m`` (the trailer's frame) stands apart from the body:
+        its sides (``sides_x``: the fit's points on them, reached from the foremost without a gap
+        longer than ``FACE_APART_GAP_M``) end so far ahead of it that a slab ``FACE_APART_MIN_SLAB_M``
+        long fits between, ``FACE_APART_CLEAR_M`` ahead of the face, and rays crossed that slab
+        (``_seen_empty_behind``). Ahead of its own rear face the body is solid; a face behind it (a
+        dock's door 0.6 m behind a Volvo standing at it, seen by one LiDAR from the side) leaves a
+        gap the rays cross. That door had been learned as the rear face: the trailer 0.6 m too long,
+        and pulling out, the door held the fitted rear face while the cab drove on (0.98 m behind).
+        Sides reaching the face ask no rays (a pass over the frame's rays costs about 2 ms)."""
+        back = face_m + FACE_APART_CLEAR_M
+        front = back + FACE_APART_MIN_SLAB_M + END_SEEN_OFFSET_M  # the slab's front, as a side's end
+        if not len(sides_x) or _reached_back(float(sides_x.max()), sides_x, FACE_APART_GAP_M) < front:
+            return False
+        return self._seen_empty_behind(track, m, front, track.model.trailer.width_m, back)
 
     def _fitted_length(self, track: _Track, m: Measurement, points: np.ndarray, seen_m: float) -> float | None:
         """The trailer's length fitted to the claimed ``points`` from the frame's fit ``m`` and the length
@@ -894,29 +939,28 @@ class VehicleTracker:
                 return self._side_end(track, m, points, side, width_m)
         return None
 
-    def _seen_empty_behind(self, track: _Track, m: Measurement, end_m: float, width_m: float) -> bool:
+    def _seen_empty_behind(
+        self, track: _Track, m: Measurement, end_m: float, width_m: float, back_to_m: float = -np.inf
+    ) -> bool:
         """Whether at least ``END_SEEN_MIN_RAYS`` rays crossed the trailer's body behind ``end_m`` (its
-        frame; a slab ``END_SEEN_LENGTH_M`` long from ``END_SEEN_OFFSET_M`` behind it, ``SOLID_INSET_M``
-        inside its sides, floor and roof), one of them within ``END_SEEN_REACH_M`` of the slab's front,
-        and none ended in it: the body ends there. A shadow's edge is no end: the trailer hidden behind
-        it stops the rays that would cross (those passing further back show only that it ends before
-        them); a return in the slab is a surface there (its own rear face, a dock)."""
+        frame; a slab ``END_SEEN_LENGTH_M`` long from ``END_SEEN_OFFSET_M`` behind it, or shorter,
+        back to ``back_to_m``; ``SOLID_INSET_M`` inside its sides, floor and roof), one of them within
+        ``END_SEEN_REACH_M`` of the slab's front, and none ended in it: the body ends there. A
+        shadow's edge is no end: the trailer hidden behind it stops the rays that would cross (those
+        passing further back show only that it ends before them); a return in the slab is a surface
+        there (its own rear face, a dock)."""
         if self._rays is None:
             return False
         model, inset = track.model, SOLID_INSET_M
+        front = end_m - END_SEEN_OFFSET_M
+        length = min(END_SEEN_LENGTH_M, front - back_to_m)
         yaw = m.yaw_rad + m.hitch_rad
-        middle = end_m - END_SEEN_OFFSET_M - END_SEEN_LENGTH_M / 2
-        centre = _on_trailer_axis(m, model, middle)
+        centre = _on_trailer_axis(m, model, front - length / 2)
         floor, top = track.ground_z_m + model.trailer.floor_m, track.ground_z_m + model.trailer.top_m
-        crossed, ended, front = self._rays.through(
-            tuple(centre),
-            yaw,
-            END_SEEN_LENGTH_M / 2,
-            width_m / 2 - inset,
-            (floor + inset, top - inset),
-            GAP_SEEN_BEYOND_M,
+        crossed, ended, reach = self._rays.through(
+            tuple(centre), yaw, length / 2, width_m / 2 - inset, (floor + inset, top - inset), GAP_SEEN_BEYOND_M
         )
-        return crossed >= END_SEEN_MIN_RAYS and ended == 0 and front >= END_SEEN_LENGTH_M / 2 - END_SEEN_REACH_M
+        return crossed >= END_SEEN_MIN_RAYS and ended == 0 and reach >= length / 2 - END_SEEN_REACH_M
 
     def _trailer_axle(self, track: _Track) -> float:
         """L2 scaled with the trailer's length behind the kingpin (the catalogue's proportion)."""
@@ -1181,7 +1225,7 @@ class VehicleTracker:
         centre, _ = model.box_centers(m.x_m, m.y_m, m.yaw_rad, 0.0)
         floor, top = ground_z_m + box.floor_m, ground_z_m + box.top_m - SOLID_INSET_M
         for face, sign in ((FRONT, 1.0), (REAR, -1.0)):
-            if _face_seen(m, model, 0, face):
+            if _face_seen(m, model, 0, face, self._roof_below(ground_z_m, box)):
                 continue
             beyond = tuple(centre + sign * (box.length_m + END_SLAB_M) / 2 * axis)
             slab = (beyond, m.yaw_rad, END_SLAB_M / 2, box.width_m / 2 - SOLID_INSET_M)
@@ -1246,6 +1290,10 @@ class VehicleTracker:
         seed.rigid = not model.articulated
         fit_moved = self._fit_moved(seed, m)
         return fit_moved and self._may_start(seed, rigid_allowed)
+
+    def _roof_below(self, ground_z_m: float, box: Box) -> float:
+        """The height of the bottom of the unit's roof band (``fit_top_band_m`` below its top)."""
+        return ground_z_m + box.top_m - self.params.fit_top_band_m
 
     def _explains(self, m: Measurement, model: VehicleModel) -> bool:
         """The fit explains ``start_min_explained`` of its points (``hinged_fit.explained_share``)."""
@@ -1843,11 +1891,11 @@ def _body_band(trailer: Box) -> tuple[float, float]:
     return trailer.floor_m - END_BAND_M, trailer.top_m + END_BAND_M
 
 
-def _reached_back(start_m: float, along: np.ndarray) -> float:
+def _reached_back(start_m: float, along: np.ndarray, gap_m: float = MAX_BODY_GAP_M) -> float:
     """The hindmost of the positions ``along`` a unit (its frame's x) reached from ``start_m`` backwards
-    without a gap longer than ``MAX_BODY_GAP_M``; ``start_m`` if none is."""
+    without a gap longer than ``gap_m``; ``start_m`` if none is."""
     behind = np.sort(along[along <= start_m])[::-1]
-    gaps = np.flatnonzero(-np.diff(np.r_[start_m, behind]) > MAX_BODY_GAP_M)
+    gaps = np.flatnonzero(-np.diff(np.r_[start_m, behind]) > gap_m)
     reached = behind[: gaps[0]] if len(gaps) else behind
     return float(reached[-1]) if len(reached) else start_m
 
@@ -2001,14 +2049,17 @@ def _sides_along(q: np.ndarray, m: Measurement, unit: int, box: Box) -> bool:
     return True
 
 
-def _face_seen(m: Measurement, model: VehicleModel, unit: int, face: int) -> bool:
+def _face_seen(m: Measurement, model: VehicleModel, unit: int, face: int, roof_below_m: float) -> bool:
     """Whether the fit's points show one of a unit's end faces, as the trailer's rear face is
     shown: two or more across its middle (within a quarter of the width of its axis), all of them
     spanning ``FACE_SEEN_SPAN`` of its width. A face's corners are no face: two or three points at
     a trailer's front corners, the ends of its sides, passed for its front face, and the reach
     measured on them came out 0.37-0.42 m short (the trailer's box 0.2-0.3 m back for seconds).
-    ``model``: the one the fit ``m`` was made with (its unit's axis is the middle)."""
-    on = (m.unit == unit) & (m.face == face)
+    Nor is the edge of a roof running on past the face (points above ``roof_below_m``, the
+    unit's roof band's bottom): a trailer's roof seen from a pole, its box pulled back 0.3-0.9 m by a
+    dock's door behind it, passed for its front face, and the reach learned on it put the trailer
+    1 m back. ``model``: the one the fit ``m`` was made with (its unit's axis is the middle)."""
+    on = (m.unit == unit) & (m.face == face) & (m.points[:, 2] < roof_below_m)
     if np.count_nonzero(on) < 2:
         return False
     across = unit_frames(m.points[on], m.vector, model)[unit][:, 1]
