@@ -1475,7 +1475,7 @@ def test_a_face_is_seen_across_its_own_unit_and_its_middle_not_at_its_corners():
     point is not its rear face."""
     yaw, hitch = 0.4, np.radians(30.0)
     model = VehicleModel.from_config("volvo_fh", PARAMS.vehicles["volvo_fh"])  # trailer 2.5 m wide
-    roof = model.trailer.top_m - PARAMS.articulated.fit_top_band_m  # 3.45 m: the roof band's bottom
+    ground_band = (0.0, PARAMS.articulated.fit_top_band_m)  # the trailer's roof band from 3.45 m up
     across = np.array([-np.sin(yaw + hitch), np.cos(yaw + hitch)])
     along = np.array([np.cos(yaw + hitch), np.sin(yaw + hitch)])
     front = model.kingpin_xy(0.0, 0.0, yaw) + model.trailer.front_m * along
@@ -1484,17 +1484,17 @@ def test_a_face_is_seen_across_its_own_unit_and_its_middle_not_at_its_corners():
     unit = np.array([1] * 8 + [0], dtype=np.int8)
     face = np.array([FRONT] * 8 + [REAR], dtype=np.int8)
     m = Measurement(0.0, 0.0, yaw, hitch, np.eye(4), points, unit, 0.0, face=face)
-    assert _face_seen(m, model, 1, FRONT, roof)  # 2.1 m >= 0.6 x 2.5 m, four points in the middle
+    assert _face_seen(m, model, 1, FRONT, *ground_band)  # 2.1 m >= 0.6 x 2.5 m, four points in the middle
     aside = points.copy()
     aside[:8, :2] += 1.6 * across  # the same spread beside the trailer's front: no middle
-    assert not _face_seen(replace(m, points=aside), model, 1, FRONT, roof)
-    assert not _face_seen(m, model, 0, REAR, roof)  # one point
+    assert not _face_seen(replace(m, points=aside), model, 1, FRONT, *ground_band)
+    assert not _face_seen(m, model, 0, REAR, *ground_band)  # one point
     corners = face.copy()
     corners[1:7] = -1  # the first and last points only
-    assert not _face_seen(replace(m, face=corners), model, 1, FRONT, roof)
+    assert not _face_seen(replace(m, face=corners), model, 1, FRONT, *ground_band)
     edge = points.copy()
     edge[:, 2] = model.trailer.top_m - 0.1  # the roof's edge
-    assert not _face_seen(replace(m, points=edge), model, 1, FRONT, roof)
+    assert not _face_seen(replace(m, points=edge), model, 1, FRONT, *ground_band)
 
 
 def test_a_side_running_on_through_the_gap_just_outside_the_cab_fills_it():

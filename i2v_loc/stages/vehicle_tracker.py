@@ -670,7 +670,7 @@ class VehicleTracker:
         box, extent = model.boxes[unit], track.widths[unit]
         if not model.articulated or self._rays is None or extent.counted or len(extent.brackets) >= BRACKETS_KEPT:
             return None
-        if not _face_seen(m, model, unit, face, self._roof_below(track.ground_z_m, box)):
+        if not _face_seen(m, model, unit, face, track.ground_z_m, self.params.fit_top_band_m):
             return None
         _, end_m = kernels.face_median(local, 0, m.unit, m.face, unit, face, ANYWHERE)
         near_end = (end_m - SIDE_NEAR_END_M, end_m + SIDE_NEAR_END_M)
@@ -734,8 +734,10 @@ class VehicleTracker:
         seen (``_face_seen``; its front pins it in the fit; an unknown tractor's cab 0.27 m shorter
         than the MAN's put its box centre 0.13 m off). (Five points on each, before: with the chassis
         behind the cab no longer on its rear face, an unknown tractor's cab had them only after 20 s.)"""
-        below = self._roof_below(track.ground_z_m, track.model.tractor)
-        if not (_face_seen(m, track.model, 0, FRONT, below) and _face_seen(m, track.model, 0, REAR, below)):
+        seen = [
+            _face_seen(m, track.model, 0, face, track.ground_z_m, self.params.fit_top_band_m) for face in (FRONT, REAR)
+        ]
+        if not all(seen):
             return
         (_, front), (_, rear) = (kernels.face_median(q, 0, m.unit, m.face, 0, f, ANYWHERE) for f in (FRONT, REAR))
         track.cab_length.add(front - rear)
@@ -771,8 +773,8 @@ class VehicleTracker:
         m = fit(points, replace(prior, free_kingpin=True), self.params)
         if m is None:
             return
-        below = self._roof_below(track.ground_z_m, track.model.trailer)
-        front_seen = _face_seen(m, _changed(track.model, kingpin_behind_axle_m=m.kingpin_m), 1, FRONT, below)
+        model = _changed(track.model, kingpin_behind_axle_m=m.kingpin_m)
+        front_seen = _face_seen(m, model, 1, FRONT, track.ground_z_m, self.params.fit_top_band_m)
         if front_seen and np.sum((m.unit == 0) & (m.face == REAR)) >= REAR_FACE_MIN_POINTS:
             track.reach.add(m.trailer_front_m - m.kingpin_m)
 
@@ -854,32 +856,29 @@ class VehicleTracker:
         )  # fmt: skip
 
     def _face_behind(self, track: _Track, m: Measurement) -> bool:
-        """Whether the rear face the fit ``m`` shows stands apart behind the trailer's body
-        (``_face_apart``): a dock's door, not the trailer's rear."""
-        if track.model.trailer is None or track.trailer_length is None:
+        """Whether the rear face the fit ``m`` shows stands apart behind the trailer's body (a
+        dock's door, not the trailer's rear): its sides (the fit's points on them, reached from the
+        foremost without a gap longer than ``FACE_APART_GAP_M``) end so far ahead of it that a slab
+        ``FACE_APART_MIN_SLAB_M`` long fits between, ``FACE_APART_CLEAR_M`` ahead of the face, and
+        rays crossed that slab (``_seen_empty_behind``). Ahead of its own rear face the body is
+        solid; a face behind it (a dock's door 0.6 m behind a Volvo standing at it, seen by one
+        LiDAR from the side) leaves a gap the rays cross. That door had been learned as the rear
+        face: the trailer 0.6 m too long, and pulling out, the door held the fitted rear face while
+        the cab drove on (0.98 m behind). Sides reaching the face ask no rays (a pass over the
+        frame's rays costs about 2 ms)."""
+        trailer = track.model.trailer
+        if trailer is None or track.trailer_length is None:
             return False
         q = trailer_frame(m.points, m.vector, track.model)
-        n_band, rows, face_seen, middle = self._rear_face(track, m, q, track.model.trailer.width_m)
+        n_band, rows, face_seen, face_m = self._rear_face(track, m, q, trailer.width_m)
         if n_band < 5 or not face_seen:
             return False
-        sides = rows[(m.unit[rows] == 1) & np.isin(m.face[rows], (LEFT, RIGHT))]
-        return self._face_apart(track, m, q[sides, 0], middle)
-
-    def _face_apart(self, track: _Track, m: Measurement, sides_x: np.ndarray, face_m: float) -> bool:
-        """Whether a rear face seen at ``face_m`` (the trailer's frame) stands apart from the body:
-        its sides (``sides_x``: the fit's points on them, reached from the foremost without a gap
-        longer than ``FACE_APART_GAP_M``) end so far ahead of it that a slab ``FACE_APART_MIN_SLAB_M``
-        long fits between, ``FACE_APART_CLEAR_M`` ahead of the face, and rays crossed that slab
-        (``_seen_empty_behind``). Ahead of its own rear face the body is solid; a face behind it (a
-        dock's door 0.6 m behind a Volvo standing at it, seen by one LiDAR from the side) leaves a
-        gap the rays cross. That door had been learned as the rear face: the trailer 0.6 m too long,
-        and pulling out, the door held the fitted rear face while the cab drove on (0.98 m behind).
-        Sides reaching the face ask no rays (a pass over the frame's rays costs about 2 ms)."""
+        sides_x = q[rows[(m.unit[rows] == 1) & ((m.face[rows] == LEFT) | (m.face[rows] == RIGHT))], 0]
         back = face_m + FACE_APART_CLEAR_M
         front = back + FACE_APART_MIN_SLAB_M + END_SEEN_OFFSET_M  # the slab's front, as a side's end
         if not len(sides_x) or _reached_back(float(sides_x.max()), sides_x, FACE_APART_GAP_M) < front:
             return False
-        return self._seen_empty_behind(track, m, front, track.model.trailer.width_m, back)
+        return self._seen_empty_behind(track, m, front, trailer.width_m, back)
 
     def _fitted_length(self, track: _Track, m: Measurement, points: np.ndarray, seen_m: float) -> float | None:
         """The trailer's length fitted to the claimed ``points`` from the frame's fit ``m`` and the length
@@ -1225,7 +1224,7 @@ class VehicleTracker:
         centre, _ = model.box_centers(m.x_m, m.y_m, m.yaw_rad, 0.0)
         floor, top = ground_z_m + box.floor_m, ground_z_m + box.top_m - SOLID_INSET_M
         for face, sign in ((FRONT, 1.0), (REAR, -1.0)):
-            if _face_seen(m, model, 0, face, self._roof_below(ground_z_m, box)):
+            if _face_seen(m, model, 0, face, ground_z_m, self.params.fit_top_band_m):
                 continue
             beyond = tuple(centre + sign * (box.length_m + END_SLAB_M) / 2 * axis)
             slab = (beyond, m.yaw_rad, END_SLAB_M / 2, box.width_m / 2 - SOLID_INSET_M)
@@ -1290,10 +1289,6 @@ class VehicleTracker:
         seed.rigid = not model.articulated
         fit_moved = self._fit_moved(seed, m)
         return fit_moved and self._may_start(seed, rigid_allowed)
-
-    def _roof_below(self, ground_z_m: float, box: Box) -> float:
-        """The height of the bottom of the unit's roof band (``fit_top_band_m`` below its top)."""
-        return ground_z_m + box.top_m - self.params.fit_top_band_m
 
     def _explains(self, m: Measurement, model: VehicleModel) -> bool:
         """The fit explains ``start_min_explained`` of its points (``hinged_fit.explained_share``)."""
@@ -2049,17 +2044,19 @@ def _sides_along(q: np.ndarray, m: Measurement, unit: int, box: Box) -> bool:
     return True
 
 
-def _face_seen(m: Measurement, model: VehicleModel, unit: int, face: int, roof_below_m: float) -> bool:
+def _face_seen(m: Measurement, model: VehicleModel, unit: int, face: int, ground_z_m: float, top_band_m: float) -> bool:
     """Whether the fit's points show one of a unit's end faces, as the trailer's rear face is
     shown: two or more across its middle (within a quarter of the width of its axis), all of them
     spanning ``FACE_SEEN_SPAN`` of its width. A face's corners are no face: two or three points at
     a trailer's front corners, the ends of its sides, passed for its front face, and the reach
     measured on them came out 0.37-0.42 m short (the trailer's box 0.2-0.3 m back for seconds).
-    Nor is the edge of a roof running on past the face (points above ``roof_below_m``, the
-    unit's roof band's bottom): a trailer's roof seen from a pole, its box pulled back 0.3-0.9 m by a
-    dock's door behind it, passed for its front face, and the reach learned on it put the trailer
-    1 m back. ``model``: the one the fit ``m`` was made with (its unit's axis is the middle)."""
-    on = (m.unit == unit) & (m.face == face) & (m.points[:, 2] < roof_below_m)
+    Nor is the edge of a roof running on past the face (points in the unit's roof band, within
+    ``top_band_m`` of its top above the ground at ``ground_z_m``): a trailer's roof seen from a pole,
+    its box pulled back 0.3-0.9 m by a dock's door behind it, passed for its front face, and the
+    reach learned on it put the trailer 1 m back. ``model``: the one the fit ``m`` was made with
+    (its unit's axis is the middle)."""
+    roof_below = ground_z_m + model.boxes[unit].top_m - top_band_m
+    on = (m.unit == unit) & (m.face == face) & (m.points[:, 2] < roof_below)
     if np.count_nonzero(on) < 2:
         return False
     across = unit_frames(m.points[on], m.vector, model)[unit][:, 1]
