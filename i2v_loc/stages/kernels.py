@@ -1671,16 +1671,23 @@ def wrap_angles(values):
 
 
 @njit(**_JIT)
-def _kinematics(s, kingpin_m, trailer_axle_m, articulated, hold_m):
-    """d/dt of states (k, 6) [x, y, yaw, v, curvature, hitch] (kinematic_filter's model)."""
+def _kinematics(s, kingpin_m, trailer_axle_m, articulated, hold_m, axle_m):
+    """d/dt of states (k, 6) [x, y, yaw, v, curvature, hitch] (kinematic_filter's model). The
+    reference point (x, y) lies ``axle_m`` ahead of the rear axle that does not slip sideways (speed
+    v, curvature): it moves sideways at the yaw rate times ``axle_m``, and the kingpin lies
+    ``kingpin_m - axle_m`` behind that axle (with ``axle_m`` 0, the arithmetic of the plain model)."""
     d = np.zeros_like(s)
+    kingpin = kingpin_m - axle_m
     for i in range(s.shape[0]):
         v, kappa, yaw, hitch = s[i, 3], s[i, 4], s[i, 2], s[i, 5]
-        d[i, 0], d[i, 1], d[i, 2] = v * math.cos(yaw), v * math.sin(yaw), v * kappa
+        slip = v * kappa * axle_m
+        d[i, 0] = v * math.cos(yaw) - slip * math.sin(yaw)
+        d[i, 1] = v * math.sin(yaw) + slip * math.cos(yaw)
+        d[i, 2] = v * kappa
         if articulated:
-            d[i, 5] = hitch_rate(v, kappa, hitch, kingpin_m, trailer_axle_m)
+            d[i, 5] = hitch_rate(v, kappa, hitch, kingpin, trailer_axle_m)
             # reversing (unstable), a driver steers the hitch still: over ``hold_m`` travelled
-            d[i, 4] = (holding_curvature(hitch, kingpin_m, trailer_axle_m) - kappa) * max(-v, 0.0) / hold_m
+            d[i, 4] = (holding_curvature(hitch, kingpin, trailer_axle_m) - kappa) * max(-v, 0.0) / hold_m
     return d
 
 
@@ -1698,14 +1705,14 @@ def hitch_rate(v, curvature, hitch, kingpin_m, trailer_axle_m):
 
 
 @njit(**_JIT)
-def propagate_states(states, step_s, steps, kingpin_m, trailer_axle_m, articulated, hold_m):
+def propagate_states(states, step_s, steps, kingpin_m, trailer_axle_m, articulated, hold_m, axle_m):
     """States (k, 6) after ``steps`` midpoint steps of ``step_s``, yaw and hitch wrapped: the
     arithmetic of the numpy code it replaced (s + h d(s + 0.5 h d(s)), products in its order)."""
     s = states.copy()
     half = 0.5 * step_s
     for _ in range(steps):
-        mid = s + half * _kinematics(s, kingpin_m, trailer_axle_m, articulated, hold_m)
-        s = s + step_s * _kinematics(mid, kingpin_m, trailer_axle_m, articulated, hold_m)
+        mid = s + half * _kinematics(s, kingpin_m, trailer_axle_m, articulated, hold_m, axle_m)
+        s = s + step_s * _kinematics(mid, kingpin_m, trailer_axle_m, articulated, hold_m, axle_m)
     s[:, 2] = wrap_angles(s[:, 2])
     s[:, 5] = wrap_angles(s[:, 5])
     return s
@@ -1774,11 +1781,11 @@ def _weighted_cross(a, b, wc):
 
 
 @njit(**_JIT)
-def ukf_predict(x, p, wm, wc, spread, q, step_s, steps, kingpin_m, trailer_axle_m, articulated, hold_m, angles):
+def ukf_predict(x, p, wm, wc, spread, q, step_s, steps, kingpin_m, trailer_axle_m, articulated, hold_m, axle_m, angles):
     """One unscented prediction over the one-trailer kinematics (``steps`` midpoint steps of
     ``step_s``): the state, its covariance and the sigma points drawn around them for the update."""
     sigmas = propagate_states(
-        _sigma_points(x, p, spread), step_s, steps, kingpin_m, trailer_axle_m, articulated, hold_m
+        _sigma_points(x, p, spread), step_s, steps, kingpin_m, trailer_axle_m, articulated, hold_m, axle_m
     )
     mean = angle_mean(sigmas, wm, angles)
     d = angle_residuals(sigmas, mean.reshape(1, -1), angles)
@@ -1912,7 +1919,7 @@ def warm_up() -> None:
     holding_curvature(0.2, -0.3, 7.0)
     states = np.zeros((13, 6))
     for articulated in (True, False):
-        propagate_states(states, 0.1, 1, -0.3, 7.0, articulated, 1.0)
+        propagate_states(states, 0.1, 1, -0.3, 7.0, articulated, 1.0, 0.0)
     for columns in (np.array([2, 5]), np.array([2, 3]), np.array([2])):
         angle_residuals(states, states[:1], columns)
         angle_mean(states, np.ones(13), columns)
@@ -1922,7 +1929,7 @@ def warm_up() -> None:
         (False, np.arange(3), np.array([2])),
     ):
         x, p, sigmas = ukf_predict(
-            np.zeros(6), np.eye(6), weights, weights, 6.0, np.eye(6), 0.1, 1, -0.3, 7.0, articulated, 1.0, x_angles
+            np.zeros(6), np.eye(6), weights, weights, 6.0, np.eye(6), 0.1, 1, -0.3, 7.0, articulated, 1.0, 0.0, x_angles
         )
         for rows in (np.eye(len(measured)), np.eye(len(measured))[:1]):  # all directions, one
             noise = np.eye(len(rows))

@@ -46,13 +46,19 @@ def _midpoint_steps(dt_s: float) -> tuple[float, int]:
 
 
 def propagate(
-    state: np.ndarray, dt_s: float, kingpin_m: float, trailer_axle_m: float, articulated: bool, hold_m: float
+    state: np.ndarray,
+    dt_s: float,
+    kingpin_m: float,
+    trailer_axle_m: float,
+    articulated: bool,
+    hold_m: float,
+    axle_m: float = 0.0,
 ) -> np.ndarray:
     """The state (6,) or states (k, 6) ``dt_s`` later (midpoint steps, compiled: ``kernels.propagate_states``)."""
     s = np.array(state, dtype=float)
     out = kernels.propagate_states(
         np.atleast_2d(s), *_midpoint_steps(dt_s), float(kingpin_m), float(trailer_axle_m), bool(articulated),
-        float(hold_m),
+        float(hold_m), float(axle_m),
     )  # fmt: skip
     return out.reshape(s.shape)
 
@@ -78,11 +84,18 @@ class _Ukf:
         self.mahalanobis = 0.0
 
     def predict(
-        self, dt: float, q: np.ndarray, kingpin_m: float, trailer_axle_m: float, articulated: bool, hold_m: float
+        self,
+        dt: float,
+        q: np.ndarray,
+        kingpin_m: float,
+        trailer_axle_m: float,
+        articulated: bool,
+        hold_m: float,
+        axle_m: float,
     ) -> None:
         self.x, self.P, self.sigmas_f = kernels.ukf_predict(
             self.x, self.P, self.wm, self.wc, self.spread, q, *_midpoint_steps(dt),
-            float(kingpin_m), float(trailer_axle_m), articulated, float(hold_m), _ANGLES_X,
+            float(kingpin_m), float(trailer_axle_m), articulated, float(hold_m), float(axle_m), _ANGLES_X,
         )  # fmt: skip
 
     def update(self, z: np.ndarray, r: np.ndarray, rows: np.ndarray | None = None) -> None:
@@ -104,6 +117,7 @@ class FilterState:
     covariance: np.ndarray  # (6, 6)
     hitch_rate_rad_s: float
     jackknife: bool
+    axle_behind_m: float = 0.0  # the rear axle that does not slip sideways, behind (x, y)
 
     @property
     def hitch_std_rad(self) -> float:
@@ -125,8 +139,9 @@ def unit_motions(s: FilterState, model: VehicleModel) -> list[UnitMotion]:
     """Each unit's motion in the state ``s`` (a turning cab's centre moves sideways; the trailer
     turns about its kingpin at the tractor's rate plus the hitch's)."""
     centers = model.box_centers(s.x_m, s.y_m, s.yaw_rad, s.hitch_rad)
-    axle = np.array([s.x_m, s.y_m])
-    axle_velocity = s.speed_m_s * np.array([np.cos(s.yaw_rad), np.sin(s.yaw_rad)])
+    heading = np.array([np.cos(s.yaw_rad), np.sin(s.yaw_rad)])
+    axle = np.array([s.x_m, s.y_m]) - s.axle_behind_m * heading
+    axle_velocity = s.speed_m_s * heading
     omega = s.speed_m_s * s.curvature_1_m
     motions = [UnitMotion(centers[0], s.yaw_rad, axle_velocity + _turn(omega, centers[0] - axle), omega)]
     if model.trailer is not None:
@@ -174,6 +189,7 @@ class KinematicFilter:
         self.params = params
         self.articulated = articulated
         self.kingpin_m, self.trailer_axle_m = kingpin_m, trailer_axle_m
+        self.axle_behind_m = 0.0  # the catalogue's rear axle until the tracker learns where it is
         self.stamp_s = stamp_s
         self.ukf = _Ukf(6, 0.3, 2.0, 0.0, np.array([X, Y, YAW, HITCH] if articulated else [X, Y, YAW]))
         x = np.zeros(6)
@@ -256,8 +272,9 @@ class KinematicFilter:
             self._first = (self.ukf.x.copy(), self.ukf.P.copy(), self.stamp_s)
         if dt > 0:
             self.ukf.predict(
-                dt, self._q(dt), self.kingpin_m, self.trailer_axle_m, self.articulated, self.params.reverse_hold_m
-            )
+                dt, self._q(dt), self.kingpin_m, self.trailer_axle_m, self.articulated, self.params.reverse_hold_m,
+                self.axle_behind_m,
+            )  # fmt: skip
             self.stamp_s = stamp_s
         return self.state
 
@@ -353,7 +370,9 @@ class KinematicFilter:
     def state(self) -> FilterState:
         x = self.ukf.x.tolist()
         rate = (
-            kernels.hitch_rate(x[SPEED], x[CURVATURE], x[HITCH], float(self.kingpin_m), float(self.trailer_axle_m))
+            kernels.hitch_rate(
+                x[SPEED], x[CURVATURE], x[HITCH], float(self.kingpin_m - self.axle_behind_m), float(self.trailer_axle_m)
+            )
             if self.articulated
             else 0.0
         )
@@ -361,4 +380,4 @@ class KinematicFilter:
             abs(x[HITCH]) > math.radians(self.params.jackknife_hitch_deg)
             or abs(rate) > math.radians(self.params.jackknife_rate_deg_s)
         )
-        return FilterState(*x, self.ukf.P.copy(), rate, bool(jackknife))
+        return FilterState(*x, self.ukf.P.copy(), rate, bool(jackknife), self.axle_behind_m)
