@@ -406,7 +406,8 @@ class _Track:
     turning_frames: int = 0
     hinge: Hinge | None = None  # fitted to the turn's frames
     frames: int = 0  # measured frames
-    axle_fits: deque = field(default_factory=lambda: deque(maxlen=int(AXLE_MAX_SPAN_S * 20)))  # (stamp, x, y, yaw)
+    # (stamp, x, y, yaw) of its whole fits within a pair's span at up to 20 Hz
+    axle_fits: deque = field(default_factory=lambda: deque(maxlen=int(AXLE_MAX_SPAN_S * 20)))
     axle_samples: deque = field(default_factory=lambda: deque(maxlen=AXLE_SAMPLES_KEPT))
     # this frame: a wall ran across its trailer's body, or a face stood apart behind it (its rear end is not seen)
     at_wall: bool = False
