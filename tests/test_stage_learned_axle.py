@@ -28,7 +28,7 @@ def learn(behind_m: float, steer_at, seconds: float, seed: int, speed: float = 3
     track = SimpleNamespace(
         model=VehicleModel.from_config("volvo_fh", VOLVO),
         axle_fits=deque(maxlen=60),
-        axle_samples=deque(maxlen=vehicle_tracker.AXLE_SAMPLES_KEPT),
+        axle=vehicle_tracker._axle_extent(),
         filter=SimpleNamespace(axle_behind_m=0.0),
     )
     observed = None if rows == 4 else (np.eye(4)[:rows], np.eye(rows))
@@ -39,7 +39,7 @@ def learn(behind_m: float, steer_at, seconds: float, seed: int, speed: float = 3
         z = np.array([truth[0] + ahead[0], truth[1] + ahead[1], truth[2], truth[3] - truth[2]])
         fit = SimpleNamespace(vector=z + rng.normal(0.0, NOISE), observed=observed)
         vehicle_tracker._learn_axle(track, fit, k * 0.1)
-    return track.filter.axle_behind_m, len(track.axle_samples)
+    return track.filter.axle_behind_m, len(track.axle.values)
 
 
 def steady(curvature_1_m: float):

@@ -387,6 +387,12 @@ def _windowed_median(window: _Window, value: float, size: int) -> float:
     return float(ordered[half]) if len(ordered) % 2 else (float(ordered[half - 1]) + float(ordered[half])) / 2
 
 
+def _axle_extent() -> _Extent:
+    """The pairs' axle offsets from the catalogue's (0 before any): their median once
+    ``AXLE_MIN_SAMPLES``, over the last ``AXLE_SAMPLES_KEPT``."""
+    return _Extent(0.0, AXLE_SAMPLES_KEPT, min_values=AXLE_MIN_SAMPLES)
+
+
 @dataclass(eq=False)
 class _Track:
     id: int
@@ -408,7 +414,7 @@ class _Track:
     frames: int = 0  # measured frames
     # (stamp, x, y, yaw) of its whole fits within a pair's span at up to 20 Hz
     axle_fits: deque = field(default_factory=lambda: deque(maxlen=int(AXLE_MAX_SPAN_S * 20)))
-    axle_samples: deque = field(default_factory=lambda: deque(maxlen=AXLE_SAMPLES_KEPT))
+    axle: _Extent = field(default_factory=_axle_extent)  # its pairs' offsets (``_learn_axle``)
     # this frame: a wall ran across its trailer's body, or a face stood apart behind it (its rear end is not seen)
     at_wall: bool = False
     ends: dict[str, deque] = field(
@@ -824,7 +830,7 @@ class VehicleTracker:
         track.filter.kingpin_m = prior.kingpin_behind_axle_m
         track.filter.shift_reference(model.tractor.front_m - prior.tractor.front_m)  # the cab stays where it is
         track.axle_fits.clear()  # of the old reference point; the new type's axle until learned again
-        track.axle_samples.clear()
+        track.axle = _axle_extent()
         track.filter.axle_behind_m = 0.0
 
     def _learn_trailer_length(
@@ -2372,8 +2378,8 @@ def _learn_axle(track: _Track, m: Measurement, stamp_s: float) -> None:
         middle = min(fits[k:], key=lambda f: abs(f[0] - (stamp + stamp_s) / 2))
         if abs(wrap_rad(middle[3] - mean)) <= AXLE_STEADY_SHARE * abs(turn):
             sideways = (y - y0) * math.cos(mean) - (x - x0) * math.sin(mean)
-            track.axle_samples.append(sideways / (2 * math.sin(turn / 2)))
+            track.axle.add(sideways / (2 * math.sin(turn / 2)))
         break
     track.axle_fits.append((stamp_s, x, y, yaw))
-    if len(track.axle_samples) >= AXLE_MIN_SAMPLES:
-        track.filter.axle_behind_m = float(np.clip(np.median(track.axle_samples), -AXLE_MAX_M, AXLE_MAX_M))
+    if track.axle.counted:
+        track.filter.axle_behind_m = float(np.clip(track.axle.median, -AXLE_MAX_M, AXLE_MAX_M))
