@@ -1175,6 +1175,27 @@ def test_a_lower_bound_on_the_trailer_length_does_not_rename_the_vehicle():
     assert tracker._type_name(track) == "unknown"
 
 
+def test_a_trailer_length_not_measured_yet_follows_the_new_type_of_a_renamed_vehicle():
+    """A vehicle started as the MAN (its 13.68 m trailer until the end shows), renamed a Volvo where
+    its moving trailer's points kept ending (6.4 m, ``still_end``): between such frames the length
+    not measured yet is the Volvo's, not the MAN's, and the name stays (an unknown 6.5 m trailer
+    was renamed back and forth for 7 s, its centre 3.6 m off whenever it was the MAN again)."""
+    man = VehicleModel.from_config("man_tgx", PARAMS.vehicles["man_tgx"])
+    points = vehicle_points(man, 0.0, 3.0, 0.2, sensors=SENSORS)
+    m = fit(points, Prior(0.0, 3.0, 0.2, 0.0, man), PARAMS.articulated, iterations=20)
+    tracker = VehicleTracker(PARAMS.articulated, PARAMS.vehicles)
+    track = tracker._track(1, man, m, 0.0, 0.0, 0.0)
+    track.trailer_length = length = _Extent(13.68, PARAMS.articulated.dimension_window)  # its rear not seen
+    for _ in range(vt.STILL_END_FRAMES):
+        length.add_reach(6.4)
+    assert tracker._type_name(track) == "volvo_fh"
+    tracker._retype(track, "volvo_fh")
+    length.add_reach(9.0)  # the points spread: no end where they kept ending
+    assert length.still_end is None
+    assert length.measured == pytest.approx(PARAMS.vehicles["volvo_fh"].trailer.length_m)
+    assert tracker._type_name(track) == "volvo_fh"
+
+
 def test_a_seed_longer_than_any_rigid_vehicle_starts_articulated():
     """A straight 16 m trailer's tractor-trailer seen from one side: longer than any coach (15 m),
     it is no rigid vehicle, even where one box explains its side almost as well; it starts as an
@@ -1533,9 +1554,11 @@ def test_a_trailer_longer_than_every_catalogue_one_starts_with_the_cab_on_its_ca
 
 def test_a_direction_placed_off_the_body_is_fitted_again_on_the_other_directions_body():
     """A MAN seen by one distant LiDAR, its group's rectangle 4 m aside and 10 deg off its axis (a
-    kerb or a car beside it in the group): placed on it, the right way round converges 1 m aside at
-    three times the cost of the wrong way round, whose cab lies on the trailer's rear. Fitted again
-    on the wrong way's body, the right way is found at the truth, the cheaper, and starts."""
+    kerb or a car beside it in the group): centred on it, the right way round converged 1 m aside
+    at three times the cost of the wrong way round, whose cab lies on the trailer's rear, and was
+    found at the truth when fitted again on the wrong way's body. (Since session 31 it is also
+    placed with its cab on the rectangle's end, and found there.) The right way is found at the
+    truth, the cheaper."""
 
     man = VehicleModel.from_config("man_tgx", PARAMS.vehicles["man_tgx"])
     points = vehicle_points(man, 0.0, 0.0, np.pi, sensors=((-15.0, -25.0, 4.0),), seed=3, spacing=0.3)
@@ -1543,8 +1566,9 @@ def test_a_direction_placed_off_the_body_is_fitted_again_on_the_other_directions
     aside = replace(rect, center_xy=np.asarray(rect.center_xy) + [0.0, -4.0], yaw_rad=rect.yaw_rad + np.radians(10.0))
     tracker = VehicleTracker(PARAMS.articulated, PARAMS.vehicles)
     fits = tracker._catalogue_fits(vt.thin(points, PARAMS.articulated.fit_max_points), points, aside, man, 0.0, True)
-    right = [m for _, _, m in fits if np.cos(m.yaw_rad - np.pi) > 0.9]
-    wrong = [m for _, _, m in fits if np.cos(m.yaw_rad - np.pi) < -0.9]
+    axis = [m.yaw_rad + m.hitch_rad / 2 - np.pi for _, _, m in fits]  # the mean axis (tractor-trailer)
+    right = [m for (_, _, m), a in zip(fits, axis) if np.cos(a) > 0.9]
+    wrong = [m for (_, _, m), a in zip(fits, axis) if np.cos(a) < -0.9]
     assert len(right) == len(wrong) == 1
     assert np.hypot(right[0].x_m, right[0].y_m) < 0.05 and abs(angle_deg(right[0].yaw_rad - np.pi)) < 0.3
     assert np.hypot(wrong[0].x_m, wrong[0].y_m) > 5.0 and right[0].cost < wrong[0].cost

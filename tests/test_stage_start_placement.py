@@ -1,0 +1,148 @@
+"""Where a start's hypotheses are placed on a seed: an unknown tractor and trailer (not in the
+catalogue) seen by one LiDAR, its trailer partly hidden or only its near sides in view. The
+catalogue's nearest model, fitted the right way round, must come out at the true hitch and on the
+far side of the faces the sensor sees."""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+from hinged_points import WorldBox, cast_rays, vehicle_points, world_boxes
+
+from i2v_loc.params import Params
+from i2v_loc.stages.hinged_fit import Prior, fit, thin
+from i2v_loc.stages.primitives import min_area_rect
+from i2v_loc.stages.vehicle_model import Box, VehicleModel
+from i2v_loc.stages.vehicle_tracker import (
+    COARSE_ITERATIONS,
+    START_ITERATIONS,
+    START_SCALE_M,
+    VehicleTracker,
+    _bent_flags,
+    _sized_start,
+)
+
+PARAMS = Params()
+# the simulator's held-out 6x2 tractor with a 13.6 m curtainsider: its cab 0.35 m further ahead of
+# its axle, its kingpin 0.15 m further back and its trailer's front 0.4 m further ahead than the MAN's
+UNKNOWN = VehicleModel("truth", Box(5.35, 2.5, 2.55, 0.5, 3.0), Box(1.6, 13.6, 2.55, 1.15, 2.8), -0.5, 7.7)
+SENSOR_Z_M = 3.5  # below the trailer's roof: its near sides show, its roof does not
+
+
+def _wall_across_trailer(hitch_rad: float, behind_kingpin_m: float) -> WorldBox:
+    """A wall hiding the trailer from ``behind_kingpin_m`` back (the truck stands at the origin, yaw 0)."""
+    yaw = hitch_rad
+    centre = UNKNOWN.kingpin_xy(0.0, 0.0, 0.0) - (behind_kingpin_m + 5.0) * np.array([np.cos(yaw), np.sin(yaw)])
+    return WorldBox(centre, yaw, Box(5.0, 10.0, 6.0, 0.0, 6.0), 2)
+
+
+def _man_the_right_way(sensor_xy, hitch_deg: float, hidden_behind_m: float | None):
+    """The cheapest MAN hypothesis of the start's search heading the truck's way (yaw 0), for the unknown
+    vehicle at the origin bent ``hitch_deg``, seen from ``sensor_xy``."""
+    sensor = [(*sensor_xy, SENSOR_Z_M)]
+    hitch = np.radians(hitch_deg)
+    others = [] if hidden_behind_m is None else [_wall_across_trailer(hitch, hidden_behind_m)]
+    points = vehicle_points(UNKNOWN, 0.0, 0.0, 0.0, hitch, sensors=sensor, spacing=0.15, others=others)
+    tracker = VehicleTracker(PARAMS.articulated, PARAMS.vehicles)
+    tracker._rays = cast_rays(world_boxes(UNKNOWN, 0.0, 0.0, 0.0, hitch) + others, sensor)
+    hypotheses = tracker._hypotheses(points, min_area_rect(points[:, :2]), 0.0, False, True)
+    right_way = [m for model, _, m in hypotheses if model.name == "man_tgx" and np.cos(m.yaw_rad) > 0.0]
+    return min(right_way, key=lambda m: m.cost)
+
+
+@pytest.mark.parametrize(
+    ("sensor_xy", "hitch_deg", "hidden_behind_m"),
+    [
+        ((2.5, 15.4), -17.8, 6.0),
+        ((18.5, 1.3), -28.2, 3.0),
+        ((3.7, 19.3), -17.4, 3.0),
+        ((-11.3, 12.5), 24.8, 3.0),
+        ((8.4, 10.4), -9.5, 3.0),
+    ],
+)
+def test_a_partly_hidden_trailer_is_placed_from_the_cab_end(sensor_xy, hitch_deg, hidden_behind_m):
+    """Only the trailer's first 3-6 m in view: the seed is much shorter than the MAN, and its
+    centre is no vehicle's centre. Placed with the cab on the seed's end the search finds the true
+    hitch (before, placed centred only, the fit came out 22-125 deg off, or the wrong way round)."""
+    m = _man_the_right_way(sensor_xy, hitch_deg, hidden_behind_m)
+    assert abs(np.degrees(m.hitch_rad) - hitch_deg) < 3.0
+    assert np.hypot(m.x_m, m.y_m) < 1.0  # the MAN's axle lies 0.35 m ahead of the unknown's
+
+
+@pytest.mark.parametrize(
+    ("sensor_xy", "hitch_deg", "hidden_behind_m"),
+    [
+        ((-2.0, -14.0), -14.0, None),
+        ((-6.0, -20.0), -10.0, None),
+        ((-0.5, -18.8), -23.1, 3.0),
+        ((-0.5, -11.6), -34.1, 6.0),
+    ],
+)
+def test_a_body_seen_from_one_side_is_placed_behind_its_faces(sensor_xy, hitch_deg, hidden_behind_m):
+    """Its roof above the sensor, the far sides hidden: the seed's footprint is the near sides only,
+    narrower than the bent body. Centred on it, half of the hypotheses' boxes lay between the
+    sensor and the faces it sees (a mirror image that fits the points as well, then seen through);
+    placed behind them, away from the sensor, the fit is the vehicle's."""
+    m = _man_the_right_way(sensor_xy, hitch_deg, hidden_behind_m)
+    assert abs(np.degrees(m.hitch_rad) - hitch_deg) < 3.5
+    assert np.hypot(m.x_m, m.y_m) < 1.0
+
+
+def test_rays_past_a_trailers_last_points_do_not_refute_a_catalogue_length_it_may_not_have():
+    """The unknown tractor with a 10.5 m trailer, bent -10 deg, seen from one side: its rear face
+    does not show, and the MAN's hypothesis keeps the catalogue's 13.68 m. The rays that pass behind
+    the real trailer's end cross the 3 m of box beyond it: its trailer is seen through, although
+    it explains all the points. Only as far as its points reach is the box a body that rays could
+    refute (the start's length goes no further: ``_start_length``)."""
+    truth = VehicleModel("truth", Box(5.2, 2.6, 2.55, 0.5, 2.9), Box(1.2, 10.5, 2.55, 1.2, 2.7), -0.4, 6.3)
+    sensor = [(10.0, -8.0, 3.0)]
+    hitch, yaw = np.radians(-10.0), np.radians(90.0)
+    points = vehicle_points(truth, 0.0, 0.0, yaw, hitch, sensors=sensor, spacing=0.15)
+    tracker = VehicleTracker(PARAMS.articulated, PARAMS.vehicles)
+    tracker._rays = cast_rays(world_boxes(truth, 0.0, 0.0, yaw, hitch), sensor)
+    hypotheses = tracker._hypotheses(points, min_area_rect(points[:, :2]), 0.0, False, True)
+    man, m = min(
+        ((model, m) for model, _, m in hypotheses if model.name == "man_tgx" and np.sin(m.yaw_rad) > 0.5),
+        key=lambda fitted: fitted[1].cost,
+    )
+    assert m.rear_points < 5 and abs(np.degrees(m.hitch_rad) + 10.0) < 1.5
+    assert man.trailer.length_m > 13.0  # the catalogue's length kept
+    assert tracker._seen_through(m, man, 0.0)  # the whole 13.68 m box
+    assert not tracker._refuted(points, m, man, 0.0)
+
+
+def test_a_fit_is_bent_against_the_cheapest_of_the_start_fits_not_the_first_tried():
+    """The start tries the direction of travel first; a fit bending further than another is left
+    out only when that other explains the points better (``_bent_against``). A reversing MAN's
+    straight fit the wrong way round, tried first, no longer rules out the right way, bent 28 deg
+    and cheaper: that one waits for the cab to show."""
+    straight_wrong_way = SimpleNamespace(hitch_rad=np.radians(0.6), cost=0.00107)
+    bent_right_way = SimpleNamespace(hitch_rad=np.radians(28.0), cost=0.00088)
+    assert _bent_flags([straight_wrong_way, bent_right_way]) == [False, False]
+    bent_costlier = SimpleNamespace(hitch_rad=np.radians(28.0), cost=0.00120)
+    assert _bent_flags([straight_wrong_way, bent_costlier]) == [False, True]
+    assert _bent_flags([]) == []
+
+
+@pytest.mark.parametrize(
+    ("sensor_xy", "hitch_deg", "off_deg"),
+    [((-0.1, -18.7), -1.6, 12.0), ((10.9, 1.0), -29.5, -8.0), ((-14.7, -1.5), -7.8, 12.0)],
+)
+def test_a_start_fit_refined_in_a_wrong_valley_is_nudged_out_of_it(sensor_xy, hitch_deg, off_deg):
+    """The start hitches lie 30 deg apart: the best coarse fit may lie 8-12 deg off. Refined from
+    there alone, the MAN's fit of the unknown vehicle settles 13-21 deg off at many times the cost;
+    fitted again from its hitch 7 deg either way (``_refined``), it finds the true hitch."""
+    man = VehicleModel.from_config("man_tgx", PARAMS.vehicles["man_tgx"])
+    hitch = np.radians(hitch_deg)
+    points = vehicle_points(UNKNOWN, 0.0, 0.0, 0.0, hitch, sensors=[(*sensor_xy, SENSOR_Z_M)], spacing=0.15)
+    sample = thin(points, PARAMS.articulated.fit_max_points)
+    placed = Prior(0.35, 0.0, 0.0, hitch + np.radians(off_deg), man, 0.0, 0.0, True, hypothesis=True)
+    coarse = fit(sample, placed, PARAMS.articulated, COARSE_ITERATIONS, START_SCALE_M)
+    alone = fit(sample, _sized_start(coarse, man, 0.0), PARAMS.articulated, START_ITERATIONS, START_SCALE_M)
+    assert abs(np.degrees(alone.hitch_rad) - hitch_deg) > 10.0
+    tracker = VehicleTracker(PARAMS.articulated, PARAMS.vehicles)
+    refined = tracker._refined(sample, coarse, man, 0.0)
+    assert abs(np.degrees(refined.hitch_rad) - hitch_deg) < 2.0
+    assert refined.cost < 0.1 * alone.cost
