@@ -1691,27 +1691,34 @@ class VehicleTracker:
         top_seen: bool,
     ) -> tuple[VehicleModel, float, Measurement] | None:
         """``model`` placed on ``rect`` one way round (``_catalogue_fits``) at each start hitch, its
-        footprint centred on the rectangle and its cab on the rectangle's end (``_placed``), behind
-        the side the nearest sensor sees; the cheapest refined (``_refined``)."""
+        footprint centred on the rectangle, and its cab on the rectangle's end (``_placed``), behind
+        the side the nearest sensor sees: the cheapest of each placement refined, the cheaper
+        of the two kept (``_refined``). (The cheapest coarse fit of all, refined: a Twizy standing
+        at its dock, its group widened by the dock, came out 38 deg off from its cab placed on the
+        group's end, where centred it had been right, and started 8 frames late.)"""
         away = self._away_from_sensor(rect)
-        starts = [(model, h, at_front) for at_front in (False, True) for h in START_HITCHES_DEG]
-        longer = _as_long_as(model, rect.length_m)
-        if longer is not model:  # a longer trailer centred would put the cab on its front
-            starts.append((longer, 0.0, False))
-        coarse = [
-            fit(
-                sample,
-                _placed(placed, rect, sign, np.radians(h), ground_z_m, at_front, away),
-                self.params,
-                COARSE_ITERATIONS,
-                START_SCALE_M,
-            )
-            for placed, h, at_front in starts
-        ]
-        coarse = [m for m in coarse if m is not None]
-        if not coarse:
+        refined = []
+        for at_front in (False, True):
+            starts = [(model, h) for h in START_HITCHES_DEG]
+            longer = _as_long_as(model, rect.length_m)
+            if longer is not model and not at_front:  # a longer trailer centred would put the cab on its front
+                starts.append((longer, 0.0))
+            coarse = [
+                fit(
+                    sample,
+                    _placed(placed, rect, sign, np.radians(h), ground_z_m, at_front, away),
+                    self.params,
+                    COARSE_ITERATIONS,
+                    START_SCALE_M,
+                )
+                for placed, h in starts
+            ]
+            coarse = [m for m in coarse if m is not None]
+            if coarse:
+                refined.append(self._refined(sample, min(coarse, key=lambda m: m.cost), model, ground_z_m))
+        if not refined:
             return None
-        m = self._refined(sample, min(coarse, key=lambda m: m.cost), model, ground_z_m)
+        m = min(refined, key=lambda m: m.cost)
         if not _supported(m, _with_trailer_length(model, m.trailer_length_m), ground_z_m, top_seen):
             # once more on a sample that keeps its tractor's points (thin_by_unit): the even sample
             # of a reversing MAN whose cab hid behind its trailer kept 3 of its 60 cab points, and
