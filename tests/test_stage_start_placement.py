@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from hinged_points import WorldBox, cast_rays, vehicle_points, world_boxes
 
-from i2v_loc.params import Params
+from i2v_loc.params import Params, apply_patch
 from i2v_loc.stages.hinged_fit import Prior, fit, thin
 from i2v_loc.stages.primitives import min_area_rect
 from i2v_loc.stages.vehicle_model import Box, VehicleModel
@@ -25,6 +25,7 @@ from i2v_loc.stages.vehicle_tracker import (
 )
 
 PARAMS = Params()
+ONE_SWEEP = apply_patch(PARAMS, {"articulated": {"start_frames": 1, "start_travel_m": 0.0}}).articulated  # as `detect`
 # the simulator's held-out 6x2 tractor with a 13.6 m curtainsider: its cab 0.35 m further ahead of
 # its axle, its kingpin 0.15 m further back and its trailer's front 0.4 m further ahead than the MAN's
 UNKNOWN = VehicleModel("truth", Box(5.35, 2.5, 2.55, 0.5, 3.0), Box(1.6, 13.6, 2.55, 1.15, 2.8), -0.5, 7.7)
@@ -146,3 +147,23 @@ def test_a_start_fit_refined_in_a_wrong_valley_is_nudged_out_of_it(sensor_xy, hi
     refined = tracker._refined(sample, coarse, man, 0.0)
     assert abs(np.degrees(refined.hitch_rad) - hitch_deg) < 2.0
     assert refined.cost < 0.1 * alone.cost
+
+
+def test_in_one_sweep_the_start_keeps_its_centred_search():
+    """``detect`` has no frame to come to refute a start: its hypotheses are placed centred only,
+    as before session 31 (the wider search fitted a MAN to a row of parked cars in a real KITTI
+    sweep, and it passed every check). The partly hidden trailer's MAN hypothesis is then the
+    centred search's, 6.6 deg off; with frames to come, 2.2 deg."""
+    hitch = np.radians(-17.8)
+    sensor = [(2.5, 15.4, SENSOR_Z_M)]
+    others = [_wall_across_trailer(hitch, 6.0)]
+    points = vehicle_points(UNKNOWN, 0.0, 0.0, 0.0, hitch, sensors=sensor, spacing=0.15, others=others)
+    rect = min_area_rect(points[:, :2])
+    errors = []
+    for params in (PARAMS.articulated, ONE_SWEEP):
+        tracker = VehicleTracker(params, PARAMS.vehicles)
+        tracker._rays = cast_rays(world_boxes(UNKNOWN, 0.0, 0.0, 0.0, hitch) + others, sensor)
+        hypotheses = tracker._hypotheses(points, rect, 0.0, False, True)
+        right_way = [m for model, _, m in hypotheses if model.name == "man_tgx" and np.cos(m.yaw_rad) > 0.0]
+        errors.append(abs(np.degrees(min(right_way, key=lambda m: m.cost).hitch_rad) + 17.8))
+    assert errors[0] < 3.0 < errors[1]
