@@ -1280,7 +1280,7 @@ class VehicleTracker:
         fit ``m`` saw no rear face: where it ends is not known (the track starts no longer either,
         ``_start_length``), and rays crossing the catalogue's longer box beyond do not refute the
         body: seen from one side, an unknown 10.5 m trailer's right fit as the MAN (13.68 m) was
-        seen through there, and the start waited for 15 s (held-out +1500 `l3`)."""
+        seen through there, and the start waited 11 s (held-out +1500 `l3`)."""
         if model.trailer is None or m.rear_points >= REAR_FACE_MIN_POINTS:
             return model
         return _with_trailer_length(model, self._trailer_reach(m, model, cluster, ground_z_m))
