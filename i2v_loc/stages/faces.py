@@ -107,15 +107,19 @@ def nearest_sensor(rays: Rays, xy: np.ndarray) -> np.ndarray:
     return origins[np.nanargmin(np.hypot(*(origins - xy).T))]
 
 
+def away_from_sensor(rays: Rays, rect: Rect) -> np.ndarray:
+    """Across the footprint ``rect``, the unit direction away from the sensor nearest to it."""
+    away = np.array([-np.sin(rect.yaw_rad), np.cos(rect.yaw_rad)])
+    return away if (rect.center_xy - nearest_sensor(rays, rect.center_xy)) @ away >= 0 else -away
+
+
 def face_line(rays: Rays, cluster: np.ndarray, rect: Rect) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """A one-face seed's nearest face: a point on it, its direction and the direction across it
     away from the nearest sensor. The line fitted (least squares) through each ``FACE_BAND_M``
     column's nearest point: a footprint's side is off by a degree or two, and 0.3 m at a
     wall's end put the wall's own returns behind the line."""
-    sensor = nearest_sensor(rays, rect.center_xy)
     along = np.array([np.cos(rect.yaw_rad), np.sin(rect.yaw_rad)])
-    away = np.array([-along[1], along[0]])
-    away = away if (rect.center_xy - sensor) @ away >= 0 else -away
+    away = away_from_sensor(rays, rect)
     u, v = ((cluster[:, :2] - rect.center_xy) @ np.column_stack([along, away])).T
     nearest = _column_min(u, v)
     filled = np.isfinite(nearest)

@@ -28,13 +28,13 @@ from i2v_loc.stages import kernels
 from i2v_loc.stages.faces import (
     END_FACE_WIDTH_M,
     ONE_SIDE_WIDTH_M,
+    away_from_sensor,
     end_face,
     face_foot,
     face_line,
     faces_grounded,
     l_shaped,
     low_at_both_ends,
-    nearest_sensor,
     one_face_sized,
     passes_under,
     rigid_seen,
@@ -1700,11 +1700,11 @@ class VehicleTracker:
         and on real KITTI sweeps the wider search fitted a MAN folded 46 deg to a row of parked
         cars that passed every check (two false vehicles in 32 sweeps, none before)."""
         one_sweep = self._one_sweep()
-        away = None if one_sweep else self._away_from_sensor(rect)
+        away = None if one_sweep or self._rays is None else away_from_sensor(self._rays, rect)
+        longer = _as_long_as(model, rect.length_m)
         refined = []
         for at_front in (False,) if one_sweep else (False, True):
             starts = [(model, h) for h in START_HITCHES_DEG]
-            longer = _as_long_as(model, rect.length_m)
             if longer is not model and not at_front:  # a longer trailer centred would put the cab on its front
                 starts.append((longer, 0.0))
             coarse = [
@@ -1748,14 +1748,6 @@ class VehicleTracker:
             if again is not None and again.cost < m.cost:
                 m = again
         return m
-
-    def _away_from_sensor(self, rect: Rect) -> np.ndarray | None:
-        """Across the footprint ``rect``, the unit direction away from the sensor nearest to it (None
-        without rays)."""
-        if self._rays is None:
-            return None
-        across = np.array([-np.sin(rect.yaw_rad), np.cos(rect.yaw_rad)])
-        return across if (rect.center_xy - nearest_sensor(self._rays, rect.center_xy)) @ across >= 0 else -across
 
     def _rigid_fits(
         self, sample: np.ndarray, rect: Rect, height_m: float, ground_z_m: float
@@ -2423,9 +2415,9 @@ def _in_front_of_seen_side(
     half = rect.length_m / 2
     with np.errstate(divide="ignore", invalid="ignore"):  # a side across the rectangle's axis: a1 == a0
         t_low, t_high = (-half - a0) / (a1 - a0), (half - a0) / (a1 - a0)
-    across = np.abs(a1 - a0) < 1e-12
-    t_in = np.where(across, np.where(np.abs(a0) <= half, 0.0, np.inf), np.minimum(t_low, t_high))
-    t_out = np.where(across, np.where(np.abs(a0) <= half, 1.0, -np.inf), np.maximum(t_low, t_high))
+    across, inside = np.abs(a1 - a0) < 1e-12, np.abs(a0) <= half
+    t_in = np.where(across, np.where(inside, 0.0, np.inf), np.minimum(t_low, t_high))
+    t_out = np.where(across, np.where(inside, 1.0, -np.inf), np.maximum(t_low, t_high))
     t_in, t_out = np.maximum(t_in, 0.0), np.minimum(t_out, 1.0)
     beside = t_in <= t_out
     if not beside.any():
