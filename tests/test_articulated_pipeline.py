@@ -16,26 +16,23 @@ from i2v_loc.pipelines import build_pipeline
 from i2v_loc.pipelines.articulated import ArticulatedPipeline
 from i2v_loc.pipelines.paper import PaperPipeline
 from i2v_loc.sim.kinematics import Articulation, step
+from i2v_loc.stages import vehicle_start as vs
 from i2v_loc.stages import vehicle_tracker as vt
-from i2v_loc.stages.hinged_fit import FRONT, REAR, Measurement, Prior, fit
+from i2v_loc.stages.hinged_fit import FRONT, REAR, Measurement, Prior, fit, thin
+from i2v_loc.stages.primitives import min_area_rect
+from i2v_loc.stages.unit_frames import face_seen, supported, with_trailer_length
 from i2v_loc.stages.vehicle_model import Box, VehicleModel
+from i2v_loc.stages.vehicle_start import SEED_RETRY_FRAMES, Seed, _gap_filled, _gap_open
 from i2v_loc.stages.vehicle_tracker import (
     LENGTH_CONVERGED_OBSERVATIONS,
-    SEED_RETRY_FRAMES,
     SETTLED_SLACK_M,
     TURN_MAX_SPEED_STD_M_S,
-    Seed,
     VehicleTracker,
     _around_kingpin,
     _Extent,
-    _face_seen,
-    _gap_filled,
-    _gap_open,
     _own_body,
     _shift_along_m,
     _sides_along,
-    _supported,
-    _with_trailer_length,
 )
 
 PARAMS = Params()
@@ -201,7 +198,7 @@ def test_no_start_is_offered_folded_beyond_the_start_limit_the_other_way_round()
     tracker = VehicleTracker(PARAMS.articulated, PARAMS.vehicles)
     for other_hitch_deg, offered in ((170.0, 1), (10.0, 2)):
         other = replace(m, hitch_rad=np.radians(other_hitch_deg), cost=m.cost * 1.1)
-        choices = tracker._choose([(model, None, m), (model, None, other)], seed, 0.0, True)
+        choices = tracker.starts._choose([(model, None, m), (model, None, other)], seed, 0.0, True)
         assert len(choices) == offered and choices[0][1] is m
 
 
@@ -576,15 +573,15 @@ def test_rays_along_a_parked_trailers_side_show_no_gap_behind_a_wider_cab_on_its
     for side in (1.0, -1.0):
         sensor = (18.8, 3.0 + side * 1.85, 5.0)
         points = vehicle_points(trailer, 0.0, 3.0, 0.0, sensors=[sensor], seed=0)
-        tracker._rays = cast_rays(world_boxes(trailer, 0.0, 3.0, 0.0), [sensor])
+        tracker.starts.rays = cast_rays(world_boxes(trailer, 0.0, 3.0, 0.0), [sensor])
         cab_on_front = 6.8 - man.tractor.front_m
         m = Measurement(cab_on_front, 3.0, 0.0, 0.0, np.eye(4), points, np.zeros(len(points), np.int8), 0.0)
-        assert not tracker._gap_seen_empty(m, man, 0.0)
+        assert not tracker.starts._gap_seen_empty(m, man, 0.0)
     for sensor in ((0.0, -12.0, 5.0), (-5.0, 15.0, 4.0)):
         points = vehicle_points(man, 0.0, 3.0, 0.0, sensors=[sensor], seed=0)
-        tracker._rays = cast_rays(world_boxes(man, 0.0, 3.0, 0.0), [sensor])
+        tracker.starts.rays = cast_rays(world_boxes(man, 0.0, 3.0, 0.0), [sensor])
         m = fit(points, Prior(0.0, 3.0, 0.0, 0.0, man), PARAMS.articulated, iterations=10)
-        assert tracker._gap_seen_empty(m, man, 0.0)
+        assert tracker.starts._gap_seen_empty(m, man, 0.0)
 
 
 def test_rays_grazing_a_parked_trailers_side_within_its_points_show_no_gap():
@@ -593,7 +590,7 @@ def test_rays_grazing_a_parked_trailers_side_within_its_points_show_no_gap():
     within centimetres of the side's points (their noise reaches that far) and had shown it empty
     (a false vehicle for 25 s on the generalization suite with a trial start rule). Judged inside
     the sides, they do not."""
-    from i2v_loc.stages.vehicle_tracker import _gap_middle
+    from i2v_loc.stages.vehicle_start import _gap_middle
     from i2v_loc.stages.visibility import Rays
 
     man = VehicleModel.from_config("man_tgx", PARAMS.vehicles["man_tgx"])
@@ -607,11 +604,11 @@ def test_rays_grazing_a_parked_trailers_side_within_its_points_show_no_gap():
     ends = np.array([[gap_x + 0.9 + 0.1 * i, side_y, 2.2] for i in range(5)], dtype=np.float32)
     sensor = np.array([[gap_x - 15.0, side_y + 0.3, 2.5]])
     tracker = VehicleTracker(PARAMS.articulated, PARAMS.vehicles)
-    tracker._rays = Rays(ends, sensor, np.array([0, len(ends)]), np.eye(3))
-    assert not tracker._gap_seen_empty(m, man, 0.0)
+    tracker.starts.rays = Rays(ends, sensor, np.array([0, len(ends)]), np.eye(3))
+    assert not tracker.starts._gap_seen_empty(m, man, 0.0)
     across = np.array([[gap_x, 3.0 - 4.0, 0.5]], dtype=np.float32)  # a ray through it, onto the ground beyond
-    tracker._rays = Rays(across, np.array([[gap_x, 3.0 + 8.0, 5.0]]), np.array([0, 1]), np.eye(3))
-    assert tracker._gap_seen_empty(m, man, 0.0)
+    tracker.starts.rays = Rays(across, np.array([[gap_x, 3.0 + 8.0, 5.0]]), np.array([0, 1]), np.eye(3))
+    assert tracker.starts._gap_seen_empty(m, man, 0.0)
 
 
 def test_in_one_sweep_a_face_seen_through_the_gap_shows_the_hinge():
@@ -620,7 +617,7 @@ def test_in_one_sweep_a_face_seen_through_the_gap_shows_the_hinge():
     through the gap's opening, inside the sides. With no frame to come (``detect``) that is its
     hinge, and it starts articulated; in the yard it waits to move. A parked trailer seen so, a
     MAN's cab fitted on its front, shows no face inside its side there."""
-    from i2v_loc.stages.vehicle_tracker import _gap_looked_into
+    from i2v_loc.stages.vehicle_start import _gap_looked_into
     from i2v_loc.stages.visibility import Rays
 
     man = VehicleModel.from_config("man_tgx", PARAMS.vehicles["man_tgx"])
@@ -765,11 +762,11 @@ def test_a_unit_the_rays_cross_is_no_body():
     points = vehicle_points(model, 0.0, 3.0, 0.3, np.radians(20.0), sensors=SENSORS)
     m = fit(points, Prior(0.0, 3.0, 0.3, np.radians(20.0), model), PARAMS.articulated, iterations=20)
     tracker = VehicleTracker(PARAMS.articulated, PARAMS.vehicles)
-    tracker._rays = cast_rays(world_boxes(model, 0.0, 3.0, 0.3, np.radians(20.0)), SENSORS)
-    assert not tracker._seen_through(m, model, 0.0)
-    assert tracker._seen_through(replace(m, y_m=m.y_m - 4.0), model, 0.0)
-    tracker._rays = None  # without rays nothing is known to be seen through
-    assert not tracker._seen_through(replace(m, y_m=m.y_m - 4.0), model, 0.0)
+    tracker.starts.rays = cast_rays(world_boxes(model, 0.0, 3.0, 0.3, np.radians(20.0)), SENSORS)
+    assert not tracker.starts._seen_through(m, model, 0.0)
+    assert tracker.starts._seen_through(replace(m, y_m=m.y_m - 4.0), model, 0.0)
+    tracker.starts.rays = None  # without rays nothing is known to be seen through
+    assert not tracker.starts._seen_through(replace(m, y_m=m.y_m - 4.0), model, 0.0)
 
 
 def test_articulated_method_end_to_end():
@@ -902,7 +899,7 @@ def test_seed_parts_are_joined_by_their_nearest_points():
     """Components closer than the join distance (point to point) are one cluster, chained; one
     whose footprint overlaps another's grown one without close points stays apart; clusters list
     their components largest first, each component's points in point order."""
-    from i2v_loc.stages.vehicle_tracker import seed_group_rows
+    from i2v_loc.stages.vehicle_start import seed_group_rows
 
     def groups(*parts, join=2.0, min_diagonal=0.0):
         points = np.vstack(parts)
@@ -948,7 +945,7 @@ def test_the_seeds_closeness_test_is_a_kd_tree_query():
 def test_seed_components_too_small_or_too_low_are_left_out():
     """A component needs ``min_points`` points and its top ``min_height`` above the ground under its
     centre (a sloped ground: the height is taken there, not at z = 0)."""
-    from i2v_loc.stages.vehicle_tracker import seed_group_rows
+    from i2v_loc.stages.vehicle_start import seed_group_rows
 
     def sloped(x, y):  # a 2 % grade along x, 0.3 m up at the origin
         return 0.3 + 0.02 * x
@@ -1360,13 +1357,16 @@ def test_two_units_are_judged_on_the_cheapest_supported_fit():
     right = fit(points, Prior(0.0, 5.0, 0.05, 0.0, model), PARAMS.articulated, iterations=20)
     back = -10.0 * np.array([np.cos(0.05), np.sin(0.05)]) + [0.0, 5.0]
     wrong = replace(fit(points, Prior(*back, 0.05 + np.pi, 0.0, model), PARAMS.articulated, iterations=20), cost=0.0)
-    assert not _supported(wrong, model, 0.0) and not _gap_open(points, wrong, model, 0.0)
+    assert not supported(wrong, model, 0.0) and not _gap_open(points, wrong, model, 0.0)
     tracker = VehicleTracker(PARAMS.articulated, PARAMS.vehicles)
     moving = _seed_that_moved(points, 2.0)
-    assert tracker._two_units([(model, -1.0, wrong), (model, 1.0, right)], points, moving, 0.0, True) == (model, right)
-    assert tracker._two_units([(model, -1.0, wrong)], points, moving, 0.0, True) is None
+    assert tracker.starts._two_units([(model, -1.0, wrong), (model, 1.0, right)], points, moving, 0.0, True) == (
+        model,
+        right,
+    )
+    assert tracker.starts._two_units([(model, -1.0, wrong)], points, moving, 0.0, True) is None
     standing = Seed(np.array([0.0, 5.0]), np.array([0.0, 5.0]))
-    assert tracker._two_units([(model, 1.0, right)], points, standing, 0.0, True) is None
+    assert tracker.starts._two_units([(model, 1.0, right)], points, standing, 0.0, True) is None
 
 
 def test_a_moving_seed_that_fitted_one_box_is_fitted_again_before_the_map_is_ready():
@@ -1377,7 +1377,7 @@ def test_a_moving_seed_that_fitted_one_box_is_fitted_again_before_the_map_is_rea
     box = vehicle_points(VehicleModel.rigid("rigid", 8.0, 2.5, 3.0), 0.0, 5.0, 0.0, sensors=SENSORS[:1], spacing=0.2)
     moved = replace(_seed_that_moved(box, travel + 0.1), frames=10, rigid=True, failed_frame=5)
     standing = Seed(np.array([0.0, 5.0]), np.array([0.0, 5.0]), frames=10, rigid=True, failed_frame=5)
-    assert tracker._may_fit(moved) and not tracker._may_fit(standing)
+    assert tracker.starts._may_fit(moved) and not tracker.starts._may_fit(standing)
     assert moved.retry_due(rigid_allowed=True) and not moved.retry_due(rigid_allowed=False)
     moved.frames = 5 + SEED_RETRY_FRAMES
     assert moved.retry_due(rigid_allowed=False)
@@ -1389,8 +1389,8 @@ def test_a_moving_car_is_no_vehicle_and_is_not_fitted(monkeypatch):
     car = VehicleModel.rigid("rigid", 4.5, 1.8, 1.5, 0.15)
     tracker = VehicleTracker(PARAMS.articulated, PARAMS.vehicles)
     calls = []
-    hypotheses = tracker._hypotheses
-    monkeypatch.setattr(tracker, "_hypotheses", lambda *a: calls.append(1) or hypotheses(*a))
+    hypotheses = tracker.starts._hypotheses
+    monkeypatch.setattr(tracker.starts, "_hypotheses", lambda *a: calls.append(1) or hypotheses(*a))
     for k in range(45):
         points = vehicle_points(car, -8.0 + 0.3 * k, 4.0, 0.0, sensors=SENSORS, seed=k)
         assert tracker.process(points, flat, 0.1 * k) == []
@@ -1419,16 +1419,16 @@ def test_the_windowed_median_is_numpys_median_of_the_window(size):
 def test_a_unit_whose_points_lie_mostly_under_its_floor_is_not_supported():
     """A row of kerbs and parked cars with a lamp post among them, fitted as a tractor and trailer:
     the posts reach the roofs, but most points lie below the bodies' floors."""
-    from i2v_loc.stages.vehicle_tracker import _supported
+    from i2v_loc.stages.unit_frames import supported
 
     model = volvo()
     points = vehicle_points(model, 0.0, 3.0, 0.2, np.radians(10.0), sensors=SENSORS)
     m = fit(points, Prior(0.0, 3.0, 0.2, np.radians(10.0), model), PARAMS.articulated, iterations=20)
-    assert _supported(m, model, 0.0)
+    assert supported(m, model, 0.0)
     kerbs = m.points.copy()
     low = np.random.default_rng(0).random(len(kerbs)) < 0.6
     kerbs[low, 2] = 0.2  # the same footprint, at kerb height
-    assert not _supported(replace(m, points=kerbs), model, 0.0)
+    assert not supported(replace(m, points=kerbs), model, 0.0)
 
 
 def test_a_trailers_side_seen_sparse_beside_a_dense_cab_supports_it_but_a_few_cab_points_do_not():
@@ -1436,12 +1436,12 @@ def test_a_trailers_side_seen_sparse_beside_a_dense_cab_supports_it_but_a_few_ca
     far and sparse: the side spans the trailer's length and height, and supports it however few
     its points are beside the cab's (a lane change was reported as a rigid box 4.3 m off for 7 s).
     A cab of a few points among its trailer's is no cab (a parked trailer's landing gear)."""
-    from i2v_loc.stages.vehicle_tracker import UNIT_SUPPORT, _supported
+    from i2v_loc.stages.unit_frames import UNIT_SUPPORT, supported
 
     man = VehicleModel.from_config("man_tgx", PARAMS.vehicles["man_tgx"])
     points = vehicle_points(man, 0.0, 0.0, 0.0, sensors=SENSORS)
     m = fit(points, Prior(0.0, 0.0, 0.0, 0.0, man), PARAMS.articulated, iterations=20)
-    assert _supported(m, man, 0.0)
+    assert supported(m, man, 0.0)
     areas = np.array([box.length_m * box.height_m for box in man.boxes])
     every = np.arange(len(m.points)) % 10 == 0
     for thin_unit in (1, 0):
@@ -1449,7 +1449,7 @@ def test_a_trailers_side_seen_sparse_beside_a_dense_cab_supports_it_but_a_few_ca
         thinned = replace(m, points=m.points[keep], unit=m.unit[keep])
         share = np.mean(thinned.unit[thinned.unit >= 0] == thin_unit)
         assert share < UNIT_SUPPORT * areas[thin_unit] / areas.sum()  # fewer than their side's share
-        assert _supported(thinned, man, 0.0) == (thin_unit == 1)
+        assert supported(thinned, man, 0.0) == (thin_unit == 1)
 
 
 def test_a_reach_that_stays_put_while_moving_is_the_trailers_end():
@@ -1505,17 +1505,17 @@ def test_a_face_is_seen_across_its_own_unit_and_its_middle_not_at_its_corners():
     unit = np.array([1] * 8 + [0], dtype=np.int8)
     face = np.array([FRONT] * 8 + [REAR], dtype=np.int8)
     m = Measurement(0.0, 0.0, yaw, hitch, np.eye(4), points, unit, 0.0, face=face)
-    assert _face_seen(m, model, 1, FRONT, *ground_band)  # 2.1 m >= 0.6 x 2.5 m, four points in the middle
+    assert face_seen(m, model, 1, FRONT, *ground_band)  # 2.1 m >= 0.6 x 2.5 m, four points in the middle
     aside = points.copy()
     aside[:8, :2] += 1.6 * across  # the same spread beside the trailer's front: no middle
-    assert not _face_seen(replace(m, points=aside), model, 1, FRONT, *ground_band)
-    assert not _face_seen(m, model, 0, REAR, *ground_band)  # one point
+    assert not face_seen(replace(m, points=aside), model, 1, FRONT, *ground_band)
+    assert not face_seen(m, model, 0, REAR, *ground_band)  # one point
     corners = face.copy()
     corners[1:7] = -1  # the first and last points only
-    assert not _face_seen(replace(m, face=corners), model, 1, FRONT, *ground_band)
+    assert not face_seen(replace(m, face=corners), model, 1, FRONT, *ground_band)
     edge = points.copy()
     edge[:, 2] = model.trailer.top_m - 0.1  # the roof's edge
-    assert not _face_seen(replace(m, points=edge), model, 1, FRONT, *ground_band)
+    assert not face_seen(replace(m, points=edge), model, 1, FRONT, *ground_band)
 
 
 def test_a_side_running_on_through_the_gap_just_outside_the_cab_fills_it():
@@ -1562,10 +1562,12 @@ def test_a_direction_placed_off_the_body_is_fitted_again_on_the_other_directions
 
     man = VehicleModel.from_config("man_tgx", PARAMS.vehicles["man_tgx"])
     points = vehicle_points(man, 0.0, 0.0, np.pi, sensors=((-15.0, -25.0, 4.0),), seed=3, spacing=0.3)
-    rect = vt.min_area_rect(points[:, :2])
+    rect = min_area_rect(points[:, :2])
     aside = replace(rect, center_xy=np.asarray(rect.center_xy) + [0.0, -4.0], yaw_rad=rect.yaw_rad + np.radians(10.0))
     tracker = VehicleTracker(PARAMS.articulated, PARAMS.vehicles)
-    fits = tracker._catalogue_fits(vt.thin(points, PARAMS.articulated.fit_max_points), points, aside, man, 0.0, True)
+    fits = tracker.starts._catalogue_fits(
+        thin(points, PARAMS.articulated.fit_max_points), points, aside, man, 0.0, True
+    )
     axis = [m.yaw_rad + m.hitch_rad / 2 - np.pi for _, _, m in fits]  # the mean axis (tractor-trailer)
     right = [m for (_, _, m), a in zip(fits, axis) if np.cos(a) > 0.9]
     wrong = [m for (_, _, m), a in zip(fits, axis) if np.cos(a) < -0.9]
@@ -1586,36 +1588,36 @@ def test_both_directions_are_checked_when_they_cost_alike():
     volvo, man = tracker.catalogue["volvo_fh"], tracker.catalogue["man_tgx"]
     seed = Seed(np.array([0.0, 0.0]), np.array([0.0, 0.0]))
     alike = [_hypothesis(volvo, 1.0, 0.0054), _hypothesis(volvo, -1.0, 0.0053, np.pi), _hypothesis(man, 1.0, 0.0055)]
-    chosen = tracker._choose(alike, seed, 0.0, True)
+    chosen = tracker.starts._choose(alike, seed, 0.0, True)
     assert [(m.name, h.cost) for m, h in chosen] == [("volvo_fh", 0.0053), ("volvo_fh", 0.0054)]
     seed.center_xy = np.array([1.0, 0.0])  # it moved along +x: the direction facing +x first
-    assert [h.cost for _, h in tracker._choose(alike, seed, 0.0, True)] == [0.0054, 0.0053]
+    assert [h.cost for _, h in tracker.starts._choose(alike, seed, 0.0, True)] == [0.0054, 0.0053]
     clear = [_hypothesis(volvo, 1.0, 0.0080), _hypothesis(volvo, -1.0, 0.0040, np.pi)]
-    assert [h.cost for _, h in tracker._choose(clear, seed, 0.0, True)] == [0.0040]
+    assert [h.cost for _, h in tracker.starts._choose(clear, seed, 0.0, True)] == [0.0040]
 
 
 def _start_of_a_man(monkeypatch, lacking: set, refuted: set):
     """A MAN standing with its cab towards -x, its right fit, and ``start(*hypotheses)``: the
-    tracker's ``_candidate`` on its points with those hypotheses, every start check passing but
+    start's ``candidate`` on its points with those hypotheses, every start check passing but
     support (none for the fits whose ids are in ``lacking``) and the gap (filled for those in
     ``refuted``)."""
 
     man = VehicleModel.from_config("man_tgx", PARAMS.vehicles["man_tgx"])
     points = vehicle_points(man, 0.0, 0.0, np.pi, sensors=SENSORS)
     right = fit(points, Prior(0.0, 0.0, np.pi, 0.0, man), PARAMS.articulated, iterations=20)
-    monkeypatch.setattr(vt, "_supported", lambda m, *a, **k: id(m) not in lacking)
-    monkeypatch.setattr(vt, "_gap_filled", lambda c, m, *a: id(m) in refuted)
+    monkeypatch.setattr(vs, "supported", lambda m, *a, **k: id(m) not in lacking)
+    monkeypatch.setattr(vs, "_gap_filled", lambda c, m, *a: id(m) in refuted)
     tracker = VehicleTracker(PARAMS.articulated, PARAMS.vehicles)
     for name in ("_hinge_shown", "_stands_on_wheels", "_explains"):
-        monkeypatch.setattr(tracker, name, lambda *a: True)
-    monkeypatch.setattr(tracker, "_seen_through", lambda *a: False)
-    monkeypatch.setattr(tracker, "_allowed_to_start", lambda *a: True)
-    rect = vt.min_area_rect(points[:, :2])
+        monkeypatch.setattr(tracker.starts, name, lambda *a: True)
+    monkeypatch.setattr(tracker.starts, "_seen_through", lambda *a: False)
+    monkeypatch.setattr(tracker.starts, "_allowed_to_start", lambda *a: True)
+    rect = min_area_rect(points[:, :2])
     moving = _seed_that_moved(points, 2.0)
 
     def start(*fits):
-        monkeypatch.setattr(tracker, "_hypotheses", lambda *a: list(fits))
-        return tracker._candidate(points, rect, moving, 0.0, True, True)
+        monkeypatch.setattr(tracker.starts, "_hypotheses", lambda *a: list(fits))
+        return tracker.starts.candidate(points, rect, moving, 0.0, True, True)
 
     return man, right, start
 
@@ -1655,7 +1657,7 @@ def test_directions_that_cost_alike_wait_for_the_one_lacking_points_unless_a_gap
     cheaper = replace(alike, cost=0.7 * right.cost)
     lacking.add(id(right))
     shown = set()
-    monkeypatch.setattr(vt.VehicleTracker, "_gap_shown", lambda self, c, m, *a: id(m) in shown)
+    monkeypatch.setattr(vs.VehicleStarts, "_gap_shown", lambda self, c, m, *a: id(m) in shown)
     assert start((volvo_model, -1.0, alike), (man, 1.0, right)) is None
     assert start((volvo_model, -1.0, cheaper), (man, 1.0, right)) == (volvo_model, cheaper)
     shown.add(id(alike))
@@ -1696,11 +1698,11 @@ def test_a_start_that_saw_no_rear_face_takes_its_trailers_reach_as_a_lower_bound
     named = {}
     for length, rear_seen in ((11.1, False), (man.trailer.length_m, False), (11.1, True), (15.0, False)):
         points = vehicle_points(
-            _with_trailer_length(man, length), 0.0, 0.0, 0.0, sensors=SENSORS, drop=() if rear_seen else ((1, "rear"),)
+            with_trailer_length(man, length), 0.0, 0.0, 0.0, sensors=SENSORS, drop=() if rear_seen else ((1, "rear"),)
         )
-        drifted = Prior(0.0, 0.0, 0.0, 0.0, _with_trailer_length(man, length + 1.1), free_trailer_length=True)
+        drifted = Prior(0.0, 0.0, 0.0, 0.0, with_trailer_length(man, length + 1.1), free_trailer_length=True)
         m = fit(points, drifted, PARAMS.articulated, iterations=10)
-        track = tracker._track(1, _with_trailer_length(man, m.trailer_length_m), m, 0.0, 0.0, 0.0, points)
+        track = tracker._track(1, with_trailer_length(man, m.trailer_length_m), m, 0.0, 0.0, 0.0, points)
         named[length, rear_seen] = (tracker._type_name(track), track.trailer_length.estimate)
     assert named[11.1, False] == ("man_tgx", man.trailer.length_m)
     assert named[man.trailer.length_m, False] == ("man_tgx", man.trailer.length_m)
@@ -1744,8 +1746,8 @@ def test_a_rigid_fit_is_refuted_where_something_stands_against_an_end():
     assert not np.any((m.unit == 0) & np.isin(m.face, [FRONT, REAR]))  # its side only
     tracker = VehicleTracker(PARAMS.articulated, PARAMS.vehicles)
     for others, free in (([], True), ([apart], True), ([cab], False), ([wall], False)):
-        tracker._rays = cast_rays(body + others, sensor)
-        assert tracker._ends_free(m, box, 0.0) == free, others
+        tracker.starts.rays = cast_rays(body + others, sensor)
+        assert tracker.starts._ends_free(m, box, 0.0) == free, others
 
 
 def test_with_frames_to_come_an_end_face_alone_waits_for_a_side():
@@ -1756,14 +1758,14 @@ def test_with_frames_to_come_an_end_face_alone_waits_for_a_side():
     box = replace(box, tractor=replace(box.tractor, floor_m=0.6))
     sensor = [(-20.0, 0.0, 3.6)]
     points = vehicle_points(box, 0.0, 0.0, 0.0, sensors=sensor, spacing=0.1)
-    rect = vt.min_area_rect(points[:, :2])
+    rect = min_area_rect(points[:, :2])
     rays = cast_rays(world_boxes(box, 0.0, 0.0, 0.0), sensor)
     started = {}
     for name, params in (("one sweep", ONE_SWEEP), ("frames to come", PARAMS.articulated)):
         tracker = VehicleTracker(params, PARAMS.vehicles)
-        tracker._rays = rays
+        tracker.starts.rays = rays
         seed = replace(_seed_that_moved(points, 3.0), moving=True, first_fit=np.array([-4.0, 0.0]))  # its box moved 3 m
-        started[name] = tracker._candidate(points, rect, seed, 0.0, True, True)
+        started[name] = tracker.starts.candidate(points, rect, seed, 0.0, True, True)
     model, m = started["one sweep"]
     assert not model.articulated and abs(m.yaw_rad) < np.radians(3.0)
     assert started["frames to come"] is None
@@ -1776,8 +1778,8 @@ def _ends_free_alone_and_with(m, box, body, other, sensors) -> dict:
     for name, params in (("one sweep", ONE_SWEEP), ("frames to come", PARAMS.articulated)):
         tracker = VehicleTracker(params, PARAMS.vehicles)
         for others in ([], [other]):
-            tracker._rays = cast_rays(body + others, sensors)
-            free[name, len(others)] = tracker._ends_free(m, box, 0.0)
+            tracker.starts.rays = cast_rays(body + others, sensors)
+            free[name, len(others)] = tracker.starts._ends_free(m, box, 0.0)
     return free
 
 
@@ -1845,7 +1847,7 @@ def test_a_lower_bound_in_as_many_frames_as_a_length_needs_rules_a_shorter_type_
     tracker = VehicleTracker(PARAMS.articulated, PARAMS.vehicles)
     points = vehicle_points(model, 0.0, 0.0, 0.0, sensors=SENSORS, drop=((1, "rear"),))
     m = fit(points, Prior(0.0, 0.0, 0.0, 0.0, model, free_trailer_length=True), PARAMS.articulated, iterations=10)
-    track = tracker._track(1, _with_trailer_length(model, m.trailer_length_m), m, 0.0, 0.0, 0.0, points)
+    track = tracker._track(1, with_trailer_length(model, m.trailer_length_m), m, 0.0, 0.0, 0.0, points)
     assert len(track.trailer_length.bounds) == 1  # the start's reach
     names = [tracker._type_name(track)]
     for _ in range(LENGTH_CONVERGED_OBSERVATIONS - 1):

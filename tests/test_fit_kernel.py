@@ -356,7 +356,7 @@ def test_the_compiled_fit_is_the_numpy_fit(model, free, hitch_deg):
 
 def ref_box_distance(points, prior):
     """The numpy gate the kernel replaced: per unit frame, the distance to its box, the nearer."""
-    from i2v_loc.stages.vehicle_tracker import unit_frames
+    from i2v_loc.stages.unit_frames import unit_frames
 
     model = prior.model
     best = np.full(len(points), np.inf)

@@ -192,7 +192,7 @@ def test_forgetting_vehicles_keeps_the_map_and_the_ids_counting():
     assert [r.id for r in reports] == [1] and tracker.tracks
     background = pipeline.background
     pipeline.forget_vehicles()
-    assert tracker.tracks == [] and tracker.seeds == [] and pipeline.background is background
+    assert tracker.tracks == [] and tracker.starts.seeds == [] and pipeline.background is background
     for k in range(4):
         points = vehicle_points(volvo(), -6.0, -3.0, 1.0, np.radians(-15.0), sensors=SENSORS, seed=k)
         reports = tracker.process(points, lambda x, y: 0.0, 1.0 + 0.1 * k, background_ready=False)

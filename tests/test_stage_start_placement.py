@@ -15,14 +15,8 @@ from i2v_loc.params import Params, apply_patch
 from i2v_loc.stages.hinged_fit import Prior, fit, thin
 from i2v_loc.stages.primitives import min_area_rect
 from i2v_loc.stages.vehicle_model import Box, VehicleModel
-from i2v_loc.stages.vehicle_tracker import (
-    COARSE_ITERATIONS,
-    START_ITERATIONS,
-    START_SCALE_M,
-    VehicleTracker,
-    _bent_flags,
-    _sized_start,
-)
+from i2v_loc.stages.vehicle_start import COARSE_ITERATIONS, START_ITERATIONS, START_SCALE_M, _bent_flags, _sized_start
+from i2v_loc.stages.vehicle_tracker import VehicleTracker
 
 PARAMS = Params()
 ONE_SWEEP = apply_patch(PARAMS, {"articulated": {"start_frames": 1, "start_travel_m": 0.0}}).articulated  # as `detect`
@@ -47,8 +41,8 @@ def _man_the_right_way(sensor_xy, hitch_deg: float, hidden_behind_m: float | Non
     others = [] if hidden_behind_m is None else [_wall_across_trailer(hitch, hidden_behind_m)]
     points = vehicle_points(UNKNOWN, 0.0, 0.0, 0.0, hitch, sensors=sensor, spacing=0.15, others=others)
     tracker = VehicleTracker(PARAMS.articulated, PARAMS.vehicles)
-    tracker._rays = cast_rays(world_boxes(UNKNOWN, 0.0, 0.0, 0.0, hitch) + others, sensor)
-    hypotheses = tracker._hypotheses(points, min_area_rect(points[:, :2]), 0.0, False, True)
+    tracker.starts.rays = cast_rays(world_boxes(UNKNOWN, 0.0, 0.0, 0.0, hitch) + others, sensor)
+    hypotheses = tracker.starts._hypotheses(points, min_area_rect(points[:, :2]), 0.0, False, True)
     right_way = [m for model, _, m in hypotheses if model.name == "man_tgx" and np.cos(m.yaw_rad) > 0.0]
     return min(right_way, key=lambda m: m.cost)
 
@@ -102,16 +96,16 @@ def test_rays_past_a_trailers_last_points_do_not_refute_a_catalogue_length_it_ma
     hitch, yaw = np.radians(-10.0), np.radians(90.0)
     points = vehicle_points(truth, 0.0, 0.0, yaw, hitch, sensors=sensor, spacing=0.15)
     tracker = VehicleTracker(PARAMS.articulated, PARAMS.vehicles)
-    tracker._rays = cast_rays(world_boxes(truth, 0.0, 0.0, yaw, hitch), sensor)
-    hypotheses = tracker._hypotheses(points, min_area_rect(points[:, :2]), 0.0, False, True)
+    tracker.starts.rays = cast_rays(world_boxes(truth, 0.0, 0.0, yaw, hitch), sensor)
+    hypotheses = tracker.starts._hypotheses(points, min_area_rect(points[:, :2]), 0.0, False, True)
     man, m = min(
         ((model, m) for model, _, m in hypotheses if model.name == "man_tgx" and np.sin(m.yaw_rad) > 0.5),
         key=lambda fitted: fitted[1].cost,
     )
     assert m.rear_points < 5 and abs(np.degrees(m.hitch_rad) + 10.0) < 1.5
     assert man.trailer.length_m > 13.0  # the catalogue's length kept
-    assert tracker._seen_through(m, man, 0.0)  # the whole 13.68 m box
-    assert not tracker._refuted(points, m, man, 0.0)
+    assert tracker.starts._seen_through(m, man, 0.0)  # the whole 13.68 m box
+    assert not tracker.starts._refuted(points, m, man, 0.0)
 
 
 def test_a_fit_is_bent_against_the_cheapest_of_the_start_fits_not_the_first_tried():
@@ -144,7 +138,7 @@ def test_a_start_fit_refined_in_a_wrong_valley_is_nudged_out_of_it(sensor_xy, hi
     alone = fit(sample, _sized_start(coarse, man, 0.0), PARAMS.articulated, START_ITERATIONS, START_SCALE_M)
     assert abs(np.degrees(alone.hitch_rad) - hitch_deg) > 10.0
     tracker = VehicleTracker(PARAMS.articulated, PARAMS.vehicles)
-    refined = tracker._refined(sample, coarse, man, 0.0)
+    refined = tracker.starts._refined(sample, coarse, man, 0.0)
     assert abs(np.degrees(refined.hitch_rad) - hitch_deg) < 2.0
     assert refined.cost < 0.1 * alone.cost
 
@@ -162,8 +156,8 @@ def test_in_one_sweep_the_start_keeps_its_centred_search():
     errors = []
     for params in (PARAMS.articulated, ONE_SWEEP):
         tracker = VehicleTracker(params, PARAMS.vehicles)
-        tracker._rays = cast_rays(world_boxes(UNKNOWN, 0.0, 0.0, 0.0, hitch) + others, sensor)
-        hypotheses = tracker._hypotheses(points, rect, 0.0, False, True)
+        tracker.starts.rays = cast_rays(world_boxes(UNKNOWN, 0.0, 0.0, 0.0, hitch) + others, sensor)
+        hypotheses = tracker.starts._hypotheses(points, rect, 0.0, False, True)
         right_way = [m for model, _, m in hypotheses if model.name == "man_tgx" and np.cos(m.yaw_rad) > 0.0]
         errors.append(abs(np.degrees(min(right_way, key=lambda m: m.cost).hitch_rad) + 17.8))
     assert errors[0] < 3.0 < errors[1]

@@ -1,10 +1,7 @@
 """The articulated estimator's vehicle tracks: per vehicle gate -> hinged fit -> kinematic UKF;
 unclaimed points seed new vehicles (docs/pipeline.md, Articulated estimator).
 
-A new vehicle starts from a connected component of the right size (length, height) that persists
-for ``start_frames`` frames; its model (catalogue vehicle, or one rigid box of the measured size),
-its direction (tractor ahead) and hitch come from fitting every hypothesis to its points and
-keeping the best explained; the motion decides the direction only when both ends fit alike. A
+What starts (``vehicle_start.VehicleStarts``: model, direction, hitch) becomes a track here. A
 vehicle leaves after ``leave_frames`` frames without points. The trailer's length and the units'
 widths are re-estimated from the points seen in each unit's frame (the catalogue is the prior).
 """
@@ -20,28 +17,13 @@ from functools import lru_cache
 from itertools import count
 
 import numpy as np
-from scipy.spatial import cKDTree
 
-from i2v_loc.geometry import box_corners, rotate_xy, wrap_rad
+from i2v_loc.geometry import wrap_rad
 from i2v_loc.params import ArticulatedParams, VehicleConfig
 from i2v_loc.stages import kernels
 from i2v_loc.stages.faces import (
     END_FACE_WIDTH_M,
-    ONE_SIDE_WIDTH_M,
-    away_from_sensor,
-    end_face,
-    face_foot,
-    face_line,
-    faces_grounded,
-    l_shaped,
-    low_at_both_ends,
-    one_face_sized,
-    passes_under,
     rigid_seen,
-    roof_shown,
-    unit_grounded,
-    unit_raised,
-    vehicle_face,
 )
 from i2v_loc.stages.hinged_fit import (
     FRONT,
@@ -53,40 +35,56 @@ from i2v_loc.stages.hinged_fit import (
     Measurement,
     Prior,
     TurnFrame,
-    explained_share,
     fit,
     fit_hinge,
     in_unit_box,
     rear_sigma_m,
-    thin,
     with_rear_end,
     without_hitch,
 )
 from i2v_loc.stages.kinematic_filter import FilterState, KinematicFilter, unit_motions
-from i2v_loc.stages.primitives import Rect, min_area_rect, voxel_keys
-from i2v_loc.stages.vehicle_model import MAX_VEHICLE_HEIGHT_M, RIGID_MAX_LENGTH_M, Box, VehicleModel
+from i2v_loc.stages.primitives import Rect, min_area_rect
+from i2v_loc.stages.unit_frames import (
+    END_BAND_M,
+    FACE_SEEN_SPAN,
+    MAX_BODY_GAP_M,
+    MAX_TRAILER_LENGTH_M,
+    REAR_FACE_MIN_POINTS,
+    body_band,
+    body_heights,
+    face_seen,
+    frame_args,
+    free_length_at,
+    prior_boxes,
+    reached_back,
+    supported,
+    trailer_frame,
+    trailer_reach,
+    unfolded,
+    unit_frames,
+    unit_origins,
+    with_trailer_length,
+)
+from i2v_loc.stages.vehicle_model import Box, VehicleModel
+from i2v_loc.stages.vehicle_start import (
+    COARSE_ITERATIONS,
+    DIRECTION_COST_RATIO,
+    GAP_SEEN_BEYOND_M,
+    RIGID_MIN_WIDTH_M,
+    SOLID_INSET_M,
+    START_HITCHES_DEG,
+    START_ITERATIONS,
+    START_SCALE_M,
+    Seed,
+    VehicleStarts,
+)
 from i2v_loc.stages.visibility import Rays
 
-START_HITCHES_DEG = (-90.0, -60.0, -30.0, 0.0, 30.0, 60.0, 90.0)
-COARSE_ITERATIONS = 4  # per start hitch; the best is refined with START_ITERATIONS
-START_NUDGE_RAD = np.radians(7.0)  # the refined start fit fitted again this far either way in hitch
-START_ITERATIONS = 20
 START_SIGMAS = np.array([0.3, 0.3, np.radians(3.0), np.radians(5.0)])  # added to the first fit's covariance
-START_SCALE_M = 0.8  # first loss scale of the start fits (a placed model is off by up to metres)
-DIRECTION_COST_RATIO = 0.8  # one end's fit must cost this much less than the other's to decide the direction
-RIGID_COST_RATIO = 0.7  # an articulated model must cost this much less than one rigid box
-START_BEND_TOLERANCE_RAD = np.radians(10.0)  # catalogue models' fits of one vehicle bend alike (within 2 deg)
 FOLDED_HITCH_RAD = np.radians(90.0)  # no trailer swings further round its kingpin: its box runs through the cab
 TRACTOR_LOST_SIGMA_DEG = 1.0  # tracked, the hitch's is 0.2-0.4 deg; the cab hidden behind its trailer, 1-5 deg
-MAX_TRAILER_LENGTH_M = TRAILER_LENGTH_RANGE_M[1]
-REAR_FACE_MIN_POINTS = 3
 SIDE_MIN_POINTS = 5
 SIDE_MAX_SLOPE = np.tan(np.radians(5.0))  # a side's points run along its unit's axis (the fits' yaw: within 2 deg)
-LOW_SEED_SLACK_M = 0.5  # a seed shorter than a rigid vehicle and this much lower than every articulated one is none
-REFIT_SIZE_CHANGE_M = 0.1  # a rigid start's box refitted on the footprint its fit explains (``_rigid_fits``)
-APART_VOXEL_M = 0.3  # a seed taken apart in one sweep (``_start_apart``): lanes 0.6 m apart stay apart
-TALL_COLUMN_MIN_POINTS = 2  # points above a vehicle's height that make a column a structure (not one noise point)
-RIGID_MIN_WIDTH_M = 1.6  # a rigid vehicle starts once its width is seen (an end face or both sides)
 # the kingpin's offset shows only at a hitch angle; from this one the joint fit's own standard
 # deviation decides when its frames pin it (at 20 deg a lane change never turned enough, and an
 # unknown 13.6 m trailer kept the catalogue's hinge: its cab's yaw 1.5 deg off at a 15 deg hitch)
@@ -100,30 +98,11 @@ HINGE_MAX_STD_M = 0.05  # a joint fit pinning the kingpin or the front no better
 CAB_LENGTH_SIGMA_M = 0.3
 REACH_SETTLED = 50  # straight frames' reaches of the trailer's front ahead of the rear axle: learned
 REACH_MAX_HITCH_RAD = np.radians(5.0)  # nearly straight: the trailer's front reach ahead of the rear axle shows
-GAP_TEST_MAX_HITCH_RAD = np.radians(10.0)  # beyond, a trailer's front corner swings into the gap
 WALL_MIN_POINTS = 5
 WALL_MIN_ACROSS_M = 0.2
 WALL_MIN_ANGLE_DEG = 30.0
 WALL_ANGLE_STEP_DEG = 2.0
 WALL_LINE_M = 0.1
-GAP_FILL_RATIO = 0.5
-GAP_MIN_POINTS = 5
-GAP_OPEN_RATIO = 0.1  # a moving seed with so few points in its gap is two units, however well one box fits
-GAP_OPEN_MIN_POINTS = 10
-GAP_SEEN_MIN_RAYS = 1  # a solid side stops every ray: one through a seed's gap shows it empty, not hidden
-GAP_SEEN_BEYOND_M = 0.3  # past the gap: a ray ending on a side running through it did not cross it
-GAP_SIDES_REACH_M = 2.5  # the body's sides next to the gap: about a cab's length either way
-# the gap's box is this far inside the sides: rays grazing a parked trailer's side ran along it within
-# 3 cm of its points' extent for a metre and "crossed" its "gap" (a false vehicle for 25 s on the
-# generalization suite with a trial start rule); 0.25 m inside kept too few of a MAN's rays through its
-# 0.7 m gap (two started 26 frames late)
-GAP_SIDE_INSET_M = 0.1
-GAP_LOOKED_MIN_POINTS = 8  # on a face across the gap, seen through its opening (one sweep: no motion to wait for)
-GAP_FACE_MARGIN_M = 0.15  # the faces bounding the gap: their points' noise and the fit's error along
-END_SLAB_M = 1.0  # beyond a rigid body's end: a ray ending there and none crossing, it goes on (``_ends_free``)
-SOLID_INSET_M = 0.5  # a unit's box this far inside its faces is crossed by no ray (a sweep's motion blurs them)
-SEEN_THROUGH_RATIO = 0.1  # of the rays ending on a unit, at most this many cross it (real ones: under 0.01)
-CAB_SLICE_MIN_M = 1.0
 LENGTH_CONVERGED_OBSERVATIONS = 5
 TURN_MAX_SPEED_STD_M_S = 0.5  # the hinge is measured in a turn from frames de-skewed with a speed known this well
 LENGTH_MAX_STD_M = 0.05  # a trailer's length the points pin no better than this is not measured
@@ -155,12 +134,7 @@ FACE_APART_MIN_SLAB_M = 0.25  # of body between a trailer's side's end and a rea
 FACE_APART_GAP_M = 0.5  # along a side in the fit's thinned points, a gap: the side ends there
 FACE_APART_CLEAR_M = 0.15  # the slab ends this short of the face (its points' range noise)
 VEHICLE_WIDTH_M = (RIGID_MIN_WIDTH_M, END_FACE_WIDTH_M[1])  # a bracket outside: a fit that went astray
-FACE_SEEN_SPAN = 0.6  # an end face is seen when its points span this share of the unit's width
-END_BAND_M = 0.4
-MAX_BODY_GAP_M = 1.0
 WALL_BESIDE_M = (0.35, 0.8)  # a face with points this far out past a trailer's side is wider than it
-UNIT_SUPPORT = 0.5
-VIEW_TOP_TOLERANCE_RAD = np.radians(0.5)  # about one beam's spacing
 # the rear axle that does not slip sideways, from pairs of whole fits along one arc (``_learn_axle``)
 AXLE_MIN_TURN_RAD = np.radians(8.0)  # a pair's turn: 3 cm of side noise make 0.3 m of axle
 AXLE_MAX_SPAN_S = 3.0  # a pair's time apart
@@ -170,13 +144,6 @@ AXLE_SAMPLES_KEPT = 100
 AXLE_MAX_M = 1.0  # from the catalogue's: tractors' wheelbases and overhangs vary less
 RECHECK_MIN_SPEED_M_S = 0.5  # a rigid track is fitted again as every model while it moves this fast
 RECHECK_FRAMES = 20  # a moving rigid track is fitted as every model every this many frames (the fits cost ~0.1 s)
-VACATED_M = 0.5  # a first point this far from all of a seed's points now: its place was left
-VACATED_MIN_SHARE = 0.1
-VACATED_SEEN_MIN_RAYS = 3  # through a place a seed's first points left: seen empty, not hidden
-SEED_FIRST_POINTS = 200
-SEED_RETRY_FRAMES = 20  # a seed that was no vehicle is fitted again after this many frames
-SHAPE_CHANGE_M = 0.5  # if its extent or centre moved this much
-SHAPE_POINTS_CHANGE = 0.3  # or its point count changed by this share
 MODEL_FOLLOW_MIN_M = 0.02  # a learned change that moves a face less is left to the filter (the fits' own noise)
 
 
@@ -192,86 +159,6 @@ class VehicleReport:
     measured: bool  # a fit was fused this frame
     travel_m: float  # tractor reference point's distance from where the vehicle started
     dimensions_seen: tuple[tuple[bool, bool, bool], ...]  # per unit: length, width, height measured (else a prior)
-
-
-@dataclass(frozen=True)
-class _Shape:
-    """A seed's cluster as far as a start fit could tell (points, extent, centre) and whether rigid
-    vehicles could start: the fits cost ~0.1 s, a container's or a wall's seed is not fitted
-    again every few frames while it stays as it was."""
-
-    points: int
-    length_m: float
-    width_m: float
-    center_xy: np.ndarray
-    rigid_allowed: bool
-
-    def changed(self, now: _Shape) -> bool:
-        return (
-            now.rigid_allowed != self.rigid_allowed
-            or abs(now.points - self.points) > SHAPE_POINTS_CHANGE * self.points
-            or abs(now.length_m - self.length_m) > SHAPE_CHANGE_M
-            or abs(now.width_m - self.width_m) > SHAPE_CHANGE_M
-            or float(np.hypot(*(now.center_xy - self.center_xy))) > SHAPE_CHANGE_M
-        )
-
-
-@dataclass(eq=False)
-class Seed:
-    center_xy: np.ndarray
-    first_xy: np.ndarray
-    frames: int = 1
-    seen: bool = True
-    # best explained by one rigid box: fitted again once it has moved and the map is ready
-    rigid: bool = False
-    first_fit: np.ndarray | None = None  # xy of its first rigid fit
-    failed: _Shape | None = None  # its shape when it was last fitted and was no vehicle
-    failed_frame: int = 0  # its frame count then
-    moving: bool = False  # known to move (a tracked vehicle's probe), however short its travel
-    travelled: bool = False  # it once moved (``moved``): no background, whether it stands now or not
-    rect: Rect | None = None  # this frame's footprint
-    first_points: np.ndarray = field(default_factory=lambda: np.empty((0, 3)))  # thinned, when first seen
-    points: np.ndarray = field(default_factory=lambda: np.empty((0, 3)))  # this frame's
-
-    def retry_due(self, rigid_allowed: bool) -> bool:
-        """A rigid seed that may start as one (it moved, the map is ready) at once; any other after
-        a while."""
-        return (self.rigid and rigid_allowed) or self.frames - self.failed_frame >= SEED_RETRY_FRAMES
-
-    @property
-    def travel_m(self) -> float:
-        return float(np.hypot(*(self.center_xy - self.first_xy)))
-
-    def moved(self, travel_m: float, rays: Rays | None = None) -> bool:
-        """Known to move, or its centre travelled ``travel_m`` and it left a place behind: at least
-        ``VACATED_MIN_SHARE`` of its first points are ``VACATED_M`` from all of its points now and,
-        when asked with the frame's ``rays``, their place is seen empty (``_seen_empty``). A standing
-        container that a passing truck uncovers grows where it was hidden, and its centre travels as
-        far (one started as a Twizy, 9 false vehicle-s on held-out seeds); what it showed first stays
-        where it was, or is hidden now: a parked trailer's side, seen by one LiDAR past a MAN driving
-        by, lost its first points behind the MAN, showed others, and started as a rigid vehicle."""
-        if self.moving:
-            return True
-        if self.travel_m < travel_m or len(self.first_points) == 0 or len(self.points) == 0:
-            return False
-        distance, _ = cKDTree(self.points[:, :2]).query(self.first_points[:, :2], distance_upper_bound=VACATED_M)
-        vacated = np.isinf(distance)
-        if float(np.mean(vacated)) < VACATED_MIN_SHARE:
-            return False
-        return rays is None or _seen_empty(rays, self.first_points[vacated])
-
-
-def _seen_empty(rays: Rays, points: np.ndarray) -> bool:
-    """At least ``VACATED_SEEN_MIN_RAYS`` rays crossed the box around ``points`` (their footprint's
-    rectangle, at least ``VACATED_M`` wide, and heights) and ended ``GAP_SEEN_BEYOND_M`` beyond it:
-    no surface is there now (hidden, the rays would have ended before it)."""
-    rect = min_area_rect(points[:, :2])
-    z = (float(points[:, 2].min()), float(points[:, 2].max()))
-    half_width = max(rect.width_m, VACATED_M) / 2
-    crossed, _, _ = rays.through(
-        tuple(rect.center_xy), rect.yaw_rad, rect.length_m / 2, half_width, z, GAP_SEEN_BEYOND_M
-    )
-    return crossed >= VACATED_SEEN_MIN_RAYS
 
 
 class _Window(deque):
@@ -450,19 +337,32 @@ class _Track:
 
 class VehicleTracker:
     def __init__(self, params: ArticulatedParams, catalogue: dict[str, VehicleConfig]):
-        self.params = params
         self.catalogue = {name: VehicleModel.from_config(name, v) for name, v in catalogue.items()}
+        self.starts = VehicleStarts(params, self.catalogue)
+        self.params = params
         self.tracks: list[_Track] = []
-        self.seeds: list[Seed] = []
         self._rays: Rays | None = None  # this frame's
         self._ids = count(1)
         self.rejected = 0  # fits outside a filter's innovation gate
 
+    @property
+    def params(self) -> ArticulatedParams:
+        return self._params
+
+    @params.setter
+    def params(self, params: ArticulatedParams) -> None:
+        """Applied from the next frame on, to the tracks and the start alike."""
+        self._params = params
+        self.starts.params = params
+
     def forget(self) -> None:
         """Drop every track and seed; ids go on counting."""
-        self.tracks, self.seeds = [], []
+        self.tracks = []
+        self.starts.forget()
 
-    # ----------------------------------------------------------------- per frame
+    def moving_seeds(self) -> list[Rect]:
+        """``VehicleStarts.moving_seeds``."""
+        return self.starts.moving_seeds()
 
     def process(
         self,
@@ -477,7 +377,7 @@ class VehicleTracker:
         the yard too: only articulated vehicles start then (two hinged units are no wall, container
         or parked trailer); a rigid one needs the learned background to tell it from a container.
         ``rays``: the frame's sensor rays, which show whether a seed's gap was seen empty."""
-        self._rays = rays
+        self._rays = self.starts.rays = rays
         priors = [self._prior(t, stamp_s, ground) for t in self.tracks]
         lost = [self._tractor_lost(t) for t in self.tracks]
         owner = self._claim(points, priors, lost)
@@ -624,13 +524,11 @@ class VehicleTracker:
         if (
             found is None
             or found.cost >= DIRECTION_COST_RATIO * here.cost
-            or not _supported(found, model, prior.ground_z_m)
-            or not self._unfolded(found)
+            or not supported(found, model, prior.ground_z_m)
+            or not unfolded(found, self.params)
         ):
             return None
         return fit(points, _at_pose(prior, found), self.params)  # from all the points, as every frame's fit
-
-    # ----------------------------------------------------------------- dimensions
 
     def _learn(self, track: _Track, m: Measurement, points: np.ndarray) -> None:
         """The sizes the fit ``m`` of the vehicle's claimed ``points`` shows."""
@@ -690,7 +588,7 @@ class VehicleTracker:
         box, extent = model.boxes[unit], track.widths[unit]
         if not model.articulated or self._rays is None or extent.counted or len(extent.brackets) >= BRACKETS_KEPT:
             return None
-        if not _face_seen(m, model, unit, face, track.ground_z_m, self.params.fit_top_band_m):
+        if not face_seen(m, model, unit, face, track.ground_z_m, self.params.fit_top_band_m):
             return None
         _, end_m = kernels.face_median(local, 0, m.unit, m.face, unit, face, ANYWHERE)
         near_end = (end_m - SIDE_NEAR_END_M, end_m + SIDE_NEAR_END_M)
@@ -706,7 +604,7 @@ class VehicleTracker:
         if np.count_nonzero(on_face) < 2:
             return None
         last = np.partition(outward * q[on_face, 1], 1)[1]
-        origin, yaw = _unit_origins(m.vector, model)[unit]
+        origin, yaw = unit_origins(m.vector, model)[unit]
         along, across = np.array([np.cos(yaw), np.sin(yaw)]), np.array([-np.sin(yaw), np.cos(yaw)])
         motion = unit_motions(track.filter.state, model)[unit]
         rays = self._rays.crossings(
@@ -751,11 +649,11 @@ class VehicleTracker:
 
     def _learn_cab_length(self, track: _Track, m: Measurement, q: np.ndarray) -> None:
         """The cab's length: between the middles of its front and rear faces' points, when both are
-        seen (``_face_seen``; its front pins it in the fit; an unknown tractor's cab 0.27 m shorter
+        seen (``face_seen``; its front pins it in the fit; an unknown tractor's cab 0.27 m shorter
         than the MAN's put its box centre 0.13 m off). (Five points on each, before: with the chassis
         behind the cab no longer on its rear face, an unknown tractor's cab had them only after 20 s.)"""
         seen = [
-            _face_seen(m, track.model, 0, face, track.ground_z_m, self.params.fit_top_band_m) for face in (FRONT, REAR)
+            face_seen(m, track.model, 0, face, track.ground_z_m, self.params.fit_top_band_m) for face in (FRONT, REAR)
         ]
         if not all(seen):
             return
@@ -794,7 +692,7 @@ class VehicleTracker:
         if m is None:
             return
         model = _changed(track.model, kingpin_behind_axle_m=m.kingpin_m)
-        front_seen = _face_seen(m, model, 1, FRONT, track.ground_z_m, self.params.fit_top_band_m)
+        front_seen = face_seen(m, model, 1, FRONT, track.ground_z_m, self.params.fit_top_band_m)
         if front_seen and np.sum((m.unit == 0) & (m.face == REAR)) >= REAR_FACE_MIN_POINTS:
             track.reach.add(m.trailer_front_m - m.kingpin_m)
 
@@ -879,7 +777,7 @@ class VehicleTracker:
         face is seen and its middle)."""
         trailer = track.model.trailer
         return kernels.rear_face(
-            q, m.points[:, 2] - track.ground_z_m, m.unit, m.face, _body_band(trailer),
+            q, m.points[:, 2] - track.ground_z_m, m.unit, m.face, body_band(trailer),
             trailer.front_m + END_BAND_M, width_m / 2, self.params.fit_inlier_m, WALL_BESIDE_M, MAX_BODY_GAP_M,
             END_BAND_M, trailer.top_m - self.params.fit_top_band_m, FACE_SEEN_SPAN * width_m,
         )  # fmt: skip
@@ -905,7 +803,7 @@ class VehicleTracker:
         sides_x = q[rows[(m.unit[rows] == 1) & ((m.face[rows] == LEFT) | (m.face[rows] == RIGHT))], 0]
         back = face_m + FACE_APART_CLEAR_M
         front = back + FACE_APART_MIN_SLAB_M + END_SEEN_OFFSET_M  # the slab's front, as a side's end
-        if not len(sides_x) or _reached_back(float(sides_x.max()), sides_x, FACE_APART_GAP_M) < front:
+        if not len(sides_x) or reached_back(float(sides_x.max()), sides_x, FACE_APART_GAP_M) < front:
             return False
         return self._seen_empty_behind(track, m, front, trailer.width_m, back)
 
@@ -917,7 +815,7 @@ class VehicleTracker:
         the fits put the tractor 0.2 m off.)"""
         if seen_m < TRAILER_LENGTH_RANGE_M[0]:  # its front face, seen from ahead
             return None
-        free = fit(points, _free_length_at(m, track.model, seen_m, track.ground_z_m), self.params)
+        free = fit(points, free_length_at(m, track.model, seen_m, track.ground_z_m), self.params)
         if free is None or free.trailer_length_std_m > LENGTH_MAX_STD_M:
             return None
         return free.trailer_length_m
@@ -948,10 +846,10 @@ class VehicleTracker:
         z_rel = points[:, 2] - track.ground_z_m
         on_side = (
             (np.abs(q[:, 1] - np.sign(side[0, 1]) * width_m / 2) <= self.params.fit_inlier_m)
-            & _body_heights(z_rel, trailer)
+            & body_heights(z_rel, trailer)
             & (q[:, 0] < end)
         )
-        return _reached_back(end, q[on_side, 0])
+        return reached_back(end, q[on_side, 0])
 
     def _seen_end(
         self, track: _Track, m: Measurement, points: np.ndarray, sides: list[np.ndarray], width_m: float
@@ -1024,147 +922,17 @@ class VehicleTracker:
                 best, best_err = name, err
         return best
 
-    # ----------------------------------------------------------------- start
-
     def _start(self, points: np.ndarray, ground, stamp_s: float, rigid_allowed: bool) -> list[VehicleReport]:
-        clusters = self._seed_clusters(points, ground)
-        for seed in self.seeds:
-            seed.seen = False
-        ready = []
-        for cluster, rect in clusters:
-            center = rect.center_xy
-            seed = min(self.seeds, key=lambda s: float(np.hypot(*(s.center_xy - center))), default=None)
-            if (
-                seed is not None
-                and not seed.seen
-                and np.hypot(*(seed.center_xy - center)) <= self.params.start_max_step_m
-            ):
-                seed.center_xy, seed.frames, seed.seen = center, seed.frames + 1, True
-            else:
-                seed = Seed(center, center, first_points=thin(cluster, SEED_FIRST_POINTS))
-                self.seeds.append(seed)
-            seed.points, seed.rect = cluster, rect
-            seed.travelled = seed.travelled or seed.moved(self.params.start_travel_m)
-            shape = _Shape(len(cluster), rect.length_m, rect.width_m, center, rigid_allowed)
-            if (
-                seed.frames >= self.params.start_frames
-                and self._may_fit(seed)
-                and (seed.failed is None or (seed.retry_due(rigid_allowed) and seed.failed.changed(shape)))
-            ):
-                ready.append((seed, cluster, rect, shape))
-        self.seeds = [s for s in self.seeds if s.seen]
+        """Tracks of the vehicles that start among the unclaimed ``points`` (``VehicleStarts.found``):
+        their first reports."""
         reports = []
-        for seed, cluster, rect, shape in ready:
-            center = seed.center_xy
-            track = self._new_track(cluster, rect, seed, float(ground(center[0], center[1])), stamp_s, rigid_allowed)
-            if track is None:  # no vehicle (yet): fitted again after a while if its shape changed
-                seed.failed, seed.failed_frame = shape, seed.frames
-                if self._one_sweep():
-                    reports += self._start_apart(cluster, ground, stamp_s, rigid_allowed)
-                continue
-            self.seeds.remove(seed)
-            reports.append(self._started(track))
+        for start in self.starts.found(points, ground, rigid_allowed):
+            track = self._track(next(self._ids), start.model, start.fit, start.ground_z_m, stamp_s, 0.0, start.points)
+            track.rigid_seen = rigid_seen(start.rect, self.params, start.top_seen)
+            self._learn_at_start(track, start.points, start.fit)
+            self.tracks.append(track)
+            reports.append(track.report(True))
         return reports
-
-    def _started(self, track: _Track) -> VehicleReport:
-        """``track`` tracked from this frame on: its first report."""
-        self.tracks.append(track)
-        return track.report(True)
-
-    def _start_apart(self, cluster: np.ndarray, ground, stamp_s: float, rigid_allowed: bool) -> list[VehicleReport]:
-        """The vehicles among a seed that is none, taken apart at ``APART_VOXEL_M`` (one sweep: no
-        frame to come in which vehicles side by side drive apart). Its voxels bridge a cab's gap, and
-        a street's lanes too: a bus 1.6 m beside a car was one seed 18.7 m by 5.0 m in an Argoverse 2
-        sweep, which no model explains."""
-        p = self.params
-        reports = []
-        for rows in seed_group_rows(cluster, ground, APART_VOXEL_M, p.start_min_height_m, p.fit_min_points, 0.0, 0.0):
-            if len(rows) == len(cluster):
-                return []  # one piece: the seed itself
-            part = cluster[rows]
-            rect = min_area_rect(part[:, :2])
-            if not self._seen_wide(rect):
-                continue  # one face split off: a crown beside another, seen as an end, started as one
-            seed = Seed(
-                rect.center_xy, rect.center_xy, first_points=thin(part, SEED_FIRST_POINTS), points=part, rect=rect
-            )
-            ground_z_m = float(ground(*rect.center_xy))
-            track = self._new_track(part, rect, seed, ground_z_m, stamp_s, rigid_allowed)
-            if track is not None:
-                reports.append(self._started(track))
-        return reports
-
-    def moving_seeds(self) -> list[Rect]:
-        """The footprints of the seeds that moved (``Seed.moved``), standing now or not: a trailer that
-        drove off while the background was learned, its tractor out of reach, had become background
-        along its sides (they stay in place as it moves along them) and was cut out of its points
-        for 5 s once it stopped and reversed into a dock."""
-        return [s.rect for s in self.seeds if s.travelled and s.rect is not None]
-
-    def _fit_moved(self, seed: Seed, m: Measurement) -> bool:
-        """A rigid seed's fitted pose moved ``start_travel_m`` since its first rigid fit (its points'
-        centre alone jumps when a passing vehicle hides part of a container)."""
-        if not seed.rigid:
-            return True
-        if seed.first_fit is None:
-            seed.first_fit = m.vector[:2].copy()
-        return float(np.hypot(*(m.vector[:2] - seed.first_fit))) >= self.params.start_travel_m
-
-    def _may_fit(self, seed: Seed) -> bool:
-        """A seed that fitted one rigid box best is fitted again once it moved, before the map is
-        ready too: driving straight, a tractor and trailer seen from one side fit one box, and their
-        hinge shows as an open gap only in motion (``_two_units``); ``_candidate`` starts it then
-        only as articulated."""
-        return not seed.rigid or self._one_sweep() or seed.moved(self.params.start_travel_m)
-
-    def _one_sweep(self) -> bool:
-        """No frame to come (``start_travel_m`` 0, as ``detect`` sets it): no motion to wait for, and
-        no more of a vehicle to wait to see."""
-        return self.params.start_travel_m <= 0.0
-
-    def _may_start(self, seed: Seed, rigid_allowed: bool) -> bool:
-        """A rigid seed once the background is learned and it moved."""
-        return self._may_fit(seed) and (rigid_allowed or not seed.rigid)
-
-    def _seed_clusters(self, points: np.ndarray, ground) -> list[tuple[np.ndarray, Rect]]:
-        """Connected components tall enough to be a vehicle, those closer than ``start_join_m`` joined
-        (a cab and its trailer are apart by up to about 1.5 m), of a vehicle's length and at least
-        ``start_min_width_m`` wide (a wall, or a vehicle seen from one side only, is a plane)."""
-        p = self.params
-        points = _in_grid_precision(_below_tall_structures(points, ground, p.start_voxel_m))
-        out = []
-        for rows in seed_group_rows(
-            points,
-            ground,
-            p.start_voxel_m,
-            p.start_min_height_m,
-            p.fit_min_points,
-            p.start_join_m,
-            min(p.start_min_length_m, END_FACE_WIDTH_M[0]),
-        ):
-            cluster = points[rows]
-            rect = min_area_rect(cluster[:, :2])
-            if self._seen_wide(rect) or one_face_sized(rect, p):
-                out.append((cluster, rect))
-        return out
-
-    def _seen_wide(self, rect: Rect) -> bool:
-        """A footprint of a vehicle's length and at least ``start_min_width_m`` wide."""
-        p = self.params
-        return p.start_min_length_m <= rect.length_m <= p.start_max_length_m and rect.width_m >= p.start_min_width_m
-
-    def _new_track(
-        self, cluster: np.ndarray, rect: Rect, seed: Seed, ground_z_m: float, stamp_s: float, rigid_allowed: bool
-    ) -> _Track | None:
-        top_seen = not self._at_view_top(cluster)
-        chosen = self._candidate(cluster, rect, seed, ground_z_m, rigid_allowed, top_seen)
-        if chosen is None:
-            return None
-        model, m = chosen
-        track = self._track(next(self._ids), model, m, ground_z_m, stamp_s, 0.0, cluster)
-        track.rigid_seen = rigid_seen(rect, self.params, top_seen)
-        self._learn_at_start(track, cluster, m)
-        return track
 
     def _learn_at_start(self, track: _Track, cluster: np.ndarray, m: Measurement) -> None:
         """The start frame's sizes learned before the first report, the pose fitted again with them
@@ -1184,323 +952,6 @@ class VehicleTracker:
         if again is not None:
             track.filter.restart(again.vector, _start_covariance(again))
             track.last = again
-
-    def _candidate(
-        self, cluster: np.ndarray, rect: Rect, seed: Seed, ground_z_m: float, rigid_allowed: bool, top_seen: bool
-    ) -> tuple[VehicleModel, Measurement] | None:
-        """The best-explaining model and its fit, if it passes the start's checks (``rect``: the
-        cluster's minimum-area rectangle; ``top_seen``: no point at a sensor's view top). A seed
-        longer than any rigid vehicle is articulated: the catalogue models are tried cheapest first
-        (an unknown tractor's cab puts a model's gap on the real trailer's front), but while one
-        that costs alike or less only lacks points (not supported, nor ``_refuted``), none the
-        other way round starts unless its own gap shows (``_waits_for``): seen by one LiDAR ahead
-        of its cab, a MAN's right fit waited for its trailer's side to show, and a Volvo the wrong
-        way round, at 16 times its cost, started instead."""
-        if one_face_sized(rect, self.params):
-            return self._one_face(cluster, rect, seed, ground_z_m, rigid_allowed, top_seen)
-        may_be_rigid = rect.length_m <= RIGID_MAX_LENGTH_M
-        if rect.length_m < self.params.rigid_min_length_m and not self._tall_enough(cluster, ground_z_m, top_seen):
-            return None  # a car or a person: no fit needed (the start's fits cost 40-80 ms)
-        hypotheses = self._hypotheses(cluster, rect, ground_z_m, may_be_rigid, top_seen)
-        if not hypotheses:
-            return None
-        choices = self._articulated_choices(hypotheses)
-        if may_be_rigid:
-            two = self._two_units(hypotheses, cluster, seed, ground_z_m, top_seen)
-            choices = [two] if two is not None else self._choose(hypotheses, seed, ground_z_m, top_seen)
-            choices += self._rigid_after(choices, hypotheses)
-        bent = _bent_flags([m for _, m in choices])
-        supported = [_supported(m, model, ground_z_m, top_seen) for model, m in choices]
-        waiting = [  # fits that only lack points yet: more of the vehicle may show in the frames to come
-            m
-            for (model, m), b, s in zip(choices, bent, supported)
-            if not (b or s or self._refuted(cluster, m, model, ground_z_m))
-        ]
-        for (model, m), b, s in zip(choices, bent, supported):
-            if not self._allowed_to_start(seed, model, m, rigid_allowed):
-                return None
-            if b or not s or (_waits_for(m, waiting) and not self._gap_shown(cluster, m, model, ground_z_m)):
-                continue
-            filled = _gap_filled(cluster, m, model, ground_z_m)
-            if (
-                self._explains(m, model)
-                and not filled
-                # without rays a hole and a gap look alike: the points alone decide
-                and (self._rays is None or self._hinge_shown(seed, m, model, ground_z_m))
-                and not self._seen_through(m, self._as_far_as_seen(m, model, cluster, ground_z_m), ground_z_m)
-                and self._stands_on_wheels(cluster, m, model, ground_z_m, top_seen)
-                and not self._cab_grounded(cluster, m, model, ground_z_m)
-                and self._ends_free(m, model, ground_z_m)
-            ):
-                return model, m
-        return None
-
-    def _ends_free(self, m: Measurement, model: VehicleModel, ground_z_m: float) -> bool:
-        """Whether nothing stands against a rigid fit's ends: at each end whose face does not show
-        (``_face_seen``), no ray ended in the slab ``END_SLAB_M`` beyond it (within the box's width
-        and height, ``SOLID_INSET_M`` inside) unless rays also crossed it. A body going on there, or
-        a unit hinged to it, makes the box a part of a longer vehicle: seen by `l3` and `l4`, a
-        reversing MAN's trailer alone, its cab hidden at -40 deg in that slab, started as a 13.85 m
-        rigid box for 6 s. An end the view does not reach (no ray in the slab: a truck seen from its
-        side and end hides its far end) is not refuted in one sweep; with frames to come the start
-        waits for rays to cross the slab's upper half (rays pass under a semitrailer's floor, its
-        body going on above them): a MAN seen from ahead, its trailer's side past its cab, started
-        as an 11.2 m rigid box for 4 s (paper `l3`). Articulated fits and frames without rays: True."""
-        if self._rays is None or model.articulated:
-            return True
-        box = model.tractor
-        axis = np.array([np.cos(m.yaw_rad), np.sin(m.yaw_rad)])
-        centre, _ = model.box_centers(m.x_m, m.y_m, m.yaw_rad, 0.0)
-        floor, top = ground_z_m + box.floor_m, ground_z_m + box.top_m - SOLID_INSET_M
-        for face, sign in ((FRONT, 1.0), (REAR, -1.0)):
-            if _face_seen(m, model, 0, face, ground_z_m, self.params.fit_top_band_m):
-                continue
-            beyond = tuple(centre + sign * (box.length_m + END_SLAB_M) / 2 * axis)
-            slab = (beyond, m.yaw_rad, END_SLAB_M / 2, box.width_m / 2 - SOLID_INSET_M)
-            through, ended, _ = self._rays.through(*slab, (floor + SOLID_INSET_M, top), GAP_SEEN_BEYOND_M)
-            if ended and through < GAP_SEEN_MIN_RAYS:
-                return False
-            if not self._one_sweep():
-                above, _, _ = self._rays.through(*slab, ((floor + top) / 2, top), GAP_SEEN_BEYOND_M)
-                if above < GAP_SEEN_MIN_RAYS:
-                    return False
-        return True
-
-    def _refuted(self, cluster: np.ndarray, m: Measurement, model: VehicleModel, ground_z_m: float) -> bool:
-        """Whether the points rule a start's fit out, however many more show: its gap filled or a
-        unit seen through."""
-        return _gap_filled(cluster, m, model, ground_z_m) or self._seen_through(
-            m, self._as_far_as_seen(m, model, cluster, ground_z_m), ground_z_m
-        )
-
-    def _as_far_as_seen(
-        self, m: Measurement, model: VehicleModel, cluster: np.ndarray, ground_z_m: float
-    ) -> VehicleModel:
-        """``model`` with its trailer as long as the start's points reach (``_trailer_reach``) when the
-        fit ``m`` saw no rear face: where it ends is not known (the track starts no longer either,
-        ``_start_length``), and rays crossing the catalogue's longer box beyond do not refute the
-        body: seen from one side, an unknown 10.5 m trailer's right fit as the MAN (13.68 m) was
-        seen through there, and the start waited 11 s (held-out +1500 `l3`)."""
-        if model.trailer is None or m.rear_points >= REAR_FACE_MIN_POINTS:
-            return model
-        return _with_trailer_length(model, self._trailer_reach(m, model, cluster, ground_z_m))
-
-    def _gap_shown(self, cluster: np.ndarray, m: Measurement, model: VehicleModel, ground_z_m: float) -> bool:
-        """Whether the points show the fit's gap open (``_gap_open``) or rays crossed it
-        (``_gap_seen_empty``): the hinge is where the fit puts it."""
-        return model.articulated and (
-            _gap_open(cluster, m, model, ground_z_m) or self._gap_seen_empty(m, model, ground_z_m)
-        )
-
-    def _one_face(
-        self, cluster: np.ndarray, rect: Rect, seed: Seed, ground_z_m: float, rigid_allowed: bool, top_seen: bool
-    ) -> tuple[VehicleModel, Measurement] | None:
-        """A seed that is one upright face (no roof, one side or one end: a vehicle-mounted sensor sees
-        a truck so) is a rigid vehicle when the face is a vehicle's (``faces.vehicle_face``) and stands on
-        wheels: rays cross under it (``faces.passes_under``; a wall stands on the ground). Its body lies behind
-        the face, away from the sensor: as long as the shortest rigid vehicle behind an end, as
-        wide as ``ONE_SIDE_WIDTH_M`` behind a side, until more of it shows. Never without rays. With
-        frames to come an end alone waits for a side to show: a semitrailer's rear face is one too,
-        its tractor hidden ahead of it (seen from behind by paper `l2`, a Volvo pulling away started
-        as a 5.5 m rigid box for 2 s)."""
-        if end_face(rect) and not self._one_sweep():
-            return None
-        if self._rays is None or not (
-            vehicle_face(cluster, rect, ground_z_m) and self._tall_enough(cluster, ground_z_m, top_seen)
-        ):
-            return None
-        face, along, away = face_line(self._rays, cluster, rect)
-        if not passes_under(self._rays, cluster, face, along, rect.length_m / 2, ground_z_m):
-            return None
-        model, prior = self._behind_face(cluster, rect, face, along, away, seed, ground_z_m)
-        m = fit(thin(cluster, self.params.fit_max_points), prior, self.params, START_ITERATIONS, START_SCALE_M)
-        if m is None:
-            return None
-        if not self._allowed_to_start(seed, model, m, rigid_allowed):
-            return None
-        if not self._explains(m, model) or self._seen_through(m, model, ground_z_m):
-            return None
-        if not (end_face(rect) or low_at_both_ends(cluster, m, model.tractor, ground_z_m)):
-            return None  # a side standing on legs at one end: a semitrailer's
-        if not self._one_sweep() and not seed.moved(self.params.start_travel_m, self._rays):
-            return None  # a face's points come and go as things pass before it: where it was must be seen empty
-        return model, m
-
-    def _allowed_to_start(self, seed: Seed, model: VehicleModel, m: Measurement, rigid_allowed: bool) -> bool:
-        """Whether the seed, now fitted ``m`` with ``model``, may start: a rigid one once it (and its
-        first rigid fit, remembered here) moved and the map is ready (``_may_start``)."""
-        seed.rigid = not model.articulated
-        fit_moved = self._fit_moved(seed, m)
-        return fit_moved and self._may_start(seed, rigid_allowed)
-
-    def _explains(self, m: Measurement, model: VehicleModel) -> bool:
-        """The fit explains ``start_min_explained`` of its points (``hinged_fit.explained_share``)."""
-        return explained_share(m, model) >= self.params.start_min_explained
-
-    def _stands_on_wheels(
-        self, cluster: np.ndarray, m: Measurement, model: VehicleModel, ground_z_m: float, top_seen: bool
-    ) -> bool:
-        """Whether a start's fit stands on wheels where that is asked (``faces.unit_raised``): a rigid box
-        unless its roof shows (``faces.roof_shown``: one sweep of a 13 m wall with a short one across it
-        is a box of a coach's size, its top two lines; from a pole 7.5 m up, rays pass under a van
-        in a few columns only; in a yard a rigid start also needs its seed to have moved), an articulated one's trailer when
-        the sensors' view ends below its top and its points do not reach the heights ``_supported``
-        asks anyway (the heights that tell a trailer from a wall are not seen then: a round crown
-        beside a wall, seen with beams reaching 2 deg up, had started as a Volvo). Never without
-        rays."""
-        if self._rays is None:
-            return True
-        if not model.articulated:
-            if np.ptp(cluster[:, 2]) < UNIT_SUPPORT * model.tractor.height_m:
-                return False  # a plate of points at one height (a canopy, a gantry's deck) is no body
-            raised = roof_shown(cluster, m, model, ground_z_m) or unit_raised(
-                self._rays, cluster, m, model, 0, ground_z_m
-            )
-            body = low_at_both_ends(cluster, m, model.tractor, ground_z_m)
-            return raised and body and not faces_grounded(self._rays, cluster, m, model, 0, ground_z_m)
-        heights_shown = top_seen or _supported(m, model, ground_z_m)
-        return heights_shown or unit_raised(self._rays, cluster, m, model, 1, ground_z_m)
-
-    def _cab_grounded(self, cluster: np.ndarray, m: Measurement, model: VehicleModel, ground_z_m: float) -> bool:
-        """Whether an articulated fit's cab has a face reaching down to the ground
-        (``faces.unit_grounded``): a box set down before a parked trailer's front, a 10-ft
-        container, had started as its tractor in one sweep. Never without rays."""
-        return (
-            model.articulated and self._rays is not None and unit_grounded(self._rays, cluster, m, model, 0, ground_z_m)
-        )
-
-    def _behind_face(
-        self,
-        cluster: np.ndarray,
-        rect: Rect,
-        face: np.ndarray,
-        along: np.ndarray,
-        away: np.ndarray,
-        seed: Seed,
-        ground_z_m: float,
-    ) -> tuple[VehicleModel, Prior]:
-        """The rigid model of a one-face seed and its placement behind the face (``faces.face_line``),
-        along its travel if it moved (else facing the sensor from its end; along the face's line
-        from its side)."""
-        floor = face_foot(cluster, face, along, ground_z_m)
-        spread = (cluster[:, :2] - face) @ along
-        face = face + along * float(np.ptp(spread) / 2 + spread.min())  # the face's middle
-        height = float(cluster[:, 2].max() - ground_z_m) - floor
-        if end_face(rect):
-            model = VehicleModel.rigid("rigid", self.params.rigid_min_length_m, rect.length_m, height, floor)
-            axis, behind_m = -away, model.tractor.length_m / 2
-        else:
-            model = VehicleModel.rigid("rigid", rect.length_m, ONE_SIDE_WIDTH_M, height, floor)
-            axis, behind_m = along, ONE_SIDE_WIDTH_M / 2
-        travel = seed.center_xy - seed.first_xy
-        if np.hypot(*travel) > 0.3 and axis @ travel < 0:
-            axis = -axis
-        centre = face + away * behind_m
-        return model, Prior(*centre, float(np.arctan2(axis[1], axis[0])), 0.0, model, ground_z_m)
-
-    def _seen_through(self, m: Measurement, model: VehicleModel, ground_z_m: float) -> bool:
-        """Whether some unit of the fit is no solid body: more than ``SEEN_THROUGH_RATIO`` as many
-        rays crossed its box (``SOLID_INSET_M`` inside its faces) and ended beyond as ended on it
-        (within ``SOLID_INSET_M`` of its box). A parked trailer with a pole beside it had started
-        as a tractor bent at 34 degrees: the rays crossed the "cab" between pole and trailer."""
-        if self._rays is None:
-            return False
-        inset = SOLID_INSET_M
-        hitch = m.hitch_rad or 0.0
-        for centre, yaw, box in zip(
-            model.box_centers(m.x_m, m.y_m, m.yaw_rad, hitch), (m.yaw_rad, m.yaw_rad + hitch), model.boxes
-        ):
-            centre = tuple(centre)
-            half_l, half_w, floor, top = (
-                box.length_m / 2,
-                box.width_m / 2,
-                ground_z_m + box.floor_m,
-                ground_z_m + box.top_m,
-            )
-            through, _, _ = self._rays.through(
-                centre, yaw, half_l - inset, half_w - inset, (floor + inset, top - inset), GAP_SEEN_BEYOND_M
-            )
-            _, ended, _ = self._rays.through(
-                centre, yaw, half_l + inset, half_w + inset, (floor - inset, top + inset), GAP_SEEN_BEYOND_M
-            )
-            if through > SEEN_THROUGH_RATIO * ended:
-                return True
-        return False
-
-    def _hinge_shown(self, seed: Seed, m: Measurement, model: VehicleModel, ground_z_m: float) -> bool:
-        """Whether a straight articulated fit is two units: it moves (its seed moved
-        ``start_travel_m``, or it is a tracked vehicle's probe), or its gap was seen empty, or, in one
-        sweep, into (``_gap_looked_into``); a standing straight one may be a parked trailer with a
-        hole in its side (a pole's shadow). A rigid fit, or a bent one, needs neither. (Tried: the
-        motion of the fit's middle between cab front and trailer rear instead of the seed's centre;
-        a first fit of the seed merged with a dock wall put it elsewhere, and a 16 m vehicle
-        started 20 frames later on held-out seeds.)"""
-        if model.trailer is None or abs(m.hitch_rad) > GAP_TEST_MAX_HITCH_RAD:
-            return True
-        return (
-            seed.moved(self.params.start_travel_m)
-            or self._gap_seen_empty(m, model, ground_z_m)
-            or (self._one_sweep() and _gap_looked_into(seed.points, m, model, ground_z_m))
-        )
-
-    def _tall_enough(self, cluster: np.ndarray, ground_z_m: float, top_seen: bool) -> bool:
-        """As tall as some catalogue vehicle's higher unit, less ``LOW_SEED_SLACK_M`` (a Twizy is
-        car-sized, but its box trailer stands 2.85 m high), or its top not seen (``_at_view_top``)."""
-        tops = [max(box.top_m for box in model.boxes) for model in self.catalogue.values() if model.articulated]
-        return not top_seen or not tops or float(cluster[:, 2].max()) - ground_z_m >= min(tops) - LOW_SEED_SLACK_M
-
-    def _at_view_top(self, points: np.ndarray) -> bool:
-        """Whether some of ``points`` lie at the top of a sensor's view (within ``VIEW_TOP_TOLERANCE_RAD``
-        of the elevation of its sweep's highest return): what stands higher there is not seen, and
-        their height is a lower bound. Never without rays."""
-        return self._rays is not None and self._rays.at_view_top(points, VIEW_TOP_TOLERANCE_RAD)
-
-    def _two_units(
-        self, hypotheses, cluster: np.ndarray, seed: Seed, ground_z_m: float, top_seen: bool
-    ) -> tuple[VehicleModel, Measurement] | None:
-        """The cheapest supported articulated fit (either direction) if it shows an open gap between
-        cab and trailer and its hinge is shown (``_hinge_shown``: moving, or the gap seen empty):
-        driving straight and seen from one side, a tractor and an unknown trailer fit one box of
-        their measured size better than any catalogue model, and started rigid; the model the wrong
-        way round, its cab on a few trailer points, may cost less."""
-        fits = sorted((h for h in hypotheses if h[0].articulated and self._unfolded(h[2])), key=lambda h: h[2].cost)
-        model, _, m = next((h for h in fits if _supported(h[2], h[0], ground_z_m, top_seen)), (None, None, None))
-        if model is None or not _gap_open(cluster, m, model, ground_z_m):
-            return None
-        return (model, m) if self._hinge_shown(seed, m, model, ground_z_m) else None
-
-    def _gap_seen_empty(self, m: Measurement, model: VehicleModel, ground_z_m: float) -> bool:
-        """At least ``GAP_SEEN_MIN_RAYS`` rays crossed the middle of the model's gap (``_gap_counts``'
-        box, across between the sides the fit's points show next to it, ``_sides_at_gap``, less
-        ``GAP_SIDE_INSET_M`` each) and ended
-        ``GAP_SEEN_BEYOND_M`` beyond it: the gap is empty, not hidden (a standing seed's hole may be a
-        pole's shadow on a trailer's side)."""
-        if self._rays is None:
-            return False
-        start, length = _gap_middle(model)
-        sides = _sides_at_gap(m, model, start, length)
-        if sides is None:
-            return False
-        half_width = (sides[1] - sides[0]) / 2 - GAP_SIDE_INSET_M
-        if half_width <= 0.0:
-            return False
-        centre = np.array([m.x_m, m.y_m]) + rotate_xy((start + length / 2, (sides[0] + sides[1]) / 2), m.yaw_rad)
-        low, high = _gap_band(model)
-        seen, _, _ = self._rays.through(
-            tuple(centre), m.yaw_rad, length / 2, half_width, (ground_z_m + low, ground_z_m + high), GAP_SEEN_BEYOND_M
-        )
-        return seen >= GAP_SEEN_MIN_RAYS
-
-    def _articulated_choices(self, hypotheses) -> list[tuple[VehicleModel, Measurement]]:
-        """Each catalogue model's cheapest fit, cheapest first, none folded beyond the start limit."""
-        best: dict[str, tuple[VehicleModel, Measurement]] = {}
-        for model, _, m in hypotheses:
-            if model.articulated and (model.name not in best or m.cost < best[model.name][1].cost):
-                best[model.name] = (model, m)
-        return sorted((c for c in best.values() if self._unfolded(c[1])), key=lambda c: c[1].cost)
-
-    def _unfolded(self, m: Measurement) -> bool:
-        return abs(m.hitch_rad) <= np.radians(self.params.start_max_hitch_deg)
 
     def _track(
         self,
@@ -1533,7 +984,7 @@ class VehicleTracker:
         if model.trailer is not None:
             length = self._start_length(model, m, m.points if points is None else points, ground_z_m)
             if length.prior != model.trailer.length_m:  # the catalogue's, longer than the points reach
-                model = _with_trailer_length(model, length.prior)
+                model = with_trailer_length(model, length.prior)
             hinge_prior, reach = _hinge_priors(model, window)
         return _Track(
             track_id,
@@ -1554,14 +1005,14 @@ class VehicleTracker:
     def _start_length(self, model: VehicleModel, m: Measurement, points: np.ndarray, ground_z_m: float) -> _Extent:
         """The trailer's length as the start fit ``m`` of ``points`` shows it (``model`` carries it):
         measured where it saw the rear face; else the trailer reaches at least as far as its points
-        do (``_trailer_reach``), and the catalogue's longer length stands until the end shows (a MAN
+        do (``unit_frames.trailer_reach``), and the catalogue's longer length stands until the end shows (a MAN
         entering the region, its rear beyond it, was named ``unknown`` with the 11.1 m its points
         reached, for 8 s)."""
         window, length_m = self.params.dimension_window, model.trailer.length_m
         seen_end = m.rear_points >= REAR_FACE_MIN_POINTS  # the start fit saw where the trailer ends
         listed = self.catalogue.get(model.name)
         if not seen_end and m.trailer_length_m is not None and listed is not None:
-            reach = self._trailer_reach(m, model, points, ground_z_m)
+            reach = trailer_reach(m, model, points, ground_z_m, self.params.fit_inlier_m)
             length = _Extent(max(reach, listed.trailer.length_m), window)
             length.add_bound(reach)
             return length
@@ -1570,42 +1021,23 @@ class VehicleTracker:
             length.add(length_m)
         return length
 
-    def _trailer_reach(self, m: Measurement, model: VehicleModel, points: np.ndarray, ground_z_m: float) -> float:
-        """How far behind the trailer's front the start's ``points`` on its body (within its width
-        and height band, reached from the front without a gap longer than ``MAX_BODY_GAP_M``) reach
-        at the fit ``m``, at most the fitted length: with no rear face, the fitted length is held by
-        nothing beyond them (a standing MAN's start kept 14.81 m, its points reaching 13.6, the true
-        13.68, and it was named ``unknown`` for 2.6 s). All the start's points, not the fit's thinned
-        sample: its hindmost lies up to 1.2 m short (``_side_end``)."""
-        trailer = model.trailer
-        q = trailer_frame(points, m.vector, model)
-        on_body = (
-            (np.abs(q[:, 1]) <= trailer.width_m / 2 + self.params.fit_inlier_m)
-            & _body_heights(points[:, 2] - ground_z_m, trailer)
-            & (q[:, 0] <= trailer.front_m)
-        )
-        if not on_body.any():
-            return trailer.length_m
-        hindmost = _reached_back(float(q[on_body, 0].max()), q[on_body, 0])
-        return float(min(trailer.front_m - hindmost, trailer.length_m))
-
     def _recheck_rigid(self, track: _Track, points: np.ndarray, free: np.ndarray, stamp_s: float) -> _Track:
         """A rigid track is fitted again as every model every ``RECHECK_FRAMES`` frames while it
         moves: a tractor and trailer driving straight can look like one long box, a hinge shows
         later (it becomes articulated, with its id). Fitted with the unclaimed points connected to
-        its own (``_with_connected``): a MAN that came into one LiDAR's view cab first started as a
+        its own (``VehicleStarts.with_connected``): a MAN that came into one LiDAR's view cab first started as a
         rigid box 7.6 m long, which claimed no more of it, and its trailer's side stayed outside."""
         track.frames += 1
         s = track.filter.state
         if track.model.articulated or track.frames % RECHECK_FRAMES or abs(s.speed_m_s) < RECHECK_MIN_SPEED_M_S:
             return track
-        points = self._with_connected(points, free, track.ground_z_m)
+        points = self.starts.with_connected(points, free, track.ground_z_m)
         heading = np.array([np.cos(s.yaw_rad), np.sin(s.yaw_rad)]) * np.sign(s.speed_m_s)
         here = np.array([s.x_m, s.y_m])
         probe = Seed(here, here - heading, moving=True)  # the direction of travel, for a tie between the two ends
         rect = min_area_rect(points[:, :2])
-        top_seen = not self._at_view_top(points)
-        chosen = self._candidate(points, rect, probe, track.ground_z_m, False, top_seen)
+        top_seen = not self.starts.at_view_top(points)
+        chosen = self.starts.candidate(points, rect, probe, track.ground_z_m, False, top_seen)
         if chosen is None:
             return track
         model, m = chosen
@@ -1614,279 +1046,6 @@ class VehicleTracker:
         self._learn_at_start(new, points, m)
         self.tracks[self.tracks.index(track)] = new
         return new
-
-    def _with_connected(self, points: np.ndarray, free: np.ndarray, ground_z_m: float) -> np.ndarray:
-        """``points`` and the ``free`` points in the start's clusters (``seed_group_rows``) that hold some of them."""
-        if len(free) == 0 or len(points) == 0:
-            return points
-        p = self.params
-        both = _in_grid_precision(np.vstack([points, free]))
-        groups = seed_group_rows(
-            both, lambda x, y: ground_z_m, p.start_voxel_m, p.start_min_height_m, 1, p.start_join_m, 0.0
-        )
-        holding = [rows for rows in groups if (rows < len(points)).any()]  # rows below len(points) are its own
-        return both[np.concatenate(holding)] if holding else points
-
-    def _hypotheses(
-        self, cluster: np.ndarray, rect: Rect, ground_z_m: float, may_be_rigid: bool, top_seen: bool
-    ) -> list[tuple[VehicleModel, float, Measurement]]:
-        """(model, direction sign, fit) of every catalogue vehicle in both directions (best start hitch
-        each) and, if ``may_be_rigid``, of one rigid box of the cluster's measured size, placed on
-        its footprint and, in one sweep, on the footprint its points hug when that differs
-        (``faces.l_shaped``). All are fitted to the same thinned points (their costs are compared)."""
-        sample = thin(cluster, self.params.fit_max_points)
-        out = []
-        # with frames to come, an L-shaped hull is more often a vehicle partly hidden than seen from
-        # a car: a reversing trailer's visible end, fitted a rigid box on its L, started as one
-        # (25 false vehicle-s on held-out paper +500); it waits for more of it to show
-        footprints = [rect, *l_shaped(cluster, rect)] if self._one_sweep() else [rect]
-        for footprint in footprints:
-            for model in self.catalogue.values():
-                out += self._catalogue_fits(sample, cluster, footprint, model, ground_z_m, top_seen)
-            height = float(cluster[:, 2].max() - ground_z_m)
-            # a wall, a hedge or a building is no rigid vehicle, nor anything longer than a coach
-            if may_be_rigid and RIGID_MIN_WIDTH_M <= footprint.width_m and height <= MAX_VEHICLE_HEIGHT_M:
-                out += self._rigid_fits(sample, footprint, height, ground_z_m)
-        return out
-
-    def _catalogue_fits(
-        self,
-        sample: np.ndarray,
-        cluster: np.ndarray,
-        rect: Rect,
-        model: VehicleModel,
-        ground_z_m: float,
-        top_seen: bool,
-    ) -> list[tuple[VehicleModel, float, Measurement]]:
-        """``model`` placed on the footprint ``rect`` in both directions: per direction the best of the
-        start hitches, refined with the trailer's length fitted too. Each direction in turn, if its fit
-        costs more than the other's as it stands, is placed again on the other's body (the rectangle
-        around its boxes) and kept if it costs less there; a direction bettered first so gives the
-        other a place on its new body (decided from the first fits alone, generalization `l1`+`l3`
-        kept 8.4 false vehicle-s). A MAN seen by paper `l2` 25 m away, its group's rectangle 2 m
-        off its axis, converged 3 m aside the right way round at four times the cost of the wrong
-        way round (its cab on the trailer's rear), started driving backwards and was 14 m off for
-        12 s."""
-        out = {
-            sign: self._direction_fit(sample, cluster, rect, model, sign, ground_z_m, top_seen) for sign in (1.0, -1.0)
-        }
-        for sign in (1.0, -1.0):
-            mine, other = out[sign], out[-sign]
-            if mine is None or other is None or other[2].cost >= mine[2].cost:
-                continue
-            body = _body_footprint(other[2], other[0], rect.yaw_rad)
-            again = self._direction_fit(sample, cluster, body, model, sign, ground_z_m, top_seen)
-            if again is not None and again[2].cost < mine[2].cost:
-                out[sign] = again
-        return [fitted for fitted in out.values() if fitted is not None]
-
-    def _direction_fit(
-        self,
-        sample: np.ndarray,
-        cluster: np.ndarray,
-        rect: Rect,
-        model: VehicleModel,
-        sign: float,
-        ground_z_m: float,
-        top_seen: bool,
-    ) -> tuple[VehicleModel, float, Measurement] | None:
-        """``model`` placed on ``rect`` one way round (``_catalogue_fits``) at each start hitch, its
-        footprint centred on the rectangle, and its cab on the rectangle's end (``_placed``), behind
-        the side the nearest sensor sees: the cheapest of each placement refined, the cheaper
-        of the two kept (``_refined``). (The cheapest coarse fit of all, refined: a Twizy standing
-        at its dock, its group widened by the dock, came out 38 deg off from its cab placed on the
-        group's end, where centred it had been right, and started 8 frames late.) In one sweep
-        (``detect``) centred only, not moved from the sensor, not nudged: a start there is final,
-        and on real KITTI sweeps the wider search fitted a MAN folded 46 deg to a row of parked
-        cars that passed every check (two false vehicles in 32 sweeps, none before)."""
-        one_sweep = self._one_sweep()
-        away = None if one_sweep or self._rays is None else away_from_sensor(self._rays, rect)
-        longer = _as_long_as(model, rect.length_m)
-        refined = []
-        for at_front in (False,) if one_sweep else (False, True):
-            starts = [(model, h) for h in START_HITCHES_DEG]
-            if longer is not model and not at_front:  # a longer trailer centred would put the cab on its front
-                starts.append((longer, 0.0))
-            coarse = [
-                fit(
-                    sample,
-                    _placed(placed, rect, sign, np.radians(h), ground_z_m, at_front, away),
-                    self.params,
-                    COARSE_ITERATIONS,
-                    START_SCALE_M,
-                )
-                for placed, h in starts
-            ]
-            coarse = [m for m in coarse if m is not None]
-            if coarse:
-                best = min(coarse, key=lambda m: m.cost)
-                refined.append(self._refined(sample, best, model, ground_z_m, nudge=not one_sweep))
-        if not refined:
-            return None
-        m = min(refined, key=lambda m: m.cost)
-        if not _supported(m, _with_trailer_length(model, m.trailer_length_m), ground_z_m, top_seen):
-            # once more on a sample that keeps its tractor's points (thin_by_unit): the even sample
-            # of a reversing MAN whose cab hid behind its trailer kept 3 of its 60 cab points, and
-            # the fit at the right hitch was not supported for 80 frames
-            again = fit(cluster, _sized_start(m, model, ground_z_m), self.params, START_ITERATIONS, START_SCALE_M)
-            m = m if again is None else again
-        return _with_trailer_length(model, m.trailer_length_m), sign, m
-
-    def _refined(
-        self, sample: np.ndarray, coarse: Measurement, model: VehicleModel, ground_z_m: float, nudge: bool = True
-    ) -> Measurement:
-        """The coarse fit refined with the trailer's length fitted too, then again from its hitch
-        ``START_NUDGE_RAD`` either way, the cheaper kept each time: the start hitches lie 30 deg
-        apart, and a refined fit can settle in the valley of the cab's points with the trailer a few
-        degrees off its side (an unknown 13.6 m trailer entering `l3`'s view, 10 deg off at 1.8 times
-        the cost of the fit 5 deg away; the held-out 16 m lane change seen by `l1` started the wrong
-        way round, 19 false vehicle-s)."""
-        m = fit(sample, _sized_start(coarse, model, ground_z_m), self.params, START_ITERATIONS, START_SCALE_M)
-        for step in (-START_NUDGE_RAD, START_NUDGE_RAD) if nudge else ():
-            turned = replace(m, hitch_rad=m.hitch_rad + step)
-            again = fit(sample, _sized_start(turned, model, ground_z_m), self.params, START_ITERATIONS, START_SCALE_M)
-            if again is not None and again.cost < m.cost:
-                m = again
-        return m
-
-    def _rigid_fits(
-        self, sample: np.ndarray, rect: Rect, height_m: float, ground_z_m: float
-    ) -> list[tuple[VehicleModel, float, Measurement]]:
-        """One rigid box of the footprint's size in both directions, fitted again on the footprint of
-        the points its fit explains when that is another, if it explains them better (a bollard
-        beside a nuScenes truck turned its group's rectangle 10 deg and widened it by 0.3 m: the
-        box reached past the truck's corner, and rays crossed it there)."""
-        out = []
-        for sign in (1.0, -1.0):
-            fitted = self._rigid_fit(sample, rect, rect.yaw_rad + (0.0 if sign > 0 else np.pi), height_m, ground_z_m)
-            if fitted is None:
-                continue
-            own = _explained_footprint(fitted[1], self.params.fit_min_points)
-            if own is not None and not _same_size(own, rect):
-                again = self._rigid_fit(sample, own, fitted[1].yaw_rad, height_m, ground_z_m)
-                fitted = again if again is not None and again[1].cost <= fitted[1].cost else fitted
-            out.append((fitted[0], sign, fitted[1]))
-        return out
-
-    def _rigid_fit(
-        self, sample: np.ndarray, rect: Rect, heading_rad: float, height_m: float, ground_z_m: float
-    ) -> tuple[VehicleModel, Measurement] | None:
-        """A rigid box of ``rect``'s size fitted from its centre, along its axis the way ``heading_rad`` points."""
-        rigid = VehicleModel.rigid("rigid", rect.length_m, rect.width_m, height_m)
-        yaw = rect.yaw_rad + (0.0 if np.cos(rect.yaw_rad - heading_rad) >= 0.0 else np.pi)
-        prior = Prior(*rect.center_xy, yaw, 0.0, rigid, ground_z_m)
-        m = fit(sample, prior, self.params, START_ITERATIONS, START_SCALE_M)
-        return None if m is None else (rigid, m)
-
-    def _choose(
-        self, hypotheses, seed: Seed, ground_z_m: float, top_seen: bool
-    ) -> list[tuple[VehicleModel, Measurement]]:
-        """The best-explaining model, in the order its two directions are to be checked: the cheaper
-        fit alone, or, when both cost alike, the direction of travel first and then the other (the
-        start's checks decide then: a Volvo beside a dock's wall, its cheaper direction's gap
-        filled by the wall, waited 44 frames for its other direction to come out cheaper). In one
-        sweep (``start_travel_m`` 0: no next frame to wait for), where a rigid box explains the
-        points (``start_min_explained``), an articulated fit they do not support is no contender:
-        the side and end of a 9 m bus lie on the faces of a 16.5 m MAN as well as on its own box's.
-        With frames to come, an unsupported cheapest fit waits for more of the vehicle to show (so
-        asked in every start, a reversing trailer whose tractor hid behind it started as a rigid
-        vehicle: 25 false vehicle-s on held-out paper +500; its unit hidden there is not seen
-        through, either, nor the MAN's beyond the bus)."""
-        articulated = [h for h in hypotheses if h[0].articulated]
-        rigid = [h for h in hypotheses if not h[0].articulated]
-        if self._one_sweep() and any(self._explains(h[2], h[0]) for h in rigid):
-            articulated = [h for h in articulated if _supported(h[2], h[0], ground_z_m, top_seen)]
-        best_art = min(articulated, key=lambda h: h[2].cost, default=None)
-        best_rigid = min(rigid, key=lambda h: h[2].cost, default=None)
-        if best_art is not None and (best_rigid is None or best_art[2].cost < RIGID_COST_RATIO * best_rigid[2].cost):
-            if abs(best_art[2].hitch_rad) > np.radians(self.params.start_max_hitch_deg):
-                return []  # it looks jack-knifed: a parked trailer beside a container, more likely
-            # the other way round may be folded further (a container's end started as a car-sized
-            # cab folded 170 deg onto its trailer, its unfolded way not supported)
-            pool = [h for h in articulated if h[0].name == best_art[0].name and self._unfolded(h[2])]
-        else:
-            pool = [h for h in rigid if h[0].tractor.length_m >= self.params.rigid_min_length_m]
-        pool.sort(key=lambda h: h[2].cost)
-        if len(pool) < 2 or pool[0][2].cost <= DIRECTION_COST_RATIO * pool[1][2].cost:
-            return [(h[0], h[2]) for h in pool[:1]]
-        pair = pool[:2]
-        travel = seed.center_xy - seed.first_xy
-        if np.hypot(*travel) > 0.3:
-            heading = [np.array([np.cos(h[2].yaw_rad), np.sin(h[2].yaw_rad)]) @ travel for h in pair]
-            pair = pair[::-1] if heading[1] > heading[0] else pair
-        return [(h[0], h[2]) for h in pair]
-
-    def _rigid_after(self, choices, hypotheses) -> list[tuple[VehicleModel, Measurement]]:
-        """In one sweep, after articulated ``choices``, the cheapest rigid box of the ``hypotheses``
-        long enough that explains the points: tried if the start's checks refute the two units, as
-        no frame to come will show more (a nuScenes rigid truck was fitted best as a Volvo with a
-        3.7 m trailer, seen through, and nothing was reported)."""
-        if not (self._one_sweep() and choices and choices[0][0].articulated):
-            return []
-        rigid = [
-            h for h in hypotheses if not h[0].articulated and h[0].tractor.length_m >= self.params.rigid_min_length_m
-        ]
-        best = min(rigid, key=lambda h: h[2].cost, default=None)
-        return [(best[0], best[2])] if best is not None and self._explains(best[2], best[0]) else []
-
-
-def _explained_footprint(m: Measurement, min_points: int) -> Rect | None:
-    """The smallest rectangle around the points the fit ``m`` explains, if there are ``min_points``."""
-    explained = m.points[m.explained, :2]
-    return min_area_rect(explained) if len(explained) >= min_points else None
-
-
-def _body_footprint(m: Measurement, model: VehicleModel, along_rad: float) -> Rect:
-    """The smallest rectangle around the fit's unit boxes, its yaw the way of ``along_rad`` (the
-    directions placed on it are those placed on the rectangle of that yaw)."""
-    hitch = m.hitch_rad or 0.0
-    centres = model.box_centers(m.x_m, m.y_m, m.yaw_rad, hitch)
-    corners = [
-        box_corners(centre, box.length_m, box.width_m, m.yaw_rad + hitch * u)
-        for u, (centre, box) in enumerate(zip(centres, model.boxes))
-    ]
-    body = min_area_rect(np.vstack(corners))
-    return body if np.cos(body.yaw_rad - along_rad) >= 0.0 else replace(body, yaw_rad=body.yaw_rad + np.pi)
-
-
-def _same_size(a: Rect, b: Rect) -> bool:
-    return abs(a.length_m - b.length_m) <= REFIT_SIZE_CHANGE_M and abs(a.width_m - b.width_m) <= REFIT_SIZE_CHANGE_M
-
-
-def _bent_against(m: Measurement, best: Measurement) -> bool:
-    """Whether the fit ``m`` bends more than ``START_BEND_TOLERANCE_RAD`` further than ``best``, the
-    cheapest catalogue model's: a straighter fit explaining the points better shows a straighter
-    body (parked 16 m trailers, fitted best by a MAN straight, its gap filled or its cab's box seen
-    through, started as Volvos bent 32-34 deg on them at eight times the cost: 14 s of false
-    vehicle). Not the other way: a cheapest fit bent 12 deg and seen through was a misfit of an
-    unknown 13.6 m trailer, a MAN's straight fit the right one."""
-    return abs(m.hitch_rad or 0.0) - abs(best.hitch_rad or 0.0) > START_BEND_TOLERANCE_RAD
-
-
-def _bent_flags(fits: list[Measurement]) -> list[bool]:
-    """Which of the start's ``fits`` bend further than the cheapest of them (``_bent_against``),
-    whatever order they are tried in: the direction of travel first put a reversing MAN's wrong way
-    round first, straight, its "cab" on the trailer's rear, and the right way, bent 28 deg with its
-    cab hidden and 0.8 times the cost, no longer waited for (paper `l3`: 11.4 false vehicle-s)."""
-    cheapest = min(fits, key=lambda m: m.cost, default=None)
-    return [_bent_against(m, cheapest) for m in fits]
-
-
-def _waits_for(m: Measurement, waiting: list[Measurement]) -> bool:
-    """Whether the fit ``m`` waits for one of the ``waiting`` fits that only lack points yet (not
-    supported, nor ``_refuted``): one the other way round that ``m`` does not undercut by
-    ``DIRECTION_COST_RATIO``. Which of two directions that cost alike starts is then left to
-    the points to come (``_candidate`` lets a fit whose gap shows start), not to the order they
-    were tried in (the direction of travel first: a reversing MAN seen by paper `l3`, its cab
-    hidden, started the wrong way round, its "cab" on the trailer's rear, at 0.92 times the cost
-    of the right way)."""
-    return any(not _same_way(m, w) and m.cost > DIRECTION_COST_RATIO * w.cost for w in waiting)
-
-
-def _same_way(a: Measurement, b: Measurement) -> bool:
-    """Whether two fits' mean axes (between tractor and trailer) point the same way."""
-    axis = [m.yaw_rad + (m.hitch_rad or 0.0) / 2 for m in (a, b)]
-    return bool(np.cos(axis[0] - axis[1]) > 0.0)
 
 
 def _trailer_hidden(m: Measurement) -> bool:
@@ -1964,45 +1123,9 @@ def _changed(obj, **values):
     return replace(obj, **values)
 
 
-def _body_band(trailer: Box) -> tuple[float, float]:
-    """The heights above the ground within ``END_BAND_M`` of the trailer body's floor to roof."""
-    return trailer.floor_m - END_BAND_M, trailer.top_m + END_BAND_M
-
-
-def _reached_back(start_m: float, along: np.ndarray, gap_m: float = MAX_BODY_GAP_M) -> float:
-    """The hindmost of the positions ``along`` a unit (its frame's x) reached from ``start_m`` backwards
-    without a gap longer than ``gap_m``; ``start_m`` if none is."""
-    behind = np.sort(along[along <= start_m])[::-1]
-    gaps = np.flatnonzero(-np.diff(np.r_[start_m, behind]) > gap_m)
-    reached = behind[: gaps[0]] if len(gaps) else behind
-    return float(reached[-1]) if len(reached) else start_m
-
-
-def _body_heights(z_rel: np.ndarray, trailer: Box) -> np.ndarray:
-    """Which heights above the ground (``z_rel``) lie in the trailer body's band (``_body_band``)."""
-    low, high = _body_band(trailer)
-    return (z_rel >= low) & (z_rel <= high)
-
-
 def _start_covariance(m: Measurement) -> np.ndarray:
     """A start fit's covariance widened by ``START_SIGMAS`` (the seed's points are not de-skewed)."""
     return m.covariance + np.diag(START_SIGMAS[: len(m.vector)] ** 2)
-
-
-def _sized_start(m: Measurement, model: VehicleModel, ground_z_m: float) -> Prior:
-    """A start fit's refinement from ``m``: ``model`` with the trailer's length ``m`` fitted, the
-    length fitted again."""
-    return _free_length_at(m, model, m.trailer_length_m, ground_z_m, hypothesis=True)
-
-
-def _free_length_at(
-    m: Measurement, model: VehicleModel, length_m: float, ground_z_m: float, hypothesis: bool = False
-) -> Prior:
-    """At the pose of the fit ``m``: ``model`` with its trailer ``length_m`` long, the length free."""
-    sized = _with_trailer_length(model, length_m)
-    return Prior(
-        m.x_m, m.y_m, m.yaw_rad, m.hitch_rad, sized, ground_z_m, free_trailer_length=True, hypothesis=hypothesis
-    )
 
 
 def _on_trailer_axis(m: Measurement, model: VehicleModel, x_m: float) -> np.ndarray:
@@ -2018,7 +1141,7 @@ def _own_body(points: np.ndarray, owner: np.ndarray, i: int, prior: Prior) -> tu
     body (``END_BAND_M / 2`` ahead of its rear face or more): its rear end is not seen then."""
     if prior.model.trailer is None:
         return prior, False
-    mine, q = kernels.owned_to_frame(points, owner, i, *_frame_args(*_unit_origins(prior.vector, prior.model)[1]))
+    mine, q = kernels.owned_to_frame(points, owner, i, *frame_args(*unit_origins(prior.vector, prior.model)[1]))
     prior, beyond = _beyond_gap(q, prior)
     if beyond is not None:
         owner[mine[beyond]] = -1
@@ -2127,26 +1250,6 @@ def _sides_along(q: np.ndarray, m: Measurement, unit: int, box: Box) -> bool:
     return True
 
 
-def _face_seen(m: Measurement, model: VehicleModel, unit: int, face: int, ground_z_m: float, top_band_m: float) -> bool:
-    """Whether the fit's points show one of a unit's end faces, as the trailer's rear face is
-    shown: two or more across its middle (within a quarter of the width of its axis), all of them
-    spanning ``FACE_SEEN_SPAN`` of its width. A face's corners are no face: two or three points at
-    a trailer's front corners, the ends of its sides, passed for its front face, and the reach
-    measured on them came out 0.37-0.42 m short (the trailer's box 0.2-0.3 m back for seconds).
-    Nor is the edge of a roof running on past the face (points in the unit's roof band, within
-    ``top_band_m`` of its top above the ground at ``ground_z_m``): a trailer's roof seen from a pole,
-    its box pulled back 0.3-0.9 m by a dock's door behind it, passed for its front face, and the
-    reach learned on it put the trailer 1 m back. ``model``: the one the fit ``m`` was made with
-    (its unit's axis is the middle)."""
-    roof_below = ground_z_m + model.boxes[unit].top_m - top_band_m
-    on = (m.unit == unit) & (m.face == face) & (m.points[:, 2] < roof_below)
-    if np.count_nonzero(on) < 2:
-        return False
-    across = unit_frames(m.points[on], m.vector, model)[unit][:, 1]
-    width = model.boxes[unit].width_m
-    return np.count_nonzero(np.abs(across) <= width / 4) >= 2 and float(np.ptp(across)) >= FACE_SEEN_SPAN * width
-
-
 def _shift_along_m(before: VehicleModel, after: VehicleModel) -> float:
     """How far a model change moves a unit's faces along the vehicle relative to the tractor's
     reference point (the fronts, the cab's rear and the kingpin; a trailer's length moves only its
@@ -2157,316 +1260,6 @@ def _shift_along_m(before: VehicleModel, after: VehicleModel) -> float:
         shifts.append(abs(after.kingpin_behind_axle_m - before.kingpin_behind_axle_m))
         shifts.append(abs(after.trailer.front_m - before.trailer.front_m))
     return max(shifts)
-
-
-def _supported(m: Measurement, model: VehicleModel, ground_z_m: float, top_seen: bool = True) -> bool:
-    """Each unit's explained points span at least ``UNIT_SUPPORT`` of its length, reach
-    ``UNIT_SUPPORT`` of its height above its floor (a car's side on a trailer's faces is no truck;
-    unless the sensors' view ends below: ``top_seen`` False)
-    and the cab's are at least ``UNIT_SUPPORT`` of its share of the side area (a parked trailer's
-    landing gear is no tractor; a trailer's side seen along it from afar has a fifth of the points
-    of its cab seen near, yet spans its length and height: asked of the trailer too, a MAN seen by
-    one LiDAR was tracked as a rigid box 4.3 m off for 7 s), and at most ``UNIT_SUPPORT`` of them
-    lie below its floor (a row of kerbs and parked cars with a lamp post among them is no trailer)."""
-    boxes = model.boxes
-    z_rel = m.points[:, 2] - ground_z_m
-    areas = np.array([box.length_m * box.height_m for box in boxes])
-    explained = max(int(np.sum(m.unit >= 0)), 1)
-    for u, (box, q) in enumerate(zip(boxes, unit_frames(m.points, m.vector, model))):
-        mine = m.unit == u
-        if (
-            mine.sum() < 3
-            or (u == 0 and mine.sum() / explained < UNIT_SUPPORT * areas[u] / areas.sum())
-            or np.ptp(q[mine, 0]) < UNIT_SUPPORT * box.length_m
-            or (top_seen and z_rel[mine].max() < box.floor_m + UNIT_SUPPORT * box.height_m)
-            or np.mean(z_rel[mine] < box.floor_m) > UNIT_SUPPORT
-        ):
-            return False
-    return True
-
-
-def _gap_filled(cluster: np.ndarray, m: Measurement, model: VehicleModel, ground_z_m: float) -> bool:
-    """A straight articulated vehicle seen from the side shows a gap between the cab's rear and the
-    trailer's front above the chassis; a wall or a parked trailer's side runs on through it. The
-    middle half of the gap, between the trailer's floor and the lower roof, holds more than
-    ``GAP_FILL_RATIO`` times the points per metre of a slice of the cab just ahead of it (of at least
-    ``GAP_MIN_POINTS``)."""
-    counts = _gap_counts(cluster, m, model, ground_z_m)
-    return counts is not None and counts[1] >= GAP_MIN_POINTS and counts[0] > GAP_FILL_RATIO * counts[1] * counts[2]
-
-
-def _gap_open(cluster: np.ndarray, m: Measurement, model: VehicleModel, ground_z_m: float) -> bool:
-    """The gap's middle (``_gap_filled``) holds at most ``GAP_OPEN_RATIO`` times the points per metre
-    of the cab's slice, of at least ``GAP_OPEN_MIN_POINTS``: two units, not one long box."""
-    counts = _gap_counts(cluster, m, model, ground_z_m)
-    return (
-        counts is not None and counts[1] >= GAP_OPEN_MIN_POINTS and counts[0] <= GAP_OPEN_RATIO * counts[1] * counts[2]
-    )
-
-
-def _gap_looked_into(cluster: np.ndarray, m: Measurement, model: VehicleModel, ground_z_m: float) -> bool:
-    """At least ``GAP_LOOKED_MIN_POINTS`` of the points between the cab's rear and the trailer's front
-    (``GAP_FACE_MARGIN_M`` either way), at the gap's heights, lie ``GAP_SIDE_INSET_M`` inside the sides the
-    fit shows there (``_sides_at_gap``): a face across the body, the cab's rear or the trailer's
-    front, seen through the gap's opening. Seen at a slant from a car, a straight MAN's 0.7 m gap
-    lets no ray through (it needs one within 15 deg of square to it), but shows the face behind
-    it; a parked trailer's side with a pole's shadow on it shows none."""
-    trailer_front = model.trailer.front_m - model.kingpin_behind_axle_m
-    start, length = _gap_middle(model)
-    sides = _sides_at_gap(m, model, start, length)
-    if sides is None:
-        return False
-    (q,) = unit_frames(cluster, m.vector, model.with_boxes(model.tractor, None))
-    z_rel = cluster[:, 2] - ground_z_m
-    low, high = _gap_band(model)
-    inside = (
-        (q[:, 0] >= trailer_front - GAP_FACE_MARGIN_M)
-        & (q[:, 0] <= model.tractor.rear_m + GAP_FACE_MARGIN_M)
-        & (q[:, 1] >= sides[0] + GAP_SIDE_INSET_M)
-        & (q[:, 1] <= sides[1] - GAP_SIDE_INSET_M)
-        & (z_rel >= low)
-        & (z_rel <= high)
-    )
-    return int(np.count_nonzero(inside)) >= GAP_LOOKED_MIN_POINTS
-
-
-def _gap_counts(
-    cluster: np.ndarray, m: Measurement, model: VehicleModel, ground_z_m: float
-) -> tuple[int, int, float] | None:
-    """Points in the middle half of the model's gap between cab and trailer, in a slice of the cab
-    just ahead of it (as long, at least ``CAB_SLICE_MIN_M``: a gap of a metre leaves a slice of half
-    a metre, a handful of points) between the trailer's floor and the lower roof, within the cab's
-    width and ``END_BAND_M`` beyond its sides, and the gap's length over the slice's; None unless
-    articulated and nearly straight."""
-    if model.trailer is None or abs(m.hitch_rad) > GAP_TEST_MAX_HITCH_RAD:
-        return None
-    start, length = _gap_middle(model)
-    if length <= 0.0:
-        return None
-    cab_rear = model.tractor.rear_m
-    slice_m = max(length, CAB_SLICE_MIN_M)
-    (q,) = unit_frames(cluster, m.vector, model.with_boxes(model.tractor, None))
-    z_rel = cluster[:, 2] - ground_z_m
-    low, high = _gap_band(model)
-    # the cab's sides count with their surface: a parked trailer's side running on through the
-    # "gap" lay just outside the model's cab width and left the gap empty (held-out seeds)
-    band = (np.abs(q[:, 1]) <= model.tractor.width_m / 2 + END_BAND_M) & (z_rel >= low) & (z_rel <= high)
-    in_gap = int(np.sum(band & (q[:, 0] >= start) & (q[:, 0] <= start + length)))
-    in_cab = int(np.sum(band & (q[:, 0] >= cab_rear) & (q[:, 0] <= cab_rear + slice_m)))
-    return in_gap, in_cab, length / slice_m
-
-
-def _sides_at_gap(m: Measurement, model: VehicleModel, start_m: float, length_m: float) -> tuple[float, float] | None:
-    """The extent across (tractor frame, within the cab's width) of the fit's explained points within
-    ``GAP_SIDES_REACH_M`` ahead of and behind the gap's middle: the body's sides there. Rays running
-    along a parked trailer's side 0.1 m outside it, inside the wider box of the MAN cab fitted to its
-    front, had shown the "gap" behind that cab empty (a false vehicle for 20 s, generalization suite)."""
-    (q,) = unit_frames(m.points, m.vector, model.with_boxes(model.tractor, None))
-    half = model.tractor.width_m / 2
-    near = (
-        (m.unit >= 0) & (q[:, 0] >= start_m - GAP_SIDES_REACH_M) & (q[:, 0] <= start_m + length_m + GAP_SIDES_REACH_M)
-    )
-    if not near.any():
-        return None
-    return max(float(q[near, 1].min()), -half), min(float(q[near, 1].max()), half)
-
-
-def _gap_middle(model: VehicleModel) -> tuple[float, float]:
-    """Where the middle half of the gap between the trailer's front and the cab's rear begins along
-    the tractor's frame at hitch 0, and its length (not positive: no gap)."""
-    trailer_front = model.trailer.front_m - model.kingpin_behind_axle_m
-    length = (model.tractor.rear_m - trailer_front) / 2
-    return trailer_front + length / 2, length
-
-
-def _gap_band(model: VehicleModel) -> tuple[float, float]:
-    """The heights above the ground of the gap test: above the trailer's floor, below the lower roof."""
-    return model.trailer.floor_m + END_BAND_M, min(model.tractor.top_m, model.trailer.top_m) - END_BAND_M
-
-
-def _below_tall_structures(points: np.ndarray, ground, cell_m: float) -> np.ndarray:
-    """``points`` without the ``cell_m`` columns that reach higher than any vehicle: a dock wall, a
-    building or a tree's crown (before the background map is learned, a trailer standing at a dock
-    is one component with the wall)."""
-    if len(points) == 0:
-        return points
-    above = points[:, 2] - ground_heights(ground, points[:, :2]) > MAX_VEHICLE_HEIGHT_M
-    if np.count_nonzero(above) < TALL_COLUMN_MIN_POINTS:
-        return points
-    columns = voxel_keys(np.floor(points[:, :2] / cell_m), 1.0)  # the cells of a grid through the origin
-    _, index = np.unique(columns, return_inverse=True)
-    tall = np.bincount(index, weights=above) >= TALL_COLUMN_MIN_POINTS
-    return points[~tall[index]]
-
-
-def ground_heights(ground, xy: np.ndarray) -> np.ndarray:
-    """The ground's height under each of ``xy`` (N, 2): it is a plane, so three samples give it."""
-    z0 = ground(0.0, 0.0)
-    return z0 + (ground(1.0, 0.0) - z0) * xy[:, 0] + (ground(0.0, 1.0) - z0) * xy[:, 1]
-
-
-def seed_group_rows(
-    points: np.ndarray,
-    ground,
-    voxel_m: float,
-    min_height_m: float,
-    min_points: int,
-    join_m: float,
-    min_diagonal_m: float,
-) -> list[np.ndarray]:
-    """The rows of ``points`` in each start cluster (``kernels.seed_groups``): connected ``voxel_m``
-    components of ``min_points`` points reaching ``min_height_m`` above the ground under their
-    centre, joined where points of two come closer than ``join_m`` (a cab and its trailer are apart
-    by up to about 1.5 m), whose footprint's diagonal reaches ``min_diagonal_m`` (no rectangle
-    around a shorter one is that long)."""
-    if len(points) == 0:
-        return []
-    points = _in_grid_precision(points)
-    dtype = points.dtype.type
-    z0 = ground(0.0, 0.0)
-    rows, bounds = kernels.seed_groups(
-        points, dtype(voxel_m), dtype(1.0), z0, ground(1.0, 0.0) - z0, ground(0.0, 1.0) - z0,
-        float(min_height_m), int(min_points), float(join_m), float(min_diagonal_m),
-    )  # fmt: skip
-    return [rows[a:b] for a, b in zip(bounds[:-1].tolist(), bounds[1:].tolist())]
-
-
-def _in_grid_precision(points: np.ndarray) -> np.ndarray:
-    """``points`` contiguous, float32 if they are, else float64: the start's grid in their precision."""
-    return np.ascontiguousarray(points, dtype=np.float32 if points.dtype == np.float32 else np.float64)
-
-
-def _as_long_as(model: VehicleModel, length_m: float) -> VehicleModel:
-    """The model with the longer trailer that makes it, straight, ``length_m`` long overall (up to
-    the longest trailer); never shorter: a cluster shorter than the model may be a part of it."""
-    if model.trailer is None:
-        return model
-    tractor_c, trailer_c = model.box_centers(0.0, 0.0, 0.0, 0.0)
-    overall = tractor_c[0] + model.tractor.length_m / 2 - (trailer_c[0] - model.trailer.length_m / 2)
-    if length_m <= overall:
-        return model
-    trailer_m = min(model.trailer.length_m + length_m - overall, MAX_TRAILER_LENGTH_M)
-    return _with_trailer_length(model, trailer_m)
-
-
-def _with_trailer_length(model: VehicleModel, length_m: float | None) -> VehicleModel:
-    if length_m is None:
-        return model
-    return model.with_boxes(model.tractor, replace(model.trailer, length_m=length_m))
-
-
-def _placed(
-    model: VehicleModel,
-    rect: Rect,
-    sign: float,
-    hitch_rad: float,
-    ground_z_m: float,
-    at_front: bool = False,
-    away: np.ndarray | None = None,
-) -> Prior:
-    """A prior for ``model`` bent ``hitch_rad`` on the footprint ``rect``, its mean axis along the
-    rectangle (``sign``: which end the tractor is at): its footprint's centre on the rectangle's,
-    or (``at_front``) its cab's front on the rectangle's end, as only part of a vehicle may be in
-    view (a 13.6 m trailer's first 3-6 m behind its cab, centred: fitted 22-125 deg off). With
-    ``away`` (across the rectangle, from the sensor), moved back as far as its outline beside the
-    rectangle reaches past the rectangle's side toward the sensor: the points are the faces the
-    sensor sees, the body lies behind them (centred on a bent vehicle's near sides, half the
-    hypotheses lay between the sensor and those faces: a mirror image that fits them as well)."""
-    axis = rect.yaw_rad + (0.0 if sign > 0 else np.pi)
-    yaw = axis - hitch_rad / 2 if model.articulated else axis
-    tractor_c, trailer_c = model.box_centers(0.0, 0.0, yaw, hitch_rad)
-    front = tractor_c + (model.tractor.length_m / 2) * np.array([np.cos(yaw), np.sin(yaw)])
-    if trailer_c is None:
-        centre = tractor_c
-    else:
-        back = trailer_c - (model.trailer.length_m / 2) * np.array([np.cos(yaw + hitch_rad), np.sin(yaw + hitch_rad)])
-        centre = (front + back) / 2
-    x, y = rect.center_xy - centre
-    if at_front:
-        direction = np.array([np.cos(axis), np.sin(axis)])
-        x, y = np.array([x, y]) + direction * (rect.length_m / 2 - float((front - centre) @ direction))
-    if away is not None:
-        x, y = np.array([x, y]) + away * _in_front_of_seen_side(model, rect, x, y, yaw, hitch_rad, away)
-    return Prior(
-        float(x), float(y), float(yaw), float(hitch_rad), model, ground_z_m, 0.0, model.articulated, hypothesis=True
-    )
-
-
-def _in_front_of_seen_side(
-    model: VehicleModel, rect: Rect, x: float, y: float, yaw: float, hitch_rad: float, away: np.ndarray
-) -> float:
-    """How far the outline of ``model`` at the pose (x, y, yaw, hitch), where it lies beside the
-    footprint ``rect`` (within its length), reaches past the rectangle's side toward the sensor
-    (``away`` points from the sensor, across the rectangle): the boxes' sides clipped to the
-    rectangle's length, their nearest ends to the sensor."""
-    boxes = model.boxes
-    corners = (
-        box_corners(
-            np.array(model.box_centers(x, y, yaw, hitch_rad)[: len(boxes)]),
-            np.array([box.length_m for box in boxes]),
-            np.array([box.width_m for box in boxes]),
-            yaw + hitch_rad * np.arange(len(boxes)),
-        ).reshape(-1, 4, 2)
-        - rect.center_xy
-    )
-    ends = np.roll(corners, -1, axis=1)
-    along = np.array([np.cos(rect.yaw_rad), np.sin(rect.yaw_rad)])
-    a0, a1 = corners @ along, ends @ along
-    half = rect.length_m / 2
-    with np.errstate(divide="ignore", invalid="ignore"):  # a side across the rectangle's axis: a1 == a0
-        t_low, t_high = (-half - a0) / (a1 - a0), (half - a0) / (a1 - a0)
-    across, inside = np.abs(a1 - a0) < 1e-12, np.abs(a0) <= half
-    t_in = np.where(across, np.where(inside, 0.0, np.inf), np.minimum(t_low, t_high))
-    t_out = np.where(across, np.where(inside, 1.0, -np.inf), np.maximum(t_low, t_high))
-    t_in, t_out = np.maximum(t_in, 0.0), np.minimum(t_out, 1.0)
-    beside = t_in <= t_out
-    if not beside.any():
-        return 0.0
-    w0, w1 = corners @ away, ends @ away
-    nearest = np.minimum(w0 + t_in * (w1 - w0), w0 + t_out * (w1 - w0))[beside].min()
-    return max(-rect.width_m / 2 - float(nearest), 0.0)
-
-
-def _unit_origins(v: np.ndarray, model: VehicleModel) -> list[tuple[np.ndarray, float]]:
-    """Origin xy and yaw of each unit's frame (tractor: rear axle; trailer: kingpin) for pose ``v``."""
-    frames = [(v[:2], v[2])]
-    if model.trailer is not None:
-        frames.append((model.kingpin_xy(v[0], v[1], v[2]), v[2] + v[3]))
-    return frames
-
-
-def unit_frames(points: np.ndarray, v: np.ndarray, model: VehicleModel) -> list[np.ndarray]:
-    """(N, 2) coordinates of the points in each unit's frame (tractor: rear axle; trailer: kingpin)."""
-    return [_in_frame(points, origin, yaw) for origin, yaw in _unit_origins(v, model)]
-
-
-def trailer_frame(points: np.ndarray, v: np.ndarray, model: VehicleModel) -> np.ndarray:
-    """``unit_frames``' trailer frame alone."""
-    return _in_frame(points, *_unit_origins(v, model)[1])
-
-
-def _in_frame(points: np.ndarray, origin: np.ndarray, yaw: float) -> np.ndarray:
-    return kernels.to_frame(np.ascontiguousarray(points), *_frame_args(origin, yaw))
-
-
-def _frame_args(origin: np.ndarray, yaw: float) -> tuple[float, float, float, float]:
-    """A frame as ``kernels.to_frame`` takes it: origin x, y, cosine and sine of its yaw."""
-    return float(origin[0]), float(origin[1]), float(np.cos(yaw)), float(np.sin(yaw))
-
-
-def prior_boxes(prior: Prior) -> np.ndarray:
-    """The prior's boxes as ``kernels.claim_points`` takes them (K, 6): unit frame origin x, y and
-    yaw, rear, front, half width; the trailer's box reaches ``trailer_slack_m`` further back."""
-    model = prior.model
-    return np.array(
-        [
-            (*origin, yaw, box.rear_m - slack, box.front_m, box.width_m / 2)
-            for (origin, yaw), box, slack in zip(
-                _unit_origins(prior.vector, model), model.boxes, (0.0, prior.trailer_slack_m)
-            )
-        ],
-        dtype=float,
-    )
 
 
 def _learn_axle(track: _Track, m: Measurement, stamp_s: float) -> None:
