@@ -196,3 +196,19 @@ def test_the_hitch_where_seen_leaves_out_the_frames_a_unit_was_hidden():
     s = _summary([_estimate(k, trailer=off if k < 2 else TRAILER) for k in range(N)], truth)
     assert s["hitch_rmse_deg"] == pytest.approx(math.sqrt(2 * 25.0 / N), abs=1e-6)
     assert s["hitch_rmse_seen_deg"] == pytest.approx(0.0, abs=1e-9)
+
+
+def test_the_hitch_within_two_reported_std_counts_frames_whose_error_the_std_covers():
+    """The reported hitch standard deviation is checked against the error: the trailer's yaw 1 deg
+    off in every frame (a hitch error of 1 deg), reported with 0.6 deg in frames 0-3 (covered: 1 <=
+    1.2), 0.4 deg in frames 4-6 (not: 1 > 0.8) and nothing in frames 7-9 (left out): 4 of 7."""
+    off = (TRAILER[0], TRAILER[1], TRAILER[2] + 1.0)
+    states = []
+    for k in range(N):
+        state = _estimate(k, trailer=off)
+        state["vehicles"][0]["hitch_std_deg"] = 0.6 if k < 4 else 0.4 if k < 7 else None
+        states.append(state)
+    s = _summary(states)
+    assert s["hitch_rmse_deg"] == pytest.approx(1.0, abs=1e-6)
+    assert s["hitch_within_2std_rate"] == pytest.approx(4 / 7)
+    assert math.isnan(_summary([_estimate(k) for k in range(N)])["hitch_within_2std_rate"])

@@ -63,6 +63,12 @@ def _unit_fields(prefix: str, gt: dict | None, est: dict | None) -> dict:
     return out
 
 
+def _hitch_std(vehicle: dict | None) -> float:
+    """The reported hitch angle's standard deviation (NaN: none reported)."""
+    std = (vehicle or {}).get("hitch_std_deg")
+    return float(std) if std is not None else NAN
+
+
 def _hitch(vehicle: dict | None) -> float:
     if vehicle is None:
         return NAN
@@ -134,6 +140,7 @@ def vehicle_record(gt: dict | None, est: dict | None, params: Params) -> dict:
     rec["hitch_gt_deg"] = _hitch(gt)
     rec["hitch_est_deg"] = _hitch(est)
     rec["hitch_err_deg"] = float(angle_error_deg(rec["hitch_est_deg"], rec["hitch_gt_deg"]))
+    rec["hitch_std_deg"] = _hitch_std(est)
     rec.update(_success_fields(rec) if gt is not None else {})
     config = params.vehicles.get(rec["vehicle"]) if gt is not None else None
     truth = _front_to_rear(gt, config) if config is not None and _both_posed(gt) else None

@@ -199,6 +199,7 @@ _COMPARE_ROWS = [
     ("trailer position RMSE [m], reported frames only", "trailer_pos_rmse_m", 3),
     ("trailer yaw RMSE [deg], reported frames only", "trailer_yaw_rmse_deg", 2),
     ("hitch angle RMSE [deg], both-reported frames only", "hitch_rmse_deg", 2),
+    ("hitch error within 2 reported std (0.95 if honest)", "hitch_within_2std_rate", None),
     ("heading flips", "heading_flip_rate", None),
     ("truck flip frames", "truck_flip_frames", 0),
     ("trailer flip frames", "trailer_flip_frames", 0),
@@ -253,14 +254,15 @@ def _headline_table(res, methods, primary) -> list[str]:
         "vehicles reported under this name that match no GT vehicle, in any recording.",
         "",
         "| Vehicle | Method | Success | Coverage truck / trailer / both | Hitch RMSE [deg] (reported only) "
+        "| Hitch error within 2 reported std "
         "| Yaw RMSE truck / trailer [deg] (reported only) | Position RMSE truck / trailer [m] (reported only) "
         "| Flip frames truck / trailer | Length error truck / trailer [m] (track ≥ 10 s) | False vehicle-s |",
-        "|---|---|---|---|---|---|---|---|---|---|",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for vehicle, m, s in _vehicle_summaries(res, methods, primary):
         if not s["gt_vehicle_frames"]:
             lines.append(
-                f"| {_name(vehicle)} (not in the truth) | {m} | – | – | – | – | – | – | – | {_f(s['false_vehicle_s'], 1)} |"
+                f"| {_name(vehicle)} (not in the truth) | {m} | – | – | – | – | – | – | – | – | {_f(s['false_vehicle_s'], 1)} |"
             )
             continue
         lines.append(_headline_row(_name(vehicle), m, s))
@@ -273,7 +275,8 @@ def _headline_row(name: str, method: str, s: dict) -> str:
     return (
         f"| {name} | {method} | {_pct_of(s, 'success_rate')} ({s['success_frames']}/{s['visible_frames']}) "
         f"| {_pct_of(s, 'truck_coverage')} / {_pct_of(s, 'trailer_coverage')} / {_pct_of(s, 'both_units_rate')} "
-        f"| {_f(s['hitch_rmse_deg'])} | {_pair(s['truck_yaw_rmse_deg'], s['trailer_yaw_rmse_deg'])} "
+        f"| {_f(s['hitch_rmse_deg'])} | {_pct_of(s, 'hitch_within_2std_rate')} "
+        f"| {_pair(s['truck_yaw_rmse_deg'], s['trailer_yaw_rmse_deg'])} "
         f"| {_pair(s['truck_pos_rmse_m'], s['trailer_pos_rmse_m'], 3)} "
         f"| {s['truck_flip_frames']} / {s['trailer_flip_frames']} "
         f"| {_pair(s['truck_length_error_m'], s['trailer_length_error_m'], 2)} | {_f(s['false_vehicle_s'], 1)} |"

@@ -28,6 +28,13 @@ def _rate(numerator: np.ndarray, denominator: np.ndarray) -> float:
     return float((numerator & denominator).sum() / n) if n else float("nan")
 
 
+def _within_2std(error: np.ndarray, std: np.ndarray) -> float:
+    """Share of the frames with an error and a reported standard deviation where the error is
+    within two of them: about 0.95 if the reported uncertainty is honest and the errors normal."""
+    both = np.isfinite(error) & np.isfinite(std)
+    return float(np.mean(np.abs(error[both]) <= 2.0 * std[both])) if both.any() else float("nan")
+
+
 def _switches(records: list[dict]) -> dict[str, int]:
     """ID switches per GT object, summed: the vehicle id and each unit's track id."""
     chains: dict[tuple, list[dict]] = defaultdict(list)
@@ -110,6 +117,7 @@ def summarize(records: list[dict], frame_rows: list[dict]) -> dict:
     out["hitch_frames"] = int(np.isfinite(hitch).sum())
     # the frames where both units were seen (each had its points; with a sensor subset, the subset's)
     out["hitch_rmse_seen_deg"] = m.rmse(hitch[visible])
+    out["hitch_within_2std_rate"] = _within_2std(hitch, column(gt, "hitch_std_deg"))
     for prefix, label in (("dcap", ""), ("static", "static_")):
         dt = column(gt, f"{prefix}_dT_m")
         ok = np.isfinite(dt)
