@@ -61,7 +61,7 @@ def main() -> None:
             step_ms.append((t1 - t0) * 1e3)
             track = tracker.tracks[0]
             prior = tracker._prior(track, t, flat)  # the filter is at t already: a zero-length predict
-            mine = cloud[tracker._claim(cloud, [prior]) == 0]
+            mine = cloud[tracker._claim(cloud, [prior], [False]) == 0]  # its tractor not lost
             points.append(len(mine))
             t2 = time.perf_counter()
             m = fit(mine, prior, params.articulated)
