@@ -260,7 +260,7 @@ class CalibrationParams(Section):
         0.3,
         ge=0.0,
         le=1.0,
-        description="Results below this fitness are refused (measured: 0.33-0.91 at the true extrinsics, 0.07-0.23 at 25 cm off)",
+        description="Results below this fitness are refused unless better than the guess's with every horizontal direction determined (measured: 0.26-0.91 at the true extrinsics, 0.07-0.23 at 25 cm off)",
     )
     min_constraint_points: float = Field(
         100.0,

@@ -31,6 +31,7 @@ def fake_calibration(monkeypatch):
     calls = []
     fitness = {"l3": 0.9}
     constraint = {}  # weakest horizontal direction in points, per sensor (none: unconstrained figure)
+    at_guess = {}  # fitness at the guess, per sensor (none: 1.0, no result below min_fitness beats it)
 
     def fake(recording, params, progress=None):
         calls.append(params.calibration.windows)
@@ -39,11 +40,12 @@ def fake_calibration(monkeypatch):
             true = TRUTH.sensor(sensor.name).extrinsics
             ext = _perturbed(true, 0.03, -0.04, 1.5) if sensor.name == "l2" else true
             quality = (fitness.get(sensor.name, 0.9), 0.05, "reference", constraint.get(sensor.name, 1000.0))
-            results.append(SensorCalibration(sensor.name, ext, *quality))
-        return results, any(r.fitness < params.calibration.min_fitness for r in results)
+            results.append(SensorCalibration(sensor.name, ext, *quality, at_guess.get(sensor.name, 1.0)))
+        return results, any(not r.accepted(params.calibration.min_fitness) for r in results)
 
     monkeypatch.setattr(cal, "run_calibration", fake)
     fake.constraint = constraint
+    fake.at_guess = at_guess
     return calls, fitness
 
 
@@ -100,7 +102,10 @@ def test_a_refused_sensor_is_evaluated_at_its_guess_the_others_calibrated_and_it
     _, fitness = fake_calibration
     fitness["l3"] = 0.1
     result = cal.calibrate_recording(str(SAMPLE), {}, tmp_path)
-    assert result["status"] == cal.REFUSED and "l3 (0.10)" in result["message"]
+    assert (
+        result["status"] == cal.REFUSED
+        and "l3 (0.10, 1.00 at the guess, weakest direction 1000.0 points)" in result["message"]
+    )
     used = {s["name"]: s for s in result["sensors"]}
     assert used["l3"] == GUESS.sensor("l3").model_dump(mode="json")  # the refused one: its guess
     assert used["l2"]["extrinsics"] != GUESS.sensor("l2").model_dump(mode="json")["extrinsics"]
@@ -121,11 +126,36 @@ def test_calibrate_writes_the_sensors_it_could_calibrate_and_fails_naming_the_re
     out = tmp_path / "calibrated.yaml"
     assert main(["calibrate", str(SAMPLE), "--out", str(out)]) == 2
     err = capsys.readouterr().err
-    assert "REFUSED" in err and "l3 (0.10)" in err and str(out) in err
+    assert (
+        "REFUSED" in err and "l3 (0.10, 1.00 at the guess, weakest direction 1000.0 points)" in err and str(out) in err
+    )
     written = load_params(out)
     assert written.sensor("l3").extrinsics == GUESS.sensor("l3").extrinsics
     assert written.sensor("l2").extrinsics == _perturbed(TRUTH.sensor("l2").extrinsics, 0.03, -0.04, 1.5)
     assert written.sensor("l4").extrinsics == TRUTH.sensor("l4").extrinsics
+
+
+def test_a_low_fitness_better_than_the_guess_is_accepted_unless_a_direction_is_undetermined(fake_calibration, tmp_path):
+    """A result below ``min_fitness`` that fits better than the guess is used, when every horizontal
+    direction holds a point's information at least: one sensor seeing little structure calibrated
+    to 0.4 cm at 0.26 (0.18 at its guess, 52 cm off); another slid 1.75 m along a direction with
+    none, at 0.27 (0.19 at its guess)."""
+    _, fitness = fake_calibration
+    at_guess, constraint = cal.run_calibration.at_guess, cal.run_calibration.constraint
+    fitness["l2"], at_guess["l2"], constraint["l2"] = 0.26, 0.18, 89.0
+    result = cal.calibrate_recording(str(SAMPLE), {}, tmp_path)
+    assert result["status"] == cal.CALIBRATED
+    rows = {r["sensor"]: r for r in result["per_sensor"]}
+    assert rows["l2"]["error_cm"] == pytest.approx(5.0) and rows["l2"]["guess_fitness"] == 0.18
+    constraint["l2"] = 0.4  # no structure across one horizontal direction
+    refused = cal.calibrate_recording(str(SAMPLE), {"calibration": {"windows": 4}}, tmp_path)
+    assert (
+        refused["status"] == cal.REFUSED
+        and "l2 (0.26, 0.18 at the guess, weakest direction 0.4 points)" in refused["message"]
+    )
+    constraint["l2"], at_guess["l2"] = 89.0, 0.30  # the guess fits better
+    worse = cal.calibrate_recording(str(SAMPLE), {"calibration": {"windows": 5}}, tmp_path)
+    assert worse["status"] == cal.REFUSED
 
 
 def test_a_weakly_constrained_sensor_is_calibrated_with_a_warning(fake_calibration, tmp_path):

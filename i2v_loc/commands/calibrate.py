@@ -59,12 +59,12 @@ def run(args) -> int:
     calibrated = calibrated_sensors(params.sensors, results)
     errors = {row["sensor"]: row for row in sensor_errors(calibrated, truth)}
     print(
-        f"{'sensor':8} {'fitness':>8} {'rmse_m':>8} {'weakest':>8}  against"
+        f"{'sensor':8} {'fitness':>8} {'at_guess':>8} {'rmse_m':>8} {'weakest':>8}  against"
         + ("   error_cm  error_deg" if truth else "")
     )
     for r in results:
         weakest = f"{r.constraint_points:8.0f}" if np.isfinite(r.constraint_points) else f"{'-':>8}"
-        line = f"{r.name:8} {r.fitness:8.3f} {r.inlier_rmse_m:8.4f} {weakest}  {r.target:10}"
+        line = f"{r.name:8} {r.fitness:8.3f} {r.guess_fitness:8.3f} {r.inlier_rmse_m:8.4f} {weakest}  {r.target:10}"
         if errors[r.name]["error_cm"] is not None:
             line += f" {errors[r.name]['error_cm']:8.2f} {errors[r.name]['error_deg']:10.3f}"
         print(line)

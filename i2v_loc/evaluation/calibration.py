@@ -5,7 +5,7 @@ the recording's ``sensors_guess.yaml`` and evaluate with the result: the sensors
 the calibrated extrinsics, exactly the file ``i2v-loc calibrate`` writes. The result is cached,
 keyed by the recording's path and content (meta.yaml, scan sizes), the guess's content and the
 calibration parameters, so a second evaluation does not calibrate again. When the calibration is
-refused for a sensor (its fitness below ``calibration.min_fitness``) that sensor is evaluated at its
+refused for a sensor (``SensorCalibration.accepted``) that sensor is evaluated at its
 guess, the others with their calibration, and the status says so. Each sensor's error against the truth (``sensors.yaml``) is
 measured: translation (cm), rotation (deg) and clock offset (ms).
 """
@@ -19,10 +19,10 @@ from pathlib import Path
 
 import numpy as np
 
-CACHE_VERSION = 5  # 5: a refused sensor at its guess, the others calibrated; 4: structure correspondences on one side
+CACHE_VERSION = 6  # 6: a low fitness accepted when better than the guess's, every direction determined; 5: a refused sensor at its guess, the others calibrated; 4: structure correspondences on one side
 
 CALIBRATED = "calibrated"
-REFUSED = "refused"  # a sensor's fitness too low: that sensor evaluated at its guess
+REFUSED = "refused"  # a sensor's result not accepted: that sensor evaluated at its guess
 NO_GUESS = "no_guess"  # no sensors_guess.yaml: evaluated with sensors.yaml
 FROM_PARAMS = "from_params"  # the --params files set the sensors
 TRUE = "true_extrinsics"  # --true-extrinsics (diagnosis)
@@ -119,20 +119,20 @@ def run_calibration(recording, params, progress=None) -> tuple[list, bool]:
     section = params.calibration
     windows = recording_windows(recording, params.sensors, section.windows, section.window_gap_frames)
     results = Calibrator(section).calibrate(params.sensors, windows, progress)
-    refused = any(r.fitness < params.calibration.min_fitness for r in results)
+    refused = any(not r.accepted(params.calibration.min_fitness) for r in results)
     return results, refused
 
 
 def accepted_sensors(guess_sensors, results, min_fitness: float) -> tuple[list, list]:
     """The guess's sensors with the calibrated extrinsics where the calibration was accepted and
-    the guessed ones where it was refused (fitness below ``min_fitness``), and the refused results.
+    the guessed ones where it was refused (``SensorCalibration.accepted``), and the refused results.
     One sensor whose registration failed leaves the others' calibrations standing: a refused one
     had made every sensor of a sloped docking stay at its guess, 52 cm off (38.7 % success; 94.0 %
     with the others calibrated)."""
     by_name = {r.name: r for r in results}
-    refused = [by_name[s.name] for s in guess_sensors if by_name[s.name].fitness < min_fitness]
+    refused = [by_name[s.name] for s in guess_sensors if not by_name[s.name].accepted(min_fitness)]
     calibrated = calibrated_sensors(guess_sensors, results)
-    sensors = [g if by_name[g.name].fitness < min_fitness else c for g, c in zip(guess_sensors, calibrated)]
+    sensors = [c if by_name[g.name].accepted(min_fitness) else g for g, c in zip(guess_sensors, calibrated)]
     return sensors, refused
 
 
@@ -144,10 +144,17 @@ def calibrated_sensors(guess_sensors, results) -> list:
 
 def refused_message(refused, min_fitness: float) -> str:
     """What a refusal means, naming the refused sensors."""
-    low = ", ".join(f"{r.name} ({r.fitness:.2f})" for r in refused)
+    from i2v_loc.stages.calibration import DETERMINED_POINTS
+
+    low = ", ".join(
+        f"{r.name} ({r.fitness:.2f}, {r.guess_fitness:.2f} at the guess, weakest direction "
+        f"{r.constraint_points:.1f} points)"
+        for r in refused
+    )
     return (
-        f"CALIBRATION REFUSED (fitness below {min_fitness} for {low}): kept at the guess of "
-        "sensors_guess.yaml, the other sensors calibrated"
+        f"CALIBRATION REFUSED (fitness below {min_fitness} and no better than at the guess, or a "
+        f"horizontal direction with less than {DETERMINED_POINTS:.0f} point of information: {low}): "
+        "kept at the guess of sensors_guess.yaml, the other sensors calibrated"
     )
 
 
@@ -192,6 +199,7 @@ def calibrate_recording(recording_path: str, patch: dict, cache_dir: str | Path 
         r = by_name[row["sensor"]]
         row.update(
             fitness=r.fitness,
+            guess_fitness=r.guess_fitness,
             inlier_rmse_m=r.inlier_rmse_m,
             target=r.target,
             constraint_points=r.constraint_points if np.isfinite(r.constraint_points) else None,
