@@ -12,7 +12,7 @@ from i2v_loc.geometry import extrinsics_matrix, transform_points
 from i2v_loc.params import CalibrationParams, Extrinsics, SensorConfig, load_params
 from i2v_loc.recording import Recording
 from i2v_loc.sim.generate import SimConfig, run
-from i2v_loc.stages.calibration import Calibrator, rigid_step, still_points
+from i2v_loc.stages.calibration import Calibrator, SensorCalibration, rigid_step, still_points
 
 REFERENCE = SensorConfig(name="a", extrinsics=Extrinsics(x_m=-10.0, y_m=0.0, z_m=5.0, yaw_deg=0.0))
 TRUE_B = Extrinsics(x_m=10.0, y_m=0.0, z_m=5.0, roll_deg=0.5, pitch_deg=-0.3, yaw_deg=90.0)
@@ -134,6 +134,9 @@ def test_fitness_refuses_a_sensor_25_cm_off():
     at_25_cm, _ = calibrator.quality([transform_points(off, p) for p in points["b"]], targets)
     assert at_truth > 0.9 and rmse < 0.01
     assert at_25_cm < params.min_fitness
+    # from a guess at the truth, that result fits worse than the guess: refused, however determined
+    off_result = SensorCalibration("b", TRUE_B, at_25_cm, 0.05, "a", 1000.0, guess_fitness=at_truth)
+    assert not off_result.accepted(params.min_fitness)
 
 
 def test_still_points_keep_what_stood_still_in_every_sweep():
