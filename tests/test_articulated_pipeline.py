@@ -22,7 +22,7 @@ from i2v_loc.stages.hinged_fit import FRONT, REAR, Measurement, Prior, fit, thin
 from i2v_loc.stages.primitives import min_area_rect
 from i2v_loc.stages.unit_frames import face_seen, supported, with_trailer_length
 from i2v_loc.stages.vehicle_model import Box, VehicleModel
-from i2v_loc.stages.vehicle_start import SEED_RETRY_FRAMES, Seed, _gap_filled, _gap_open
+from i2v_loc.stages.vehicle_start import SEED_RETRY_FRAMES, Background, Seed, _gap_filled, _gap_open
 from i2v_loc.stages.vehicle_tracker import (
     LENGTH_CONVERGED_OBSERVATIONS,
     SETTLED_SLACK_M,
@@ -558,7 +558,10 @@ def test_a_parked_trailer_alone_is_no_vehicle():
         tracker = VehicleTracker(PARAMS.articulated, PARAMS.vehicles)
         for k in range(40):
             points = vehicle_points(trailer, 0.0, 3.0, 0.4, sensors=sensors, seed=k)
-            assert tracker.process(points, flat, 0.1 * k, background_ready=k >= 20) == []
+            assert (
+                tracker.process(points, flat, 0.1 * k, background=Background.READY if k >= 20 else Background.LEARNING)
+                == []
+            )
 
 
 def test_rays_along_a_parked_trailers_side_show_no_gap_behind_a_wider_cab_on_its_front():
@@ -637,7 +640,7 @@ def test_in_one_sweep_a_face_seen_through_the_gap_shows_the_hinge():
     (report,) = VehicleTracker(ONE_SWEEP, PARAMS.vehicles).process(points, flat, 0.0, rays=rays)
     assert report.model.articulated and abs(report.state.hitch_rad) < np.radians(2.0)
     yard = VehicleTracker(PARAMS.articulated, PARAMS.vehicles)
-    assert not any(yard.process(points, flat, 0.1 * k, background_ready=False, rays=rays) for k in range(5))
+    assert not any(yard.process(points, flat, 0.1 * k, background=Background.LEARNING, rays=rays) for k in range(5))
 
 
 def test_a_wall_crossing_a_trailer_is_not_its_side():
@@ -715,7 +718,7 @@ def test_a_box_that_never_moves_is_no_rigid_vehicle_but_a_standing_articulated_o
     model = volvo()
     for k in range(4):
         points = vehicle_points(model, 2.0, 3.0, 0.3, np.radians(20.0), sensors=SENSORS, seed=k)
-        reports = tracker.process(points, flat, 0.1 * k, background_ready=False)
+        reports = tracker.process(points, flat, 0.1 * k, background=Background.LEARNING)
     assert len(reports) == 1 and reports[0].model.articulated
     assert abs(np.degrees(reports[0].state.hitch_rad) - 20.0) < 1.0
     assert np.hypot(reports[0].state.x_m - 2.0, reports[0].state.y_m - 3.0) < 0.1
@@ -745,7 +748,7 @@ def test_a_standing_straight_tractor_trailer_seen_from_one_side_starts_when_its_
             points = vehicle_points(model, 0.0, 3.0, 0.0, sensors=[sensor], seed=k)
             returns = np.vstack([points, behind if wall_behind else np.zeros((0, 3))]).astype(np.float32)
             rays = Rays(returns, sensor[None, :], np.array([0, len(returns)]), np.eye(3))
-            reports = tracker.process(points, flat, 0.1 * k, background_ready=False, rays=rays)
+            reports = tracker.process(points, flat, 0.1 * k, background=Background.LEARNING, rays=rays)
             if reports:
                 assert reports[0].model.articulated and abs(reports[0].state.hitch_rad) < np.radians(2.0)
                 return k
@@ -989,7 +992,7 @@ def test_a_vehicle_standing_at_a_dock_starts_and_keeps_its_trailer_length():
     vehicles = [(model, (*axle, yaw, yaw))]
     for t, points, (truth,) in drive(vehicles, 8.0, lambda t: 0.0 if t < 2.0 else 1.0, 0.0):
         rays = seen(tracker, vehicles, [truth])
-        reports = tracker.process(np.vstack([points, wall]), flat, t, background_ready=False, rays=rays)
+        reports = tracker.process(np.vstack([points, wall]), flat, t, background=Background.LEARNING, rays=rays)
         if t >= 0.25:
             assert len(reports) == 1 and reports[0].model.name == "volvo_fh"
             assert errors(reports[0], truth)[0] < 0.1
@@ -1056,21 +1059,23 @@ def test_a_wall_beyond_the_far_side_seen_by_one_sensor_is_no_side():
     assert measured and min(measured) > model.trailer.width_m + 0.1
 
 
-def pulling_out_lengths(trailer_length_m: float, shelter: bool) -> list[float]:
+def pulling_out_lengths(
+    trailer_length_m: float, shelter: bool, speed_m_s: float = 1.0, wall_height_m: float = 2.2
+) -> list[float]:
     """The trailer lengths reported while a Twizy whose trailer is ``trailer_length_m`` long pulls
-    forward at 1 m/s for 3 s, seen from both sides, never from behind, its track started with the
-    catalogue's 2.5 m; with ``shelter``, a 2.2 m tall wall stands 0.06 m out from its left side from
-    1.5 m behind its rear to 1 m ahead of it, where it started."""
+    forward at ``speed_m_s`` for 3 s, seen from both sides, never from behind, its track started with the
+    catalogue's 2.5 m; with ``shelter``, a wall ``wall_height_m`` tall stands 0.06 m out from its left
+    side from 1.5 m behind its rear to 1 m ahead of it, where it started."""
     model = VehicleModel.from_config("twizy", PARAMS.vehicles["twizy"])
     truth = replace(model, trailer=replace(model.trailer, length_m=trailer_length_m))
     sensors = ((0.0, -12.0, 4.0), (0.0, 12.0, 4.0))
     axle = (-3.0, 0.0)
     rear_x = axle[0] - truth.kingpin_behind_axle_m - (truth.trailer.length_m - truth.trailer.front_m)
     wall_xy = np.array([rear_x - 0.25, truth.trailer.width_m / 2 + 0.06 + 0.05])
-    wall = VehicleModel.rigid("wall", 2.5, 0.1, 2.2)
+    wall = VehicleModel.rigid("wall", 2.5, 0.1, wall_height_m)
     tracker = VehicleTracker(PARAMS.articulated, PARAMS.vehicles)
     lengths = []
-    for t, points, (state,) in drive([(truth, (*axle, 0.0, 0.0))], 3.0, 1.0, 0.0, sensors=sensors):
+    for t, points, (state,) in drive([(truth, (*axle, 0.0, 0.0))], 3.0, speed_m_s, 0.0, sensors=sensors):
         if shelter:
             boxes = world_boxes(truth, state[0], state[1], state[2])
             points = np.vstack(
@@ -1078,7 +1083,7 @@ def pulling_out_lengths(trailer_length_m: float, shelter: bool) -> list[float]:
             )
         if not tracker.tracks:
             m = fit(points, Prior(*state[:2], 0.0, 0.0, model), PARAMS.articulated)
-            tracker.tracks = [tracker._track(1, model, m, 0.0, t, 1.0)]
+            tracker.tracks = [tracker._track(1, model, m, 0.0, t, speed_m_s)]
             continue
         (report,) = tracker.process(points, flat, t)
         lengths.append(report.model.trailer.length_m)
@@ -1092,6 +1097,17 @@ def test_a_shelter_wall_left_behind_is_not_the_trailers_end():
     A trailer truly longer than its track's model (3.7 m) does reach further: at least 3.2 m."""
     assert np.abs(np.array(pulling_out_lengths(2.5, shelter=True)) - 2.5).max() < 0.1
     assert pulling_out_lengths(3.7, shelter=False)[-1] > 3.2
+
+
+def test_a_building_in_line_with_a_standing_trailers_side_is_not_its_end():
+    """Standing, a trailer's end is where its side's points end. A Volvo pulling out of its dock at
+    0.2-0.5 m/s had the dock's 6 m wall in line with its side 1-2 m behind its rear, and its trailer
+    was learned 8.28 m long (6.30): points higher than any vehicle beyond the side's end are a
+    building's, and the side ends before them. A wall no higher than a vehicle still runs on with
+    the side (nothing tells them apart standing)."""
+    building = pulling_out_lengths(2.5, shelter=True, speed_m_s=0.0, wall_height_m=6.0)
+    assert np.abs(np.array(building) - 2.5).max() < 0.1
+    assert pulling_out_lengths(2.5, shelter=True, speed_m_s=0.0)[-1] > 3.0
 
 
 def test_a_rigid_track_becomes_articulated_when_it_moves():
@@ -1981,3 +1997,47 @@ def test_a_dock_door_behind_a_trailer_is_not_its_rear_face():
     assert len(errors) == 75
     assert errors[:, 0].max() < 0.06 and errors[:, 1].max() < 0.05, errors[:, :2].max(axis=0)
     assert np.ptp(errors[:, 2]) < 0.05, (errors[:, 2].min(), errors[:, 2].max())
+
+
+def first_report_frame(speed_m_s: float, background: Background) -> int | None:
+    """The frame of the first report of a Volvo (straight, seen all around, no rays) driving at
+    ``speed_m_s`` for 3 s, the background as given."""
+    tracker = VehicleTracker(PARAMS.articulated, PARAMS.vehicles)
+    for k, (t, points, _) in enumerate(drive([(volvo(), (-5.0, 3.0, 0.0, 0.0))], 3.0, speed_m_s, 0.0)):
+        if tracker.process(points, flat, t, background):
+            return k
+    return None
+
+
+def test_once_the_background_is_learned_only_a_seed_that_moved_starts():
+    """While the map is learned a vehicle standing in view starts (it stood since then: no
+    background); once it is learned the same points standing do not (a container or a parked
+    trailer that a passing vehicle uncovers stands so: seen by one LiDAR, the rest of a container
+    started as a Twizy), and a vehicle driving in starts once it moved."""
+    start_frames = PARAMS.articulated.start_frames
+    assert first_report_frame(0.0, Background.LEARNING) == start_frames - 1
+    assert first_report_frame(0.0, Background.NONE) == start_frames - 1  # no map: nothing tells it apart
+    assert first_report_frame(0.0, Background.READY) is None
+    assert start_frames - 1 < first_report_frame(2.0, Background.READY) <= 15
+
+
+def test_a_vehicle_whose_unseen_cab_the_rays_cross_leaves():
+    """A Volvo standing, tracked; then its cab's points are gone. Rays crossing the cab's place: it
+    is not there, and the vehicle leaves after ``leave_frames`` frames (a car that drove off from
+    the end of a container had started with it as a Twizy and its trailer: the container was
+    tracked for 25 s). Rays ending on the cab (hidden, its points lost): it stays."""
+    model = volvo()
+    leave = PARAMS.articulated.leave_frames
+    whole, trailer_only = world_boxes(model, 0.0, 3.0, 0.2, 0.3), world_boxes(model, 0.0, 3.0, 0.2, 0.3)[1:]
+    seen = vehicle_points(model, 0.0, 3.0, 0.2, 0.3, sensors=SENSORS)
+    no_cab = vehicle_points(model, 0.0, 3.0, 0.2, 0.3, sensors=SENSORS, drop=tuple((0, face) for face in FACES))
+    for cab_rays, stays in ((trailer_only, False), (whole, True)):
+        tracker = VehicleTracker(PARAMS.articulated, PARAMS.vehicles)
+        for k in range(5):
+            tracker.process(seen, flat, 0.1 * k, Background.LEARNING, cast_rays(whole, SENSORS))
+        assert len(tracker.tracks) == 1
+        rays = cast_rays(cab_rays, SENSORS)
+        alive = [
+            bool(tracker.process(no_cab, flat, 0.5 + 0.1 * k, Background.LEARNING, rays)) for k in range(leave + 2)
+        ]
+        assert alive == [True] * (leave + 2) if stays else alive == [True] * (leave - 1) + [False] * 3

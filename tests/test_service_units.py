@@ -13,6 +13,7 @@ from i2v_loc.frame import Frame, SensorScan
 from i2v_loc.params import Params, ParamsError, apply_patch, deep_merge, load_params
 from i2v_loc.recording import SensorScans, write_recording
 from i2v_loc.sources import ReplaySource, SourceError, open_source
+from i2v_loc.stages.vehicle_start import Background
 from service import params_store
 from service.app import parse_flag
 from service.auth import HOW_TO_SET, AuthConfig, TokenError, bearer_from_header, load_token
@@ -188,14 +189,14 @@ def test_forgetting_vehicles_keeps_the_map_and_the_ids_counting():
     tracker = pipeline.tracker
     for k in range(4):
         points = vehicle_points(volvo(), 2.0, 3.0, 0.3, np.radians(20.0), sensors=SENSORS, seed=k)
-        reports = tracker.process(points, lambda x, y: 0.0, 0.1 * k, background_ready=False)
+        reports = tracker.process(points, lambda x, y: 0.0, 0.1 * k, background=Background.LEARNING)
     assert [r.id for r in reports] == [1] and tracker.tracks
     background = pipeline.background
     pipeline.forget_vehicles()
     assert tracker.tracks == [] and tracker.starts.seeds == [] and pipeline.background is background
     for k in range(4):
         points = vehicle_points(volvo(), -6.0, -3.0, 1.0, np.radians(-15.0), sensors=SENSORS, seed=k)
-        reports = tracker.process(points, lambda x, y: 0.0, 1.0 + 0.1 * k, background_ready=False)
+        reports = tracker.process(points, lambda x, y: 0.0, 1.0 + 0.1 * k, background=Background.LEARNING)
     assert [r.id for r in reports] == [2]
     paper = build_pipeline(Params(), "paper")
     old = paper.tracker

@@ -23,6 +23,7 @@ from i2v_loc.stages.level_frame import LevelFrame
 from i2v_loc.stages.primitives import Rect, voxel_centroids
 from i2v_loc.stages.region import Region
 from i2v_loc.stages.vehicle_model import Box
+from i2v_loc.stages.vehicle_start import Background
 from i2v_loc.stages.vehicle_tracker import VehicleReport, VehicleTracker
 from i2v_loc.stages.visibility import Rays
 
@@ -116,7 +117,13 @@ class ArticulatedPipeline(ParameterHandoff):
         self.level.update(region.ground)
         ground = self._ground = self.level.ground(region.ground)
         if np.isfinite(merged.stamp_s):
-            ready = self.background is None or self.background.ready
+            background = (
+                Background.NONE
+                if self.background is None
+                else Background.READY
+                if self.background.ready
+                else Background.LEARNING
+            )
             level_points = self.level.points(points)
             known = np.isfinite(merged.sweep_origins).all(axis=1).any()  # else no ray is known (a cloud file)
             rays = (
@@ -124,7 +131,7 @@ class ArticulatedPipeline(ParameterHandoff):
                 if known
                 else None
             )
-            self._reports = self.tracker.process(level_points, ground, merged.stamp_s, ready, rays)
+            self._reports = self.tracker.process(level_points, ground, merged.stamp_s, background, rays)
             self._reports_stamp_s = merged.stamp_s
         timer.lap("vehicles")
         vehicles = [self._result(r, ground) for r in self._reports]

@@ -9,6 +9,7 @@ tracker (``vehicle_tracker``) tracks what starts here.
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
+from enum import Enum
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -56,7 +57,7 @@ from i2v_loc.stages.unit_frames import (
     unit_frames,
     with_trailer_length,
 )
-from i2v_loc.stages.vehicle_model import MAX_VEHICLE_HEIGHT_M, RIGID_MAX_LENGTH_M, VehicleModel
+from i2v_loc.stages.vehicle_model import MAX_VEHICLE_HEIGHT_M, RIGID_MAX_LENGTH_M, Box, VehicleModel
 from i2v_loc.stages.visibility import Rays
 
 START_HITCHES_DEG = (-90.0, -60.0, -30.0, 0.0, 30.0, 60.0, 90.0)
@@ -96,9 +97,23 @@ VACATED_M = 0.5  # a first point this far from all of a seed's points now: its p
 VACATED_MIN_SHARE = 0.1
 VACATED_SEEN_MIN_RAYS = 3  # through a place a seed's first points left: seen empty, not hidden
 SEED_FIRST_POINTS = 200
+START_MOVED_M = 0.5  # an articulated seed starting after the map was learned moved this far (or start_travel_m)
 SEED_RETRY_FRAMES = 20  # a seed that was no vehicle is fitted again after this many frames
 SHAPE_CHANGE_M = 0.5  # if its extent or centre moved this much
 SHAPE_POINTS_CHANGE = 0.3  # or its point count changed by this share
+
+
+class Background(Enum):
+    """What the points a start is given hold besides vehicles."""
+
+    NONE = "none"  # no map learned (turned off, or one sweep): what stands is not told from vehicles anyway
+    LEARNING = "learning"  # the yard too, while the map is learned: only articulated seeds start
+    READY = "ready"  # the foreground: seeds start once they moved
+
+    @property
+    def rigid_allowed(self) -> bool:
+        """A rigid seed may start (once it moved): no wall or container is in the points, or none can be told."""
+        return self is not Background.LEARNING
 
 
 @dataclass(frozen=True)
@@ -181,6 +196,28 @@ def _seen_empty(rays: Rays, points: np.ndarray) -> bool:
     return crossed >= VACATED_SEEN_MIN_RAYS
 
 
+def unit_seen_through(rays: Rays, centre_xy: np.ndarray, yaw_rad: float, box: Box, ground_z_m: float) -> bool:
+    """Whether a unit's box (centre, yaw) is no solid body: more than ``SEEN_THROUGH_RATIO`` as many
+    rays crossed it (``units_crossed``) as ended on it (within ``SOLID_INSET_M`` of its box)."""
+    inset, floor, top = SOLID_INSET_M, ground_z_m + box.floor_m, ground_z_m + box.top_m
+    _, ended, _ = rays.through(
+        tuple(centre_xy), yaw_rad, box.length_m / 2 + inset, box.width_m / 2 + inset, (floor - inset, top + inset),
+        GAP_SEEN_BEYOND_M,
+    )  # fmt: skip
+    return unit_crossed(rays, centre_xy, yaw_rad, box, ground_z_m) > SEEN_THROUGH_RATIO * ended
+
+
+def unit_crossed(rays: Rays, centre_xy: np.ndarray, yaw_rad: float, box: Box, ground_z_m: float) -> int:
+    """The rays that crossed a unit's box ``SOLID_INSET_M`` inside its faces and ended beyond it: a
+    body there stops them all."""
+    inset, floor, top = SOLID_INSET_M, ground_z_m + box.floor_m, ground_z_m + box.top_m
+    through, _, _ = rays.through(
+        tuple(centre_xy), yaw_rad, box.length_m / 2 - inset, box.width_m / 2 - inset, (floor + inset, top - inset),
+        GAP_SEEN_BEYOND_M,
+    )  # fmt: skip
+    return through
+
+
 @dataclass(frozen=True)
 class Start:
     """A vehicle to track from this frame on: its seed's points and footprint, the model that
@@ -205,8 +242,9 @@ class VehicleStarts:
         self.seeds: list[Seed] = []
         self.rays: Rays | None = None  # this frame's
 
-    def found(self, points: np.ndarray, ground, rigid_allowed: bool) -> list[Start]:
+    def found(self, points: np.ndarray, ground, background: Background) -> list[Start]:
         """The vehicles that start this frame among ``points`` (those no track claimed)."""
+        rigid_allowed = background.rigid_allowed
         clusters = self._seed_clusters(points, ground)
         for seed in self.seeds:
             seed.seen = False
@@ -229,6 +267,7 @@ class VehicleStarts:
             if (
                 seed.frames >= self.params.start_frames
                 and self._may_fit(seed)
+                and not self._stood_in(seed, background)
                 and (seed.failed is None or (seed.retry_due(rigid_allowed) and seed.failed.changed(shape)))
             ):
                 ready.append((seed, cluster, rect, shape))
@@ -302,6 +341,18 @@ class VehicleStarts:
     def _may_start(self, seed: Seed, rigid_allowed: bool) -> bool:
         """A rigid seed once the background is learned and it moved."""
         return self._may_fit(seed) and (rigid_allowed or not seed.rigid)
+
+    def _stood_in(self, seed: Seed, background: Background) -> bool:
+        """Whether a seed waits for motion: once the background is learned, a seed is fitted only
+        after it moved ``START_MOVED_M`` and left a place seen empty (``Seed.moved``); a vehicle
+        standing since before started then. A container or a parked trailer that a passing vehicle
+        uncovers, or the few points of one the map did not learn, stand (seen by one LiDAR, the
+        rest of a container started as a Twizy of 26 points, 6 false vehicle-s on held-out seeds)."""
+        return (
+            background is Background.READY
+            and not self._one_sweep()
+            and not seed.moved(min(START_MOVED_M, self.params.start_travel_m), self.rays)
+        )
 
     def _seed_clusters(self, points: np.ndarray, ground) -> list[tuple[np.ndarray, Rect]]:
         """Connected components tall enough to be a vehicle, those closer than ``start_join_m`` joined
@@ -551,33 +602,18 @@ class VehicleStarts:
         return model, Prior(*centre, float(np.arctan2(axis[1], axis[0])), 0.0, model, ground_z_m)
 
     def _seen_through(self, m: Measurement, model: VehicleModel, ground_z_m: float) -> bool:
-        """Whether some unit of the fit is no solid body: more than ``SEEN_THROUGH_RATIO`` as many
-        rays crossed its box (``SOLID_INSET_M`` inside its faces) and ended beyond as ended on it
-        (within ``SOLID_INSET_M`` of its box). A parked trailer with a pole beside it had started
-        as a tractor bent at 34 degrees: the rays crossed the "cab" between pole and trailer."""
+        """Whether some unit of the fit is no solid body (``unit_seen_through``). A parked trailer with
+        a pole beside it had started as a tractor bent at 34 degrees: the rays crossed the "cab"
+        between pole and trailer."""
         if self.rays is None:
             return False
-        inset = SOLID_INSET_M
         hitch = m.hitch_rad or 0.0
-        for centre, yaw, box in zip(
-            model.box_centers(m.x_m, m.y_m, m.yaw_rad, hitch), (m.yaw_rad, m.yaw_rad + hitch), model.boxes
-        ):
-            centre = tuple(centre)
-            half_l, half_w, floor, top = (
-                box.length_m / 2,
-                box.width_m / 2,
-                ground_z_m + box.floor_m,
-                ground_z_m + box.top_m,
+        return any(
+            unit_seen_through(self.rays, centre, yaw, box, ground_z_m)
+            for centre, yaw, box in zip(
+                model.box_centers(m.x_m, m.y_m, m.yaw_rad, hitch), (m.yaw_rad, m.yaw_rad + hitch), model.boxes
             )
-            through, _, _ = self.rays.through(
-                centre, yaw, half_l - inset, half_w - inset, (floor + inset, top - inset), GAP_SEEN_BEYOND_M
-            )
-            _, ended, _ = self.rays.through(
-                centre, yaw, half_l + inset, half_w + inset, (floor - inset, top + inset), GAP_SEEN_BEYOND_M
-            )
-            if through > SEEN_THROUGH_RATIO * ended:
-                return True
-        return False
+        )
 
     def _hinge_shown(self, seed: Seed, m: Measurement, model: VehicleModel, ground_z_m: float) -> bool:
         """Whether a straight articulated fit is two units: it moves (its seed moved

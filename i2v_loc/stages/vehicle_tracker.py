@@ -65,7 +65,7 @@ from i2v_loc.stages.unit_frames import (
     unit_origins,
     with_trailer_length,
 )
-from i2v_loc.stages.vehicle_model import Box, VehicleModel
+from i2v_loc.stages.vehicle_model import MAX_VEHICLE_HEIGHT_M, Box, VehicleModel
 from i2v_loc.stages.vehicle_start import (
     COARSE_ITERATIONS,
     DIRECTION_COST_RATIO,
@@ -75,8 +75,10 @@ from i2v_loc.stages.vehicle_start import (
     START_HITCHES_DEG,
     START_ITERATIONS,
     START_SCALE_M,
+    Background,
     Seed,
     VehicleStarts,
+    unit_crossed,
 )
 from i2v_loc.stages.visibility import Rays
 
@@ -84,6 +86,7 @@ START_SIGMAS = np.array([0.3, 0.3, np.radians(3.0), np.radians(5.0)])  # added t
 FOLDED_HITCH_RAD = np.radians(90.0)  # no trailer swings further round its kingpin: its box runs through the cab
 TRACTOR_LOST_SIGMA_DEG = 1.0  # tracked, the hitch's is 0.2-0.4 deg; the cab hidden behind its trailer, 1-5 deg
 SIDE_MIN_POINTS = 5
+CAB_GONE_MIN_RAYS = 2  # through a cab's place, none of its points seen: it is not there
 SIDE_MAX_SLOPE = np.tan(np.radians(5.0))  # a side's points run along its unit's axis (the fits' yaw: within 2 deg)
 # the kingpin's offset shows only at a hitch angle; from this one the joint fit's own standard
 # deviation decides when its frames pin it (at 20 deg a lane change never turned enough, and an
@@ -310,6 +313,7 @@ class _Track:
         default_factory=dict
     )  # per kind of end, those seen moving: deque of (yard xy, x, kingpin xy)
     rigid_seen: tuple[bool, bool, bool] = (True, True, True)  # a rigid one's sizes came from its points
+    cab_gone: int = 0  # frames in a row its unseen cab's place was seen through (``_cab_seen_through``)
 
     def report(self, measured: bool) -> VehicleReport:
         s = self.filter.state
@@ -369,13 +373,14 @@ class VehicleTracker:
         points: np.ndarray,
         ground: Callable[[float, float], float],
         stamp_s: float,
-        background_ready: bool = True,
+        background: Background = Background.NONE,
         rays: Rays | None = None,
     ) -> list[VehicleReport]:
         """``points`` (N, 3): the foreground (off the ground and the background) in the yard frame;
-        ``ground(x, y)``: the ground's height there. Until ``background_ready`` the foreground holds
-        the yard too: only articulated vehicles start then (two hinged units are no wall, container
-        or parked trailer); a rigid one needs the learned background to tell it from a container.
+        ``ground(x, y)``: the ground's height there. ``background``: whether the map is learned
+        (``vehicle_start.Background``); until it is the foreground holds the yard too: only
+        articulated vehicles start then (two hinged units are no wall, container or parked trailer);
+        a rigid one needs the learned background to tell it from a container.
         ``rays``: the frame's sensor rays, which show whether a seed's gap was seen empty."""
         self._rays = self.starts.rays = rays
         priors = [self._prior(t, stamp_s, ground) for t in self.tracks]
@@ -387,9 +392,10 @@ class VehicleTracker:
         for i, (track, (prior, at_wall)) in enumerate(zip(self.tracks, owned)):
             track.at_wall = at_wall
             reports.append(self._step(track, prior, points[owner == i], free, stamp_s, lost[i]))
-        self.tracks = [t for t in self.tracks if t.missed < self.params.leave_frames]
+        leave = self.params.leave_frames
+        self.tracks = [t for t in self.tracks if t.missed < leave and t.cab_gone < leave]
         reports = [r for r in reports if any(t.id == r.id for t in self.tracks)]
-        reports += self._start(free, ground, stamp_s, rigid_allowed=background_ready)
+        reports += self._start(free, ground, stamp_s, background)
         return reports
 
     def _prior(self, track: _Track, stamp_s: float, ground) -> Prior:
@@ -456,7 +462,24 @@ class VehicleTracker:
             track = self._recheck_rigid(track, points, free, stamp_s)
         else:
             track.missed += 1
+        track.cab_gone = track.cab_gone + 1 if self._cab_seen_through(track) else 0
         return track.report(measured)
+
+    def _cab_seen_through(self, track: _Track) -> bool:
+        """Whether an articulated track's cab, of which its last fit explained fewer than
+        ``SIDE_MIN_POINTS`` points, was crossed by ``CAB_GONE_MIN_RAYS`` rays where the filter has it
+        (``unit_crossed``): it is not there; for ``leave_frames`` frames in a row, the vehicle has
+        left. (A hidden cab stops the rays that would cross its place; rays ending on the trailer
+        beside it do not say that the cab is there.) A car that drove past a container, started
+        with it as a Twizy and its trailer before the background was learned, drove off: the
+        container was tracked as its trailer, the cab's place empty, for 25 s."""
+        if self._rays is None or not track.model.articulated or track.last is None:
+            return False
+        if np.count_nonzero(track.last.unit == 0) >= SIDE_MIN_POINTS:
+            return False
+        s, model = track.filter.state, track.model
+        cab_xy = model.box_centers(s.x_m, s.y_m, s.yaw_rad, s.hitch_rad)[0]
+        return unit_crossed(self._rays, cab_xy, s.yaw_rad, model.tractor, track.ground_z_m) >= CAB_GONE_MIN_RAYS
 
     def _with_seen_end(self, track: _Track, m: Measurement, points: np.ndarray) -> Measurement:
         """The fit ``m`` with the trailer's rear end where its side ends before rays that passed
@@ -746,11 +769,16 @@ class VehicleTracker:
         reached from the front without a gap longer than ``MAX_BODY_GAP_M``, ahead of any face that
         runs on past the trailer's sides: a wall). A length when points across the middle of the
         face are seen there (not only the ends of the two sides), else a lower bound (the trailer
-        reaches at least that far back)."""
+        reaches at least that far back). Never into a building (``_structure_behind``)."""
         trailer = track.model.trailer
         n_band, rows, face_seen, middle = self._rear_face(track, m, q, width_m)
         if n_band < 5:
             return
+        ahead = q[rows, 0] > self._structure_behind(track, m, points, width_m)
+        if not ahead.all():  # the hindmost points were a building's
+            rows, face_seen = rows[ahead], False
+            if not len(rows):
+                return
         rear = float(q[rows[-1], 0])
         if face_seen:
             length = self._fitted_length(track, m, points, trailer.front_m - middle)
@@ -848,8 +876,25 @@ class VehicleTracker:
             (np.abs(q[:, 1] - np.sign(side[0, 1]) * width_m / 2) <= self.params.fit_inlier_m)
             & body_heights(z_rel, trailer)
             & (q[:, 0] < end)
+            & (q[:, 0] > self._structure_behind(track, m, points, width_m))
         )
         return reached_back(end, q[on_side, 0])
+
+    def _structure_behind(self, track: _Track, m: Measurement, points: np.ndarray, width_m: float) -> float:
+        """Where (the trailer's frame, x) the foremost of the claimed ``points`` higher than any
+        vehicle lies within the trailer's width (``fit_inlier_m`` out past its sides) behind its
+        rear face (``END_BAND_M`` ahead of it or further back): a building's wall, which the trailer's
+        body does not run into (-inf: none). A Volvo pulling out of its dock, the building's 6 m wall
+        in line with its side 1-2 m behind its rear, had the side run on into the wall and its
+        trailer learned 8.28 m long (6.30), named ``unknown`` throughout. Behind the rear only: a
+        tree's crown above a trailer is no end of it."""
+        q = trailer_frame(points, m.vector, track.model)
+        tall = (
+            (points[:, 2] - track.ground_z_m > MAX_VEHICLE_HEIGHT_M)
+            & (np.abs(q[:, 1]) <= width_m / 2 + self.params.fit_inlier_m)
+            & (q[:, 0] <= track.model.trailer.rear_m + END_BAND_M)
+        )
+        return float(q[tall, 0].max()) if tall.any() else -np.inf
 
     def _seen_end(
         self, track: _Track, m: Measurement, points: np.ndarray, sides: list[np.ndarray], width_m: float
@@ -922,11 +967,11 @@ class VehicleTracker:
                 best, best_err = name, err
         return best
 
-    def _start(self, points: np.ndarray, ground, stamp_s: float, rigid_allowed: bool) -> list[VehicleReport]:
+    def _start(self, points: np.ndarray, ground, stamp_s: float, background: Background) -> list[VehicleReport]:
         """Tracks of the vehicles that start among the unclaimed ``points`` (``VehicleStarts.found``):
         their first reports."""
         reports = []
-        for start in self.starts.found(points, ground, rigid_allowed):
+        for start in self.starts.found(points, ground, background):
             track = self._track(next(self._ids), start.model, start.fit, start.ground_z_m, stamp_s, 0.0, start.points)
             track.rigid_seen = rigid_seen(start.rect, self.params, start.top_seen)
             self._learn_at_start(track, start.points, start.fit)
