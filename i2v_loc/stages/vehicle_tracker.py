@@ -774,9 +774,9 @@ class VehicleTracker:
         n_band, rows, face_seen, middle = self._rear_face(track, m, q, width_m)
         if n_band < 5:
             return
-        ahead = q[rows, 0] > self._structure_behind(track, m, points, width_m)
-        if not ahead.all():  # the hindmost points were a building's
-            rows, face_seen = rows[ahead], False
+        building = self._structure_behind(track, m, points, width_m)
+        if not (q[rows, 0] > building).all():  # the hindmost points were a building's
+            rows, face_seen = rows[q[rows, 0] > building], face_seen and middle > building
             if not len(rows):
                 return
         rear = float(q[rows[-1], 0])
