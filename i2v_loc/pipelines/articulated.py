@@ -117,13 +117,6 @@ class ArticulatedPipeline(ParameterHandoff):
         self.level.update(region.ground)
         ground = self._ground = self.level.ground(region.ground)
         if np.isfinite(merged.stamp_s):
-            background = (
-                Background.NONE
-                if self.background is None
-                else Background.READY
-                if self.background.ready
-                else Background.LEARNING
-            )
             level_points = self.level.points(points)
             known = np.isfinite(merged.sweep_origins).all(axis=1).any()  # else no ray is known (a cloud file)
             rays = (
@@ -131,13 +124,19 @@ class ArticulatedPipeline(ParameterHandoff):
                 if known
                 else None
             )
-            self._reports = self.tracker.process(level_points, ground, merged.stamp_s, background, rays)
+            self._reports = self.tracker.process(level_points, ground, merged.stamp_s, self._map_state(), rays)
             self._reports_stamp_s = merged.stamp_s
         timer.lap("vehicles")
         vehicles = [self._result(r, ground) for r in self._reports]
         self._count(merged, region)
         # the seeding of new vehicles runs inside the tracker's one call: "candidates" stays 0
         return frame_result(frame.index, merged, timer.total(), [], vehicles, region.ground_found, points)
+
+    def _map_state(self) -> Background:
+        """No map, or one still learned, or learned (the start's rules differ: ``vehicle_start.Background``)."""
+        if self.background is None:
+            return Background.NONE
+        return Background.READY if self.background.ready else Background.LEARNING
 
     def _result(self, report: VehicleReport, ground) -> ArticulatedVehicleResult:
         s, model = report.state, report.model

@@ -198,7 +198,7 @@ def _seen_empty(rays: Rays, points: np.ndarray) -> bool:
 
 def unit_seen_through(rays: Rays, centre_xy: np.ndarray, yaw_rad: float, box: Box, ground_z_m: float) -> bool:
     """Whether a unit's box (centre, yaw) is no solid body: more than ``SEEN_THROUGH_RATIO`` as many
-    rays crossed it (``units_crossed``) as ended on it (within ``SOLID_INSET_M`` of its box)."""
+    rays crossed it (``unit_crossed``) as ended on it (within ``SOLID_INSET_M`` of its box)."""
     inset, floor, top = SOLID_INSET_M, ground_z_m + box.floor_m, ground_z_m + box.top_m
     _, ended, _ = rays.through(
         tuple(centre_xy), yaw_rad, box.length_m / 2 + inset, box.width_m / 2 + inset, (floor - inset, top + inset),
