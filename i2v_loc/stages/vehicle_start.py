@@ -55,6 +55,7 @@ from i2v_loc.stages.unit_frames import (
     trailer_reach,
     unfolded,
     unit_frames,
+    with_fitted_sizes,
     with_trailer_length,
 )
 from i2v_loc.stages.vehicle_model import MAX_VEHICLE_HEIGHT_M, RIGID_MAX_LENGTH_M, Box, VehicleModel
@@ -798,7 +799,8 @@ class VehicleStarts:
         if not refined:
             return None
         m = min(refined, key=lambda m: m.cost)
-        if not supported(m, with_trailer_length(model, m.trailer_length_m), ground_z_m, top_seen):
+        model = with_fitted_sizes(model, m)
+        if not supported(m, model, ground_z_m, top_seen):
             # once more on a sample that keeps its tractor's points (thin_by_unit): the even sample
             # of a reversing MAN whose cab hid behind its trailer kept 3 of its 60 cab points, and
             # the fit at the right hitch was not supported for 80 frames
@@ -819,6 +821,11 @@ class VehicleStarts:
         for step in (-START_NUDGE_RAD, START_NUDGE_RAD) if nudge else ():
             turned = replace(m, hitch_rad=m.hitch_rad + step)
             again = fit(sample, _sized_start(turned, model, ground_z_m), self.params, START_ITERATIONS, START_SCALE_M)
+            if again is not None and again.cost < m.cost:
+                m = again
+        if nudge and model.articulated:
+            hinged = replace(_sized_start(m, model, ground_z_m), free_kingpin=True)
+            again = fit(sample, hinged, self.params, START_ITERATIONS, START_SCALE_M)
             if again is not None and again.cost < m.cost:
                 m = again
         return m
