@@ -1896,6 +1896,7 @@ def warm_up() -> None:
         xy, z, geometry, 0.25, 4, True, True, v0, np.ones(7), 0.1, 0.2, 2, ranges, 0.1
     )
     cauchy_cost(residual, 0.1)
+    inlier_noise2(residual, 0.1, 0.01, 0.0004)  # the joint hinge fit's, called on its own
     fit_covariance(residual, jacobian, np.ones(7), 0.1, 0.3, 0.01, 0.0004)
     joint_hinge_irls(
         xy, z, np.array([0, 3]), geometry[None].copy(), v0[None, :4].copy(), v0[5:].copy(), np.ones(4), np.ones(2),
@@ -1912,6 +1913,8 @@ def warm_up() -> None:
     any_closer(xy, xy, 0.5)  # the tests call it on its own
     fullest_bin(np.ones((3, 2)), 0.1)
     rays_through_box(p32, p64[:1], np.array([0, 3]), np.eye(3), np.array([0.0, 0.0, 1.0, 0.0, 1.0, 1.0, 0.0, 1.0]), 0.3)
+    plane = np.array([0.0, 0.0, 1.0, 0.0, 1.0, 1.0])
+    plane_crossings(p32, p64[:1], np.array([0, 3]), np.eye(3), np.zeros(3), plane, np.zeros(5), 0.3)
     for points, one in ((p32, np.float32(1.0)), (p64, 1.0)):  # level ground keeps float32; a slope float64
         seed_groups(points, one * 0.5, one, 0.0, 0.0, 0.0, 0.0, 1, 0.5, 0.0)
     wrap_angles(np.zeros(2))
