@@ -16,23 +16,27 @@ from i2v_loc.pipelines import build_pipeline
 from i2v_loc.pipelines.articulated import ArticulatedPipeline
 from i2v_loc.pipelines.paper import PaperPipeline
 from i2v_loc.sim.kinematics import Articulation, step
+from i2v_loc.stages import vehicle_dimensions as vd
 from i2v_loc.stages import vehicle_start as vs
 from i2v_loc.stages import vehicle_tracker as vt
 from i2v_loc.stages.hinged_fit import FRONT, REAR, Measurement, Prior, fit, thin
 from i2v_loc.stages.primitives import min_area_rect
 from i2v_loc.stages.unit_frames import face_seen, supported, with_trailer_length
+from i2v_loc.stages.vehicle_dimensions import (
+    LENGTH_CONVERGED_OBSERVATIONS,
+    TURN_MAX_SPEED_STD_M_S,
+    _Extent,
+    _sides_along,
+)
 from i2v_loc.stages.vehicle_model import Box, VehicleModel
 from i2v_loc.stages.vehicle_start import SEED_RETRY_FRAMES, Background, Seed, _gap_filled, _gap_open
 from i2v_loc.stages.vehicle_tracker import (
-    LENGTH_CONVERGED_OBSERVATIONS,
     SETTLED_SLACK_M,
-    TURN_MAX_SPEED_STD_M_S,
+    VehicleReport,
     VehicleTracker,
     _around_kingpin,
-    _Extent,
     _own_body,
     _shift_along_m,
-    _sides_along,
 )
 
 PARAMS = Params()
@@ -261,11 +265,11 @@ def test_a_track_is_reported_with_the_length_its_start_frame_shows():
     boxes = world_boxes(truth, 0.0, 3.0, 0.0, 0.0)
     points = vehicle_points(truth, 0.0, 3.0, 0.0, sensors=sensors, spacing=0.15)
     tracker = VehicleTracker(PARAMS.articulated, PARAMS.vehicles)
-    tracker._rays = cast_rays(boxes, sensors)
+    tracker._rays = tracker.dimensions.rays = cast_rays(boxes, sensors)
     m = fit(points, Prior(0.0, 3.0, 0.0, 0.0, man, 0.0), PARAMS.articulated)
     track = tracker._track(1, man, m, 0.0, 0.0, 0.0)
     tracker._learn_at_start(track, points, m)
-    report = track.report(True)
+    report = VehicleReport.of(track, True)
     assert report.model.trailer.length_m == pytest.approx(10.5, abs=0.3)
     centre = report.model.box_centers(report.state.x_m, report.state.y_m, report.state.yaw_rad, report.state.hitch_rad)[
         1
@@ -1181,11 +1185,11 @@ def test_a_lower_bound_on_the_trailer_length_does_not_rename_the_vehicle():
         track.trailer_length.add_bound(model.trailer.length_m + 1.5)
     track.model = sized()
     assert track.model.trailer.length_m == pytest.approx(model.trailer.length_m + 1.5)
-    assert tracker._type_name(track) == "volvo_fh"
+    assert tracker.dimensions._type_name(track) == "volvo_fh"
     for _ in range(5):
         track.trailer_length.add(model.trailer.length_m + 1.5)
     track.model = sized()
-    assert tracker._type_name(track) == "unknown"
+    assert tracker.dimensions._type_name(track) == "unknown"
 
 
 def test_a_trailer_length_not_measured_yet_follows_the_new_type_of_a_renamed_vehicle():
@@ -1199,14 +1203,14 @@ def test_a_trailer_length_not_measured_yet_follows_the_new_type_of_a_renamed_veh
     tracker = VehicleTracker(PARAMS.articulated, PARAMS.vehicles)
     track = tracker._track(1, man, m, 0.0, 0.0, 0.0)
     track.trailer_length = length = _Extent(13.68, PARAMS.articulated.dimension_window)  # its rear not seen
-    for _ in range(vt.STILL_END_FRAMES):
+    for _ in range(vd.STILL_END_FRAMES):
         length.add_reach(6.4)
-    assert tracker._type_name(track) == "volvo_fh"
-    tracker._retype(track, "volvo_fh")
+    assert tracker.dimensions._type_name(track) == "volvo_fh"
+    tracker.dimensions._retype(track, "volvo_fh")
     length.add_reach(9.0)  # the points spread: no end where they kept ending
     assert length.still_end is None
     assert length.measured == pytest.approx(PARAMS.vehicles["volvo_fh"].trailer.length_m)
-    assert tracker._type_name(track) == "volvo_fh"
+    assert tracker.dimensions._type_name(track) == "volvo_fh"
 
 
 def test_a_seed_longer_than_any_rigid_vehicle_starts_articulated():
@@ -1422,7 +1426,7 @@ def test_a_moving_car_is_no_vehicle_and_is_not_fitted(monkeypatch):
 def test_the_windowed_median_is_numpys_median_of_the_window(size):
     from collections import deque
 
-    from i2v_loc.stages.vehicle_tracker import _Window, _windowed_median
+    from i2v_loc.stages.vehicle_dimensions import _Window, _windowed_median
 
     rng = np.random.default_rng(size)
     window, reference = _Window(), deque(maxlen=size)
@@ -1472,7 +1476,7 @@ def test_a_reach_that_stays_put_while_moving_is_the_trailers_end():
     """Seen from one side the rear face never shows: the trailer's points reaching 10.5 m behind
     its front frame after moving frame is its length (the prior, 13.68 m, was the catalogue's); a
     reach that moves along the trailer (a shadow's edge) is not, nor are too few frames."""
-    from i2v_loc.stages.vehicle_tracker import STILL_END_FRAMES
+    from i2v_loc.stages.vehicle_dimensions import STILL_END_FRAMES
 
     rng = np.random.default_rng(3)
     still = _Extent(13.68, 50)
@@ -1719,7 +1723,7 @@ def test_a_start_that_saw_no_rear_face_takes_its_trailers_reach_as_a_lower_bound
         drifted = Prior(0.0, 0.0, 0.0, 0.0, with_trailer_length(man, length + 1.1), free_trailer_length=True)
         m = fit(points, drifted, PARAMS.articulated, iterations=10)
         track = tracker._track(1, with_trailer_length(man, m.trailer_length_m), m, 0.0, 0.0, 0.0, points)
-        named[length, rear_seen] = (tracker._type_name(track), track.trailer_length.estimate)
+        named[length, rear_seen] = (tracker.dimensions._type_name(track), track.trailer_length.estimate)
     assert named[11.1, False] == ("man_tgx", man.trailer.length_m)
     assert named[man.trailer.length_m, False] == ("man_tgx", man.trailer.length_m)
     for length in (11.1, 15.0):
@@ -1847,7 +1851,7 @@ def test_a_trailers_front_face_seen_from_straight_ahead_is_no_end():
     start = fit(whole, Prior(*truth[:3], 0.0, model), PARAMS.articulated, iterations=20)
     tracker.tracks.append(tracker._track(1, model, start, 0.0, t, 2.0))
     errs = [errors(tracker.process(points, flat, t)[0], truth) for t, points, (truth,) in frames]
-    report = tracker.tracks[0].report(True)
+    report = VehicleReport.of(tracker.tracks[0], True)
     assert max(e[0] for e in errs) < 0.1 and report.state.speed_m_s > 1.5
     assert report.model.name == "volvo_fh" and report.model.trailer.length_m == model.trailer.length_m
 
@@ -1865,10 +1869,10 @@ def test_a_lower_bound_in_as_many_frames_as_a_length_needs_rules_a_shorter_type_
     m = fit(points, Prior(0.0, 0.0, 0.0, 0.0, model, free_trailer_length=True), PARAMS.articulated, iterations=10)
     track = tracker._track(1, with_trailer_length(model, m.trailer_length_m), m, 0.0, 0.0, 0.0, points)
     assert len(track.trailer_length.bounds) == 1  # the start's reach
-    names = [tracker._type_name(track)]
+    names = [tracker.dimensions._type_name(track)]
     for _ in range(LENGTH_CONVERGED_OBSERVATIONS - 1):
         track.trailer_length.add_bound(13.3)
-        names.append(tracker._type_name(track))
+        names.append(tracker.dimensions._type_name(track))
     assert names == ["volvo_fh"] * (LENGTH_CONVERGED_OBSERVATIONS - 1) + ["man_tgx"]
 
 

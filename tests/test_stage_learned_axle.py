@@ -1,5 +1,5 @@
 """The tractor's rear axle, the point that does not slip sideways, learned from its fits along an
-arc (``vehicle_tracker._learn_axle``)."""
+arc (``vehicle_dimensions._learn_axle``)."""
 
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ import pytest
 
 from i2v_loc.params import Params
 from i2v_loc.sim.kinematics import Articulation, step
-from i2v_loc.stages import vehicle_tracker
+from i2v_loc.stages import vehicle_dimensions
 from i2v_loc.stages.vehicle_model import VehicleModel
 
 PARAMS = Params()
@@ -28,7 +28,7 @@ def learn(behind_m: float, steer_at, seconds: float, seed: int, speed: float = 3
     track = SimpleNamespace(
         model=VehicleModel.from_config("volvo_fh", VOLVO),
         axle_fits=deque(maxlen=60),
-        axle=vehicle_tracker._axle_extent(),
+        axle=vehicle_dimensions._axle_extent(),
         filter=SimpleNamespace(axle_behind_m=0.0),
     )
     observed = None if rows == 4 else (np.eye(4)[:rows], np.eye(rows))
@@ -38,7 +38,7 @@ def learn(behind_m: float, steer_at, seconds: float, seed: int, speed: float = 3
         ahead = behind_m * np.array([np.cos(truth[2]), np.sin(truth[2])])
         z = np.array([truth[0] + ahead[0], truth[1] + ahead[1], truth[2], truth[3] - truth[2]])
         fit = SimpleNamespace(vector=z + rng.normal(0.0, NOISE), observed=observed)
-        vehicle_tracker._learn_axle(track, fit, k * 0.1)
+        vehicle_dimensions._learn_axle(track, fit, k * 0.1)
     return track.filter.axle_behind_m, len(track.axle.values)
 
 
@@ -51,7 +51,7 @@ def steady(curvature_1_m: float):
 @pytest.mark.parametrize("seed", [0, 1])
 def test_the_axle_is_learned_in_a_steady_turn(behind_m, seed):
     learned, pairs = learn(behind_m, steady(0.11), 15.0, seed)
-    assert pairs >= vehicle_tracker.AXLE_MIN_SAMPLES
+    assert pairs >= vehicle_dimensions.AXLE_MIN_SAMPLES
     assert learned == pytest.approx(behind_m, abs=0.08)
 
 
@@ -76,6 +76,6 @@ def test_a_turn_winding_up_and_down_does_not_move_the_axle(monkeypatch, seed):
     halfway between them halfway); with every pair, a known Volvo's axle comes out 0.2-0.6 m off."""
     learned, _ = learn(0.0, winding, 10.0, seed)
     assert abs(learned) < 0.1
-    monkeypatch.setattr(vehicle_tracker, "AXLE_STEADY_SHARE", np.inf)
+    monkeypatch.setattr(vehicle_dimensions, "AXLE_STEADY_SHARE", np.inf)
     every_pair, _ = learn(0.0, winding, 10.0, seed)
     assert abs(every_pair) > 0.2

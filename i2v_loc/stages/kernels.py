@@ -1238,7 +1238,7 @@ def face_median(q, column, unit, face, which_unit, which_face, along):
 
 @njit(**_JIT)
 def rear_face(q, z_rel, unit, face, heights, front, half_width, inlier, beside, max_gap, end_band, middle_below, span):
-    """The trailer body's hindmost points of a fit (``vehicle_tracker._learn_trailer_length``): the
+    """The trailer body's hindmost points of a fit (``vehicle_dimensions._learn_trailer_length``): the
     points (``q``: the trailer's frame, ``z_rel``: height above the ground) within the body's
     ``heights`` (low, high), up to ``front`` and ``inlier`` outside its sides, hindmost last, cut
     at the first gap longer than ``max_gap`` or point level with a face that runs on past both sides
