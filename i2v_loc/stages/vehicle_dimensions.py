@@ -675,16 +675,17 @@ class DimensionLearner:
     def _structure_behind(self, track: VehicleTrack, m: Measurement, points: np.ndarray, width_m: float) -> float:
         """Where (the trailer's frame, x) the foremost of the claimed ``points`` higher than any
         vehicle lies within the trailer's width (``fit_inlier_m`` out past its sides) behind its
-        rear face (``END_BAND_M`` ahead of it or further back): a building's wall, which the trailer's
-        body does not run into (-inf: none). A Volvo pulling out of its dock, the building's 6 m wall
-        in line with its side 1-2 m behind its rear, had the side run on into the wall and its
-        trailer learned 8.28 m long (6.30), named ``unknown`` throughout. Behind the rear only: a
-        tree's crown above a trailer is no end of it."""
+        rear face: a building's wall, which the trailer's body does not run into (-inf: none). A
+        Volvo pulling out of its dock, the building's 6 m wall in line with its side 1-2 m behind
+        its rear, had the side run on into the wall and its trailer learned 8.28 m long (6.30),
+        named ``unknown`` throughout. Behind the rear only: a tree's crown above a trailer is no end
+        of it, nor a dock's lintel above a docked Twizy's rear (counted from 0.4 m ahead of the
+        rear, it cut the trailer's rear face off, and the trailer was learned 1.86 m wide, 1.75)."""
         q = trailer_frame(points, m.vector, track.model)
         tall = (
             (points[:, 2] - track.ground_z_m > MAX_VEHICLE_HEIGHT_M)
             & (np.abs(q[:, 1]) <= width_m / 2 + self.params.fit_inlier_m)
-            & (q[:, 0] <= track.model.trailer.rear_m + END_BAND_M)
+            & (q[:, 0] <= track.model.trailer.rear_m)
         )
         return float(q[tall, 0].max()) if tall.any() else -np.inf
 
