@@ -107,16 +107,6 @@ def with_trailer_length(model: VehicleModel, length_m: float | None) -> VehicleM
     return model.with_boxes(model.tractor, replace(model.trailer, length_m=length_m))
 
 
-def with_fitted_sizes(model: VehicleModel, m: Measurement) -> VehicleModel:
-    """``model`` with the trailer's length and its hinge (kingpin offset, trailer front) the fit
-    ``m`` made free, as far as it did."""
-    model = with_trailer_length(model, m.trailer_length_m)
-    if m.kingpin_m is None:
-        return model
-    trailer = replace(model.trailer, front_m=m.trailer_front_m)
-    return replace(model.with_boxes(model.tractor, trailer), kingpin_behind_axle_m=m.kingpin_m)
-
-
 def unit_origins(v: np.ndarray, model: VehicleModel) -> list[tuple[np.ndarray, float]]:
     """Origin xy and yaw of each unit's frame (tractor: rear axle; trailer: kingpin) for pose ``v``."""
     frames = [(v[:2], v[2])]

@@ -55,7 +55,6 @@ from i2v_loc.stages.unit_frames import (
     trailer_reach,
     unfolded,
     unit_frames,
-    with_fitted_sizes,
     with_trailer_length,
 )
 from i2v_loc.stages.vehicle_model import MAX_VEHICLE_HEIGHT_M, RIGID_MAX_LENGTH_M, Box, VehicleModel
@@ -68,12 +67,6 @@ START_ITERATIONS = 20
 START_SCALE_M = 0.8  # first loss scale of the start fits (a placed model is off by up to metres)
 DIRECTION_COST_RATIO = 0.8  # one end's fit must cost this much less than the other's to decide the direction
 RIGID_COST_RATIO = 0.7  # an articulated model must cost this much less than one rigid box
-# a start fit with its hinge free must cost this much less than with the catalogue's: free, the
-# gap of a known MAN shrank 0.22 m for 15 % less cost and its rays no longer showed it (20 frames late)
-HINGE_COST_RATIO = 0.7
-# and put the kingpin and the trailer's front within this of the catalogue's: tractors' cabs and
-# kingpins differ by decimetres (free, a Twizy's drawbar grew 1.5 m between a car and a container)
-HINGE_MAX_SHIFT_M = 0.5
 START_BEND_TOLERANCE_RAD = np.radians(10.0)  # catalogue models' fits of one vehicle bend alike (within 2 deg)
 LOW_SEED_SLACK_M = 0.5  # a seed shorter than a rigid vehicle and this much lower than every articulated one is none
 REFIT_SIZE_CHANGE_M = 0.1  # a rigid start's box refitted on the footprint its fit explains (``_rigid_fits``)
@@ -805,8 +798,7 @@ class VehicleStarts:
         if not refined:
             return None
         m = min(refined, key=lambda m: m.cost)
-        model = with_fitted_sizes(model, m)
-        if not supported(m, model, ground_z_m, top_seen):
+        if not supported(m, with_trailer_length(model, m.trailer_length_m), ground_z_m, top_seen):
             # once more on a sample that keeps its tractor's points (thin_by_unit): the even sample
             # of a reversing MAN whose cab hid behind its trailer kept 3 of its 60 cab points, and
             # the fit at the right hitch was not supported for 80 frames
@@ -822,21 +814,12 @@ class VehicleStarts:
         apart, and a refined fit can settle in the valley of the cab's points with the trailer a few
         degrees off its side (an unknown 13.6 m trailer entering `l3`'s view, 10 deg off at 1.8 times
         the cost of the fit 5 deg away; the held-out 16 m lane change seen by `l1` started the wrong
-        way round, 19 false vehicle-s). Then with the hinge free too (the kingpin's offset and the
-        trailer's front), kept if it costs ``HINGE_COST_RATIO`` times less and stays near the
-        catalogue's (``_hinge_near``): an unknown vehicle's gap
-        lies elsewhere than its catalogue model's (that 16 m trailer's front filled the MAN's gap
-        the right way round, which then cost more than the wrong way round and was refuted)."""
+        way round, 19 false vehicle-s)."""
         m = fit(sample, _sized_start(coarse, model, ground_z_m), self.params, START_ITERATIONS, START_SCALE_M)
         for step in (-START_NUDGE_RAD, START_NUDGE_RAD) if nudge else ():
             turned = replace(m, hitch_rad=m.hitch_rad + step)
             again = fit(sample, _sized_start(turned, model, ground_z_m), self.params, START_ITERATIONS, START_SCALE_M)
             if again is not None and again.cost < m.cost:
-                m = again
-        if nudge and model.articulated:
-            hinged = replace(_sized_start(m, model, ground_z_m), free_kingpin=True)
-            again = fit(sample, hinged, self.params, START_ITERATIONS, START_SCALE_M)
-            if again is not None and again.cost < HINGE_COST_RATIO * m.cost and _hinge_near(again, model):
                 m = again
         return m
 
@@ -984,16 +967,6 @@ def _sized_start(m: Measurement, model: VehicleModel, ground_z_m: float) -> Prio
     """A start fit's refinement from ``m``: ``model`` with the trailer's length ``m`` fitted, the
     length fitted again."""
     return free_length_at(m, model, m.trailer_length_m, ground_z_m, hypothesis=True)
-
-
-def _hinge_near(m: Measurement, model: VehicleModel) -> bool:
-    """Whether the fit ``m`` (its hinge free) put the kingpin and the trailer's front (against the
-    rear axle) within ``HINGE_MAX_SHIFT_M`` of ``model``'s."""
-    front = model.trailer.front_m - model.kingpin_behind_axle_m
-    return (
-        abs(m.kingpin_m - model.kingpin_behind_axle_m) <= HINGE_MAX_SHIFT_M
-        and abs(m.trailer_front_m - m.kingpin_m - front) <= HINGE_MAX_SHIFT_M
-    )
 
 
 def _gap_filled(cluster: np.ndarray, m: Measurement, model: VehicleModel, ground_z_m: float) -> bool:
