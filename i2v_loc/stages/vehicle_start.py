@@ -109,7 +109,7 @@ class Background(Enum):
 
     NONE = "none"  # no map learned (turned off, or one sweep): what stands is not told from vehicles anyway
     LEARNING = "learning"  # the yard too, while the map is learned: only articulated seeds start
-    READY = "ready"  # the foreground: seeds start once they moved
+    READY = "ready"  # the foreground: a rigid seed, or one of few points, starts once it moved
 
     @property
     def rigid_allowed(self) -> bool:
