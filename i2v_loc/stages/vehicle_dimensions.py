@@ -564,7 +564,8 @@ class DimensionLearner:
         n_band, rows, face_seen, middle = self._rear_face(track, m, q, width_m)
         if n_band < 5:
             return
-        building = self._structure_behind(track, m, points, width_m)
+        claimed = trailer_frame(points, m.vector, track.model)
+        building = self._structure_behind(track, claimed, points[:, 2] - track.ground_z_m, width_m)
         if not (q[rows, 0] > building).all():  # the hindmost points were a building's
             rows, face_seen = rows[q[rows, 0] > building], face_seen and middle > building
             if not len(rows):
@@ -668,22 +669,21 @@ class DimensionLearner:
             (np.abs(q[:, 1] - np.sign(side[0, 1]) * width_m / 2) <= self.params.fit_inlier_m)
             & body_heights(z_rel, trailer)
             & (q[:, 0] < end)
-            & (q[:, 0] > self._structure_behind(track, m, points, width_m))
+            & (q[:, 0] > self._structure_behind(track, q, z_rel, width_m))
         )
         return reached_back(end, q[on_side, 0])
 
-    def _structure_behind(self, track: VehicleTrack, m: Measurement, points: np.ndarray, width_m: float) -> float:
-        """Where (the trailer's frame, x) the foremost of the claimed ``points`` higher than any
-        vehicle lies within the trailer's width (``fit_inlier_m`` out past its sides) behind its
-        rear face: a building's wall, which the trailer's body does not run into (-inf: none). A
+    def _structure_behind(self, track: VehicleTrack, q: np.ndarray, z_rel: np.ndarray, width_m: float) -> float:
+        """Where (the trailer's frame, x) the foremost of the claimed points (``q``: in the trailer's
+        frame, ``z_rel``: their heights above the ground) higher than any vehicle lies within the
+        trailer's width (``fit_inlier_m`` out past its sides) behind its rear face: a building's wall, which the trailer's body does not run into (-inf: none). A
         Volvo pulling out of its dock, the building's 6 m wall in line with its side 1-2 m behind
         its rear, had the side run on into the wall and its trailer learned 8.28 m long (6.30),
         named ``unknown`` throughout. Behind the rear only: a tree's crown above a trailer is no end
         of it, nor a dock's lintel above a docked Twizy's rear (counted from 0.4 m ahead of the
         rear, it cut the trailer's rear face off, and the trailer was learned 1.86 m wide, 1.75)."""
-        q = trailer_frame(points, m.vector, track.model)
         tall = (
-            (points[:, 2] - track.ground_z_m > MAX_VEHICLE_HEIGHT_M)
+            (z_rel > MAX_VEHICLE_HEIGHT_M)
             & (np.abs(q[:, 1]) <= width_m / 2 + self.params.fit_inlier_m)
             & (q[:, 0] <= track.model.trailer.rear_m)
         )

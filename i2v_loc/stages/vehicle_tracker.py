@@ -217,9 +217,7 @@ class VehicleTracker:
         beside it do not say that the cab is there.) A car that drove past a container, started
         with it as a Twizy and its trailer before the background was learned, drove off: the
         container was tracked as its trailer, the cab's place empty, for 25 s."""
-        if self._rays is None or not track.model.articulated or track.last is None:
-            return False
-        if np.count_nonzero(track.last.unit == 0) >= SIDE_MIN_POINTS:
+        if self._rays is None or not _cab_unseen(track):
             return False
         s, model = track.filter.state, track.model
         cab_xy = model.box_centers(s.x_m, s.y_m, s.yaw_rad, s.hitch_rad)[0]
@@ -237,12 +235,7 @@ class VehicleTracker:
         """The last fit explained fewer than ``SIDE_MIN_POINTS`` points by the cab and the hitch's
         standard deviation exceeds ``TRACTOR_LOST_SIGMA_DEG``: the cab has not been seen for a while
         (hidden behind its trailer), and the prediction may have run far off."""
-        return (
-            track.model.articulated
-            and track.last is not None
-            and np.count_nonzero(track.last.unit == 0) < SIDE_MIN_POINTS
-            and track.filter.state.hitch_std_rad > np.radians(TRACTOR_LOST_SIGMA_DEG)
-        )
+        return _cab_unseen(track) and track.filter.state.hitch_std_rad > np.radians(TRACTOR_LOST_SIGMA_DEG)
 
     def _reacquired(self, points: np.ndarray, prior: Prior, m: Measurement) -> Measurement | None:
         """The trailer where the prior has it and the tractor at each start hitch around its kingpin,
@@ -425,6 +418,13 @@ def _at_pose(prior: Prior, m: Measurement) -> Prior:
 def _start_covariance(m: Measurement) -> np.ndarray:
     """A start fit's covariance widened by ``START_SIGMAS`` (the seed's points are not de-skewed)."""
     return m.covariance + np.diag(START_SIGMAS[: len(m.vector)] ** 2)
+
+
+def _cab_unseen(track: VehicleTrack) -> bool:
+    """An articulated track whose last fit explained fewer than ``SIDE_MIN_POINTS`` points by the cab."""
+    return (
+        track.model.articulated and track.last is not None and np.count_nonzero(track.last.unit == 0) < SIDE_MIN_POINTS
+    )
 
 
 def _own_body(points: np.ndarray, owner: np.ndarray, i: int, prior: Prior) -> tuple[Prior, bool]:
