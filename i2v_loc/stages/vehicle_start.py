@@ -19,6 +19,8 @@ from i2v_loc.params import ArticulatedParams
 from i2v_loc.stages import kernels
 from i2v_loc.stages.faces import (
     END_FACE_WIDTH_M,
+    FACE_BAND_M,
+    FACE_MAX_DEPTH_M,
     ONE_SIDE_WIDTH_M,
     away_from_sensor,
     end_face,
@@ -92,12 +94,17 @@ END_SLAB_M = 1.0  # beyond a rigid body's end: a ray ending there and none cross
 SOLID_INSET_M = 0.5  # a unit's box this far inside its faces is crossed by no ray (a sweep's motion blurs them)
 SEEN_THROUGH_RATIO = 0.1  # of the rays ending on a unit, at most this many cross it (real ones: under 0.01)
 CAB_SLICE_MIN_M = 1.0
+# a semitrailer's rear face is open between its under-run guard (at most 0.7 m up) and its floor
+REAR_OPEN_BAND_M = (0.75, 0.15)  # from this high to this far below the trailer's floor
+REAR_OPEN_MIN_COLUMNS = 4
+REAR_CLOSED_SHARE = 0.6  # of its columns holding points in that band: a body reaching down, no trailer's rear
 VIEW_TOP_TOLERANCE_RAD = np.radians(0.5)  # about one beam's spacing
 VACATED_M = 0.5  # a first point this far from all of a seed's points now: its place was left
 VACATED_MIN_SHARE = 0.1
 VACATED_SEEN_MIN_RAYS = 3  # through a place a seed's first points left: seen empty, not hidden
 SEED_FIRST_POINTS = 200
 START_MOVED_M = 0.5  # a seed of few points starting after the map was learned moved this far (or start_travel_m)
+SHAPE_MIN_UNIT_POINTS = 10  # explained in each unit of a vehicle starting by its shape alone (map not learned)
 STANDING_MIN_POINTS = 100  # fewer, a seed waits for motion once the map is learned (``_stood_in``)
 SEED_RETRY_FRAMES = 20  # a seed that was no vehicle is fitted again after this many frames
 SHAPE_CHANGE_M = 0.5  # if its extent or centre moved this much
@@ -438,6 +445,7 @@ class VehicleStarts:
                 and not self._seen_through(m, self._as_far_as_seen(m, model, cluster, ground_z_m), ground_z_m)
                 and self._stands_on_wheels(cluster, m, model, ground_z_m, top_seen)
                 and not self._cab_grounded(cluster, m, model, ground_z_m)
+                and not _rear_closed(cluster, m, model, ground_z_m)
                 and self._ends_free(m, model, ground_z_m)
             ):
                 return model, m
@@ -536,10 +544,16 @@ class VehicleStarts:
 
     def _allowed_to_start(self, seed: Seed, model: VehicleModel, m: Measurement, rigid_allowed: bool) -> bool:
         """Whether the seed, now fitted ``m`` with ``model``, may start: a rigid one once it (and its
-        first rigid fit, remembered here) moved and the map is ready (``_may_start``)."""
+        first rigid fit, remembered here) moved and the map is ready (``_may_start``); while the map
+        is learned (no rigid one allowed), an articulated one by its shape only where each unit
+        shows ``SHAPE_MIN_UNIT_POINTS`` (a container's 21 points, 3 of them a "cab", had started as
+        a Twizy bent 19 deg and was tracked for 26 s on held-out seeds)."""
         seed.rigid = not model.articulated
         fit_moved = self._fit_moved(seed, m)
-        return fit_moved and self._may_start(seed, rigid_allowed)
+        shape_shown = rigid_allowed or all(
+            np.sum(m.unit == u) >= SHAPE_MIN_UNIT_POINTS for u in range(len(model.boxes))
+        )
+        return fit_moved and self._may_start(seed, rigid_allowed) and shape_shown
 
     def _explains(self, m: Measurement, model: VehicleModel) -> bool:
         """The fit explains ``start_min_explained`` of its points (``hinged_fit.explained_share``)."""
@@ -631,7 +645,8 @@ class VehicleStarts:
         if model.trailer is None or abs(m.hitch_rad) > GAP_TEST_MAX_HITCH_RAD:
             return True
         return (
-            seed.moved(self.params.start_travel_m)
+            seed.travelled
+            or seed.moved(self.params.start_travel_m)
             or self._gap_seen_empty(m, model, ground_z_m)
             or (self._one_sweep() and _gap_looked_into(seed.points, m, model, ground_z_m))
         )
@@ -938,8 +953,12 @@ def _bent_against(m: Measurement, best: Measurement) -> bool:
     body (parked 16 m trailers, fitted best by a MAN straight, its gap filled or its cab's box seen
     through, started as Volvos bent 32-34 deg on them at eight times the cost: 14 s of false
     vehicle). Not the other way: a cheapest fit bent 12 deg and seen through was a misfit of an
-    unknown 13.6 m trailer, a MAN's straight fit the right one."""
-    return abs(m.hitch_rad or 0.0) - abs(best.hitch_rad or 0.0) > START_BEND_TOLERANCE_RAD
+    unknown 13.6 m trailer, a MAN's straight fit the right one. Nor when ``best`` costs alike (not
+    under ``DIRECTION_COST_RATIO`` times ``m``'s): a cab without points bends as it may, and seen by
+    one LiDAR from behind, a MAN's trailer alone started the wrong way round, straight, its "cab" on
+    the trailer's rear face, the right way bent 27 deg at 1.14 times the cost (19 false vehicle-s)."""
+    bends_further = abs(m.hitch_rad or 0.0) - abs(best.hitch_rad or 0.0) > START_BEND_TOLERANCE_RAD
+    return bends_further and best.cost <= DIRECTION_COST_RATIO * m.cost
 
 
 def _bent_flags(fits: list[Measurement]) -> list[bool]:
@@ -972,6 +991,28 @@ def _sized_start(m: Measurement, model: VehicleModel, ground_z_m: float) -> Prio
     """A start fit's refinement from ``m``: ``model`` with the trailer's length ``m`` fitted, the
     length fitted again."""
     return free_length_at(m, model, m.trailer_length_m, ground_z_m, hypothesis=True)
+
+
+def _rear_closed(cluster: np.ndarray, m: Measurement, model: VehicleModel, ground_z_m: float) -> bool:
+    """Whether an articulated fit's trailer rear face, where its points show it (at least
+    ``REAR_OPEN_MIN_COLUMNS`` ``FACE_BAND_M`` columns across), holds points in ``REAR_CLOSED_SHARE``
+    of them between ``REAR_OPEN_BAND_M`` (above the ground; below the trailer's floor): a cab's
+    front, its bumper and grille reaching down, not a trailer's rear, open below its floor but for
+    its wheels at the corners. Seen by one LiDAR from ahead, an unknown 16 m vehicle started as a
+    Volvo the wrong way round, its "cab" on 16 points of the trailer's rear and its trailer ending
+    on the real cab's front (19 false vehicle-s on held-out seeds)."""
+    if model.trailer is None:
+        return False
+    box = model.trailer
+    low, high = REAR_OPEN_BAND_M[0], box.floor_m - REAR_OPEN_BAND_M[1]
+    q = unit_frames(cluster, m.vector, model)[1]
+    on = (np.abs(q[:, 0] - box.rear_m) <= FACE_MAX_DEPTH_M) & (np.abs(q[:, 1]) <= box.width_m / 2)
+    if low >= high or not on.any():
+        return False
+    columns = np.floor((q[on, 1] + box.width_m / 2) / FACE_BAND_M)
+    z_rel = cluster[on, 2] - ground_z_m
+    shown, closed = np.unique(columns), np.unique(columns[(z_rel >= low) & (z_rel <= high)])
+    return len(shown) >= REAR_OPEN_MIN_COLUMNS and len(closed) >= REAR_CLOSED_SHARE * len(shown)
 
 
 def _gap_filled(cluster: np.ndarray, m: Measurement, model: VehicleModel, ground_z_m: float) -> bool:
