@@ -199,18 +199,15 @@ def test_while_the_map_is_learned_a_vehicle_starts_by_its_shape_only_where_each_
     fit must hold ``SHAPE_MIN_UNIT_POINTS`` explained points (a container's 21 points, 3 of them on
     a "cab", had started as a bent Twizy). Once rigid vehicles may start too (map learned, or none
     kept), that is no longer asked: motion or the map tell then."""
-    from i2v_loc.stages.vehicle_start import SHAPE_MIN_UNIT_POINTS, Seed
+    from i2v_loc.stages.vehicle_start import SHAPE_MIN_UNIT_POINTS, _shape_shown
 
     twizy = VehicleModel.from_config("twizy", PARAMS.vehicles["twizy"])
-    starts = VehicleTracker(PARAMS.articulated, PARAMS.vehicles).starts
-    seed = Seed(np.zeros(2), np.zeros(2))
 
     def fit_of(cab: int, trailer: int, unexplained: int = 5) -> SimpleNamespace:
         return SimpleNamespace(unit=np.repeat([0, 1, -1], [cab, trailer, unexplained]))
 
     few = fit_of(3, 18)
-    enough = fit_of(SHAPE_MIN_UNIT_POINTS, 18)
-    assert not starts._allowed_to_start(seed, twizy, few, rigid_allowed=False)
-    assert not starts._allowed_to_start(seed, twizy, fit_of(18, SHAPE_MIN_UNIT_POINTS - 1), rigid_allowed=False)
-    assert starts._allowed_to_start(seed, twizy, enough, rigid_allowed=False)
-    assert starts._allowed_to_start(seed, twizy, few, rigid_allowed=True)
+    assert not _shape_shown(few, twizy, rigid_allowed=False)
+    assert not _shape_shown(fit_of(18, SHAPE_MIN_UNIT_POINTS - 1), twizy, rigid_allowed=False)
+    assert _shape_shown(fit_of(SHAPE_MIN_UNIT_POINTS, 18), twizy, rigid_allowed=False)
+    assert _shape_shown(few, twizy, rigid_allowed=True)

@@ -446,6 +446,7 @@ class VehicleStarts:
                 and self._stands_on_wheels(cluster, m, model, ground_z_m, top_seen)
                 and not self._cab_grounded(cluster, m, model, ground_z_m)
                 and not _rear_closed(cluster, m, model, ground_z_m)
+                and _shape_shown(m, model, rigid_allowed)
                 and self._ends_free(m, model, ground_z_m)
             ):
                 return model, m
@@ -544,16 +545,10 @@ class VehicleStarts:
 
     def _allowed_to_start(self, seed: Seed, model: VehicleModel, m: Measurement, rigid_allowed: bool) -> bool:
         """Whether the seed, now fitted ``m`` with ``model``, may start: a rigid one once it (and its
-        first rigid fit, remembered here) moved and the map is ready (``_may_start``); while the map
-        is learned (no rigid one allowed), an articulated one by its shape only where each unit
-        shows ``SHAPE_MIN_UNIT_POINTS`` (a container's 21 points, 3 of them a "cab", had started as
-        a Twizy bent 19 deg and was tracked for 26 s on held-out seeds)."""
+        first rigid fit, remembered here) moved and the map is ready (``_may_start``)."""
         seed.rigid = not model.articulated
         fit_moved = self._fit_moved(seed, m)
-        shape_shown = rigid_allowed or all(
-            np.sum(m.unit == u) >= SHAPE_MIN_UNIT_POINTS for u in range(len(model.boxes))
-        )
-        return fit_moved and self._may_start(seed, rigid_allowed) and shape_shown
+        return fit_moved and self._may_start(seed, rigid_allowed)
 
     def _explains(self, m: Measurement, model: VehicleModel) -> bool:
         """The fit explains ``start_min_explained`` of its points (``hinged_fit.explained_share``)."""
@@ -991,6 +986,14 @@ def _sized_start(m: Measurement, model: VehicleModel, ground_z_m: float) -> Prio
     """A start fit's refinement from ``m``: ``model`` with the trailer's length ``m`` fitted, the
     length fitted again."""
     return free_length_at(m, model, m.trailer_length_m, ground_z_m, hypothesis=True)
+
+
+def _shape_shown(m: Measurement, model: VehicleModel, rigid_allowed: bool) -> bool:
+    """Whether a fit may start by its shape: once rigid vehicles may start too (the map learned, or
+    none kept) motion or the map tell a vehicle; while the map is learned its shape alone does, and
+    each unit must hold ``SHAPE_MIN_UNIT_POINTS`` explained points (a container's 21 points, 3 of
+    them a "cab", had started as a Twizy bent 19 deg and was tracked for 26 s on held-out seeds)."""
+    return rigid_allowed or all(np.count_nonzero(m.unit == u) >= SHAPE_MIN_UNIT_POINTS for u in range(len(model.boxes)))
 
 
 def _rear_closed(cluster: np.ndarray, m: Measurement, model: VehicleModel, ground_z_m: float) -> bool:
