@@ -631,7 +631,9 @@ class VehicleStarts:
 
     def _hinge_shown(self, seed: Seed, m: Measurement, model: VehicleModel, ground_z_m: float) -> bool:
         """Whether a straight articulated fit is two units: it moves (its seed moved
-        ``start_travel_m``, or it is a tracked vehicle's probe), or its gap was seen empty, or, in one
+        ``start_travel_m``, now or once: ``Seed.travelled``, or it is a tracked vehicle's probe; a
+        vehicle seen head-on grows towards its rear as it comes, and its seed's centre wavers about
+        that travel), or its gap was seen empty, or, in one
         sweep, into (``_gap_looked_into``); a standing straight one may be a parked trailer with a
         hole in its side (a pole's shadow). A rigid fit, or a bent one, needs neither. (Tried: the
         motion of the fit's middle between cab front and trailer rear instead of the seed's centre;
@@ -1008,9 +1010,11 @@ def _rear_closed(cluster: np.ndarray, m: Measurement, model: VehicleModel, groun
         return False
     box = model.trailer
     low, high = REAR_OPEN_BAND_M[0], box.floor_m - REAR_OPEN_BAND_M[1]
+    if low >= high:
+        return False  # a trailer this low (a Twizy's) leaves no band to ask
     q = unit_frames(cluster, m.vector, model)[1]
     on = (np.abs(q[:, 0] - box.rear_m) <= FACE_MAX_DEPTH_M) & (np.abs(q[:, 1]) <= box.width_m / 2)
-    if low >= high or not on.any():
+    if not on.any():
         return False
     columns = np.floor((q[on, 1] + box.width_m / 2) / FACE_BAND_M)
     z_rel = cluster[on, 2] - ground_z_m
