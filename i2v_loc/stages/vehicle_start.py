@@ -54,6 +54,7 @@ from i2v_loc.stages.unit_frames import (
     face_seen,
     free_length_at,
     supported,
+    trailer_frame,
     trailer_reach,
     unfolded,
     unit_frames,
@@ -439,14 +440,14 @@ class VehicleStarts:
             filled = _gap_filled(cluster, m, model, ground_z_m)
             if (
                 self._explains(m, model)
+                and _shape_shown(m, model, rigid_allowed)
+                and not _rear_closed(cluster, m, model, ground_z_m)
                 and not filled
                 # without rays a hole and a gap look alike: the points alone decide
                 and (self.rays is None or self._hinge_shown(seed, m, model, ground_z_m))
                 and not self._seen_through(m, self._as_far_as_seen(m, model, cluster, ground_z_m), ground_z_m)
                 and self._stands_on_wheels(cluster, m, model, ground_z_m, top_seen)
                 and not self._cab_grounded(cluster, m, model, ground_z_m)
-                and not _rear_closed(cluster, m, model, ground_z_m)
-                and _shape_shown(m, model, rigid_allowed)
                 and self._ends_free(m, model, ground_z_m)
             ):
                 return model, m
@@ -1012,7 +1013,7 @@ def _rear_closed(cluster: np.ndarray, m: Measurement, model: VehicleModel, groun
     low, high = REAR_OPEN_BAND_M[0], box.floor_m - REAR_OPEN_BAND_M[1]
     if low >= high:
         return False  # a trailer this low (a Twizy's) leaves no band to ask
-    q = unit_frames(cluster, m.vector, model)[1]
+    q = trailer_frame(cluster, m.vector, model)
     on = (np.abs(q[:, 0] - box.rear_m) <= FACE_MAX_DEPTH_M) & (np.abs(q[:, 1]) <= box.width_m / 2)
     if not on.any():
         return False
