@@ -29,7 +29,13 @@ from i2v_loc.stages.vehicle_dimensions import (
     _sides_along,
 )
 from i2v_loc.stages.vehicle_model import Box, VehicleModel
-from i2v_loc.stages.vehicle_start import SEED_RETRY_FRAMES, Background, Seed, _gap_filled, _gap_open
+from i2v_loc.stages.vehicle_start import (
+    SEED_RETRY_FRAMES,
+    Background,
+    Seed,
+    _gap_filled,
+    _gap_open,
+)
 from i2v_loc.stages.vehicle_tracker import (
     SETTLED_SLACK_M,
     VehicleReport,
@@ -1397,6 +1403,49 @@ def test_a_seed_moved_when_the_place_it_left_is_seen_empty_not_hidden():
     assert not seed(hidden).moved(travel, rays)
     driven = vehicle_points(trailer, 3.0, 0.0, 0.0, sensors=[sensor], spacing=0.2)
     assert seed(driven).moved(travel, cast_rays(world_boxes(trailer, 3.0, 0.0, 0.0), [sensor]))
+
+
+def test_a_seed_that_moved_is_away_until_it_shows_its_first_points_again():
+    """A vehicle that drove on and whose centre wavered back under ``start_travel_m`` (it grows
+    towards its rear as it comes) is still away from the place it left; a parked trailer whose
+    centre moved while a passing truck hid its first points, and which shows them again, is not,
+    unless the rays once saw the place it left empty."""
+    box = vehicle_points(VehicleModel.rigid("rigid", 12.0, 2.5, 2.6), 0.0, 5.0, 0.0, sensors=SENSORS[:1], spacing=0.2)
+    travel = PARAMS.articulated.start_travel_m
+    centre = box[:, :2].mean(axis=0)  # 3 m on from its first points, its centre only travel - 0.2
+    first = box - [3.0, 0.0, 0.0]
+    wavered = Seed(centre, centre - [travel - 0.2, 0.0], first_points=first, points=box, travelled=True)
+    assert not wavered.moved(travel) and wavered.away()
+    assert not replace(wavered, travelled=False).away()
+    back = replace(wavered, first_points=box.copy())  # what it showed first is there again
+    assert not back.away()
+    assert replace(back, moving=True).away()
+    assert replace(back, left_seen=True).away()  # the rays once crossed the place it left
+
+
+def _seed_after(frames) -> Seed:
+    """The seed of a box's points after ``frames`` of (box x, occluders) seen by one side sensor,
+    the rays cast on them (none starts: the map is being learned)."""
+    box, sensor = VehicleModel.rigid("rigid", 8.0, 2.5, 3.0), [(0.0, -15.0, 4.0)]
+    starts = VehicleTracker(PARAMS.articulated, PARAMS.vehicles).starts
+    for x, others in frames:
+        starts.rays = cast_rays(world_boxes(box, x, 0.0, 0.0) + others, sensor)
+        points = vehicle_points(box, x, 0.0, 0.0, sensors=sensor, others=others)
+        assert starts.found(points, flat, vs.Background.LEARNING) == []
+    return max(starts.seeds, key=lambda seed: seed.frames)  # the one seen since the first frame
+
+
+def test_a_seed_is_seen_to_leave_its_place_when_the_rays_cross_it_once():
+    """A box driving along one LiDAR's view leaves its first place in the rays' sight: it is away
+    for good. A parked one whose visible half shifts behind a passing truck has travelled as far,
+    but the rays never crossed its first place (the truck hid it): it has not left it."""
+    driven = _seed_after([(0.6 * k, []) for k in range(6)])
+    assert driven.travelled and driven.left_seen
+    passing = [
+        WorldBox(np.array([x, -6.0]), 0.0, Box(2.0, 1.0, 6.0, 0.0, 6.0), 2) for x in (3.0, 2.4, 1.8, 1.2, 0.6, 0.0)
+    ]
+    parked = _seed_after([(0.0, [truck]) for truck in passing])
+    assert parked.travelled and not parked.left_seen
 
 
 def test_two_units_are_judged_on_the_cheapest_supported_fit():

@@ -160,6 +160,7 @@ class Seed:
     failed_frame: int = 0  # its frame count then
     moving: bool = False  # known to move (a tracked vehicle's probe), however short its travel
     travelled: bool = False  # it once moved (``moved``): no background, whether it stands now or not
+    left_seen: bool = False  # it once moved and the rays crossed the place it left (``moved`` with rays)
     rect: Rect | None = None  # this frame's footprint
     first_points: np.ndarray = field(default_factory=lambda: np.empty((0, 3)))  # thinned, when first seen
     points: np.ndarray = field(default_factory=lambda: np.empty((0, 3)))  # this frame's
@@ -183,13 +184,33 @@ class Seed:
         by, lost its first points behind the MAN, showed others, and started as a rigid vehicle."""
         if self.moving:
             return True
-        if self.travel_m < travel_m or len(self.first_points) == 0 or len(self.points) == 0:
+        if self.travel_m < travel_m:
             return False
-        distance, _ = cKDTree(self.points[:, :2]).query(self.first_points[:, :2], distance_upper_bound=VACATED_M)
-        vacated = np.isinf(distance)
-        if float(np.mean(vacated)) < VACATED_MIN_SHARE:
+        vacated = self._vacated()
+        if not _left(vacated):
             return False
         return rays is None or _seen_empty(rays, self.first_points[vacated])
+
+    def away(self) -> bool:
+        """It once left a place the rays saw empty (``left_seen``), or it once moved (``travelled``)
+        and its first place is still left: a vehicle coming head-on hides the place it left behind
+        its own front. A parked trailer's seed, its side hidden behind a MAN driving by, moved while
+        it grew along its other side; once the MAN passed it showed its first points again, and
+        started as a vehicle (13 false vehicle-s on held-out seeds) while its place still counted as
+        left. (Its first place left alone, a MAN driving on past one LiDAR covered its first points
+        with its trailer's side again, and started 20 frames late.)"""
+        return self.moving or self.left_seen or (self.travelled and _left(self._vacated()))
+
+    def _vacated(self) -> np.ndarray:
+        """Which first points lie ``VACATED_M`` from all of its points now."""
+        if len(self.first_points) == 0 or len(self.points) == 0:
+            return np.zeros(0, bool)
+        distance, _ = cKDTree(self.points[:, :2]).query(self.first_points[:, :2], distance_upper_bound=VACATED_M)
+        return np.isinf(distance)
+
+
+def _left(vacated: np.ndarray) -> bool:
+    return len(vacated) > 0 and float(np.mean(vacated)) >= VACATED_MIN_SHARE
 
 
 def _seen_empty(rays: Rays, points: np.ndarray) -> bool:
@@ -272,6 +293,7 @@ class VehicleStarts:
                 self.seeds.append(seed)
             seed.points, seed.rect = cluster, rect
             seed.travelled = seed.travelled or seed.moved(self.params.start_travel_m)
+            seed.left_seen = seed.left_seen or (seed.travelled and seed.moved(self.params.start_travel_m, self.rays))
             shape = _Shape(len(cluster), rect.length_m, rect.width_m, center, rigid_allowed)
             if (
                 seed.frames >= self.params.start_frames
@@ -632,9 +654,9 @@ class VehicleStarts:
 
     def _hinge_shown(self, seed: Seed, m: Measurement, model: VehicleModel, ground_z_m: float) -> bool:
         """Whether a straight articulated fit is two units: it moves (its seed moved
-        ``start_travel_m``, now or once: ``Seed.travelled``, or it is a tracked vehicle's probe; a
-        vehicle seen head-on grows towards its rear as it comes, and its seed's centre wavers about
-        that travel), or its gap was seen empty, or, in one
+        ``start_travel_m``, now or once and is still away: ``Seed.away``, or it is a tracked
+        vehicle's probe; a vehicle seen head-on grows towards its rear as it comes, and its seed's
+        centre wavers about that travel), or its gap was seen empty, or, in one
         sweep, into (``_gap_looked_into``); a standing straight one may be a parked trailer with a
         hole in its side (a pole's shadow). A rigid fit, or a bent one, needs neither. (Tried: the
         motion of the fit's middle between cab front and trailer rear instead of the seed's centre;
@@ -643,7 +665,7 @@ class VehicleStarts:
         if model.trailer is None or abs(m.hitch_rad) > GAP_TEST_MAX_HITCH_RAD:
             return True
         return (
-            seed.travelled
+            seed.away()
             or seed.moved(self.params.start_travel_m)
             or self._gap_seen_empty(m, model, ground_z_m)
             or (self._one_sweep() and _gap_looked_into(seed.points, m, model, ground_z_m))
