@@ -21,7 +21,7 @@ from i2v_loc.stages import vehicle_start as vs
 from i2v_loc.stages import vehicle_tracker as vt
 from i2v_loc.stages.hinged_fit import FRONT, REAR, Measurement, Prior, fit, thin
 from i2v_loc.stages.primitives import min_area_rect
-from i2v_loc.stages.unit_frames import face_seen, free_length_at, supported, with_trailer_length
+from i2v_loc.stages.unit_frames import face_seen, supported, with_trailer_length
 from i2v_loc.stages.vehicle_dimensions import (
     LENGTH_CONVERGED_OBSERVATIONS,
     TURN_MAX_SPEED_STD_M_S,
@@ -1446,28 +1446,6 @@ def test_a_seed_is_seen_to_leave_its_place_when_the_rays_cross_it_once():
     ]
     parked = _seed_after([(0.0, [truck]) for truck in passing])
     assert parked.travelled and not parked.left_seen
-
-
-def test_a_start_fit_spans_its_catalogue_trailer_unless_its_rear_face_shows():
-    """A MAN entering the view cab first, 2.5 m of its trailer seen: a Volvo fitted with its
-    trailer shortened to 3 m spans that trailer, but not half the Volvo's 6.3 m: it waits. A short
-    trailer whose rear face shows is as long as it is."""
-    man = VehicleModel.from_config("man_tgx", PARAMS.vehicles["man_tgx"])
-    points = vehicle_points(man, 0.0, 5.0, 0.0, sensors=SENSORS[:1], spacing=0.15)
-    trailer_front = man.box_centers(0.0, 5.0, 0.0, 0.0)[1][0] + man.trailer.length_m / 2
-    starts = VehicleTracker(PARAMS.articulated, PARAMS.vehicles).starts
-
-    def shortened(points: np.ndarray, yaw: float):
-        first = fit(points, Prior(0.0, 5.0, yaw, 0.0, volvo()), PARAMS.articulated, iterations=20)
-        m = fit(points, free_length_at(first, volvo(), 3.0, 0.0, hypothesis=True), PARAMS.articulated, iterations=20)
-        return m, with_trailer_length(volvo(), m.trailer_length_m)
-
-    m, model = shortened(points[points[:, 0] >= trailer_front - 2.5], 0.0)
-    assert m.rear_points == 0 and m.trailer_length_m < 3.15
-    assert supported(m, model, 0.0) and not starts._spanned(m, model, 0.0, True)
-    short = volvo().with_boxes(volvo().tractor, replace(volvo().trailer, length_m=2.6))
-    m, model = shortened(vehicle_points(short, 0.0, 5.0, 0.3, sensors=[(-15.0, -10.0, 4.0)], spacing=0.15), 0.3)
-    assert abs(m.trailer_length_m - 2.6) < 0.1 and starts._spanned(m, model, 0.0, True)
 
 
 def test_two_units_are_judged_on_the_cheapest_supported_fit():

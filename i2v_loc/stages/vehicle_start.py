@@ -448,7 +448,7 @@ class VehicleStarts:
             choices = [two] if two is not None else self._choose(hypotheses, seed, ground_z_m, top_seen)
             choices += self._rigid_after(choices, hypotheses)
         bent = _bent_flags([m for _, m in choices])
-        backed = [self._spanned(m, model, ground_z_m, top_seen) for model, m in choices]
+        backed = [supported(m, model, ground_z_m, top_seen) for model, m in choices]
         waiting = [  # fits that only lack points yet: more of the vehicle may show in the frames to come
             m
             for (model, m), b, s in zip(choices, bent, backed)
@@ -694,21 +694,10 @@ class VehicleStarts:
         fits = sorted(
             (h for h in hypotheses if h[0].articulated and unfolded(h[2], self.params)), key=lambda h: h[2].cost
         )
-        model, _, m = next((h for h in fits if self._spanned(h[2], h[0], ground_z_m, top_seen)), (None, None, None))
+        model, _, m = next((h for h in fits if supported(h[2], h[0], ground_z_m, top_seen)), (None, None, None))
         if model is None or not _gap_open(cluster, m, model, ground_z_m):
             return None
         return (model, m) if self._hinge_shown(seed, m, model, ground_z_m) else None
-
-    def _spanned(self, m: Measurement, model: VehicleModel, ground_z_m: float, top_seen: bool) -> bool:
-        """Whether a start's fit is ``supported``, its trailer as long as the catalogue's at least
-        where the fit saw no rear face: a trailer shortened to the few metres in view spans them.
-        A MAN entering paper +2000 `l4`'s view cab first, 35 points of its trailer seen, was fitted
-        best as itself (not supported yet) and, at 7 times the cost, as a Volvo whose trailer
-        shrank to 2 m: that one started, and the MAN was named a Volvo for 2.4 s."""
-        listed = self.catalogue.get(model.name)
-        if model.trailer is not None and listed is not None and m.rear_points < REAR_FACE_MIN_POINTS:
-            model = with_trailer_length(model, max(model.trailer.length_m, listed.trailer.length_m))
-        return supported(m, model, ground_z_m, top_seen)
 
     def _gap_seen_empty(self, m: Measurement, model: VehicleModel, ground_z_m: float) -> bool:
         """At least ``GAP_SEEN_MIN_RAYS`` rays crossed the middle of the model's gap (``_gap_counts``'
