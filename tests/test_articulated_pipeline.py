@@ -29,13 +29,7 @@ from i2v_loc.stages.vehicle_dimensions import (
     _sides_along,
 )
 from i2v_loc.stages.vehicle_model import Box, VehicleModel
-from i2v_loc.stages.vehicle_start import (
-    SEED_RETRY_FRAMES,
-    Background,
-    Seed,
-    _gap_filled,
-    _gap_open,
-)
+from i2v_loc.stages.vehicle_start import SEED_RETRY_FRAMES, Background, Seed, _gap_filled, _gap_open
 from i2v_loc.stages.vehicle_tracker import (
     SETTLED_SLACK_M,
     VehicleReport,

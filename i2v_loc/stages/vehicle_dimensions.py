@@ -677,7 +677,8 @@ class DimensionLearner:
         """Where (the trailer's frame, x) the foremost of the claimed points (``q``: in the trailer's
         frame, ``z_rel``: their heights above the ground) higher than any vehicle lies within the
         trailer's width (``fit_inlier_m`` out past its sides) behind its rear face: a building's
-        wall, which the trailer's body does not run into (-inf: none). A Volvo pulling out of its dock, the building's 6 m wall in line with its side 1-2 m behind
+        wall, which the trailer's body does not run into (-inf: none). A Volvo pulling out of its
+        dock, the building's 6 m wall in line with its side 1-2 m behind
         its rear, had the side run on into the wall and its trailer learned 8.28 m long (6.30),
         named ``unknown`` throughout. Behind the rear only: a tree's crown above a trailer is no end
         of it, nor a dock's lintel above a docked Twizy's rear (counted from 0.4 m ahead of the

@@ -210,6 +210,7 @@ class Seed:
 
 
 def _left(vacated: np.ndarray) -> bool:
+    """Whether at least ``VACATED_MIN_SHARE`` of a seed's first points are vacated."""
     return len(vacated) > 0 and float(np.mean(vacated)) >= VACATED_MIN_SHARE
 
 
@@ -292,8 +293,10 @@ class VehicleStarts:
                 seed = Seed(center, center, first_points=thin(cluster, SEED_FIRST_POINTS))
                 self.seeds.append(seed)
             seed.points, seed.rect = cluster, rect
-            seed.travelled = seed.travelled or seed.moved(self.params.start_travel_m)
-            seed.left_seen = seed.left_seen or (seed.travelled and seed.moved(self.params.start_travel_m, self.rays))
+            if not seed.left_seen:  # it left a place the rays saw empty only in a frame in which it moved
+                moved = seed.moved(self.params.start_travel_m)
+                seed.travelled = seed.travelled or moved
+                seed.left_seen = moved and seed.moved(self.params.start_travel_m, self.rays)
             shape = _Shape(len(cluster), rect.length_m, rect.width_m, center, rigid_allowed)
             if (
                 seed.frames >= self.params.start_frames
