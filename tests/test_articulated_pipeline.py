@@ -21,7 +21,7 @@ from i2v_loc.stages import vehicle_start as vs
 from i2v_loc.stages import vehicle_tracker as vt
 from i2v_loc.stages.hinged_fit import FRONT, REAR, Measurement, Prior, fit, thin
 from i2v_loc.stages.primitives import min_area_rect
-from i2v_loc.stages.unit_frames import face_seen, supported, with_trailer_length
+from i2v_loc.stages.unit_frames import face_seen, free_length_at, supported, with_trailer_length
 from i2v_loc.stages.vehicle_dimensions import (
     LENGTH_CONVERGED_OBSERVATIONS,
     TURN_MAX_SPEED_STD_M_S,
@@ -566,6 +566,30 @@ def test_a_parked_trailer_alone_is_no_vehicle():
                 tracker.process(points, flat, 0.1 * k, background=Background.READY if k >= 20 else Background.LEARNING)
                 == []
             )
+
+
+def test_rays_pass_under_both_ends_of_a_semitrailer_not_under_a_cab_or_a_buss_end():
+    """A 13.6 m semitrailer, floor 1.2 m up, reversing with its tractor hidden behind it: its axles
+    stand under its rear quarter and the tractor's rear wheels under its front quarter, yet rays pass
+    under the outer metre of both its ends, 0.6-1.0 m up, onto the ground beyond: no rigid body. A
+    bus's skirt (0.3 m up) and a box truck's cab (0.5 m up) close an end; so does an end no ray
+    reaches."""
+    from i2v_loc.stages.faces import closed_below_at_an_end
+
+    def at(x: float, y: float, length_m: float, width_m: float, floor_m: float, top_m: float) -> WorldBox:
+        return WorldBox(np.array([x, y]), 0.0, Box(length_m / 2, length_m, width_m, floor_m, top_m - floor_m), 0)
+
+    def closed(length_m: float, boxes: list[WorldBox], sensors=SENSORS) -> bool:
+        box = VehicleModel.rigid("rigid", length_m, 2.55, 2.6).tractor  # centred on x = 0
+        m = Measurement(0.0, 3.0, 0.0, 0.0, np.eye(4), np.empty((0, 3)), np.empty(0, np.int8), 0.0)
+        return closed_below_at_an_end(cast_rays(boxes, sensors), m, box, 0.0)
+
+    wheels = [at(x, 3.0 + side, length, 0.4, 0.0, 1.0) for x, length in ((-3.2, 2.0), (4.7, 1.0)) for side in (-1, 1)]
+    assert not closed(13.6, [at(0.0, 3.0, 13.6, 2.55, 1.2, 3.8), *wheels])
+    assert closed(12.0, [at(0.0, 3.0, 12.0, 2.55, 0.3, 3.2)])
+    assert closed(10.4, [at(-1.2, 3.0, 8.0, 2.55, 1.1, 3.6), at(4.05, 3.0, 2.3, 2.5, 0.5, 2.9)])
+    rear_only = [(-30.0, 3.0, 4.0)]  # the truck's front hidden from view: not refuted
+    assert closed(10.4, [at(-1.2, 3.0, 8.0, 2.55, 1.1, 3.6), at(4.05, 3.0, 2.3, 2.5, 0.5, 2.9)], rear_only)
 
 
 def test_rays_along_a_parked_trailers_side_show_no_gap_behind_a_wider_cab_on_its_front():
@@ -1440,6 +1464,48 @@ def test_a_seed_is_seen_to_leave_its_place_when_the_rays_cross_it_once():
     ]
     parked = _seed_after([(0.0, [truck]) for truck in passing])
     assert parked.travelled and not parked.left_seen
+
+
+def _shortened(model: VehicleModel, points: np.ndarray, yaw: float, length_m: float):
+    """``model`` fitted to ``points`` at (0, 5, ``yaw``), then again with its trailer's length free
+    from ``length_m``: the fit and the model with the fitted length."""
+    first = fit(points, Prior(0.0, 5.0, yaw, 0.0, model), PARAMS.articulated, iterations=20)
+    m = fit(points, free_length_at(first, model, length_m, 0.0, hypothesis=True), PARAMS.articulated, iterations=20)
+    return m, with_trailer_length(model, m.trailer_length_m)
+
+
+def test_a_start_fit_spans_its_catalogue_trailer_unless_its_rear_face_shows():
+    """A MAN entering the view cab first, 2.5 m of its trailer seen: a Volvo fitted with its
+    trailer shortened to 3 m spans that trailer, but not half the Volvo's 6.3 m: it waits. A short
+    trailer whose rear face shows is as long as it is."""
+    man = VehicleModel.from_config("man_tgx", PARAMS.vehicles["man_tgx"])
+    points = vehicle_points(man, 0.0, 5.0, 0.0, sensors=SENSORS[:1], spacing=0.15)
+    trailer_front = man.box_centers(0.0, 5.0, 0.0, 0.0)[1][0] + man.trailer.length_m / 2
+    starts = VehicleTracker(PARAMS.articulated, PARAMS.vehicles).starts
+    m, model = _shortened(volvo(), points[points[:, 0] >= trailer_front - 2.5], 0.0, 3.0)
+    assert m.rear_points == 0 and m.trailer_length_m < 3.15
+    assert supported(m, model, 0.0) and not starts._spanned(m, model, 0.0, True)
+    short = volvo().with_boxes(volvo().tractor, replace(volvo().trailer, length_m=2.6))
+    points = vehicle_points(short, 0.0, 5.0, 0.3, sensors=[(-15.0, -10.0, 4.0)], spacing=0.15)
+    m, model = _shortened(volvo(), points, 0.3, 3.0)
+    assert abs(m.trailer_length_m - 2.6) < 0.1 and starts._spanned(m, model, 0.0, True)
+
+
+def test_a_model_whose_trailer_shrank_short_of_its_own_gives_way_to_one_it_spans():
+    """An unknown 6.5 m trailer behind a MAN's tractor, seen from one side, its rear face hidden:
+    the MAN fitted with its trailer 6.5 m long costs least and is supported, but does not span half
+    the MAN's 13.68 m; the Volvo's fit spans its own 6.3 m, and the start chooses among it alone
+    (the MAN's fit waited for a rear face that never showed). With no other model, the MAN stays."""
+    man = VehicleModel.from_config("man_tgx", PARAMS.vehicles["man_tgx"])
+    unknown = man.with_boxes(man.tractor, replace(man.trailer, length_m=6.5))
+    points = vehicle_points(unknown, 0.0, 5.0, 0.0, sensors=SENSORS[:1], spacing=0.15, drop=((1, "rear"),))
+    starts = VehicleTracker(PARAMS.articulated, PARAMS.vehicles).starts
+    hypotheses = [(model, 1.0, m) for m, model in (_shortened(model, points, 0.0, 6.5) for model in (man, volvo()))]
+    (_, _, as_man), (_, _, as_volvo) = hypotheses
+    assert as_man.rear_points == as_volvo.rear_points == 0 and as_man.cost < as_volvo.cost
+    assert all(supported(m, model, 0.0) for model, _, m in hypotheses)
+    assert starts._spanning(hypotheses, 0.0, True) == hypotheses[1:]
+    assert starts._spanning(hypotheses[:1], 0.0, True) == hypotheses[:1]
 
 
 def test_two_units_are_judged_on_the_cheapest_supported_fit():
