@@ -948,7 +948,8 @@ class VehicleStarts:
         With frames to come, an unsupported cheapest fit waits for more of the vehicle to show (so
         asked in every start, a reversing trailer whose tractor hid behind it started as a rigid
         vehicle: 25 false vehicle-s on held-out paper +500; its unit hidden there is not seen
-        through, either, nor the MAN's beyond the bus)."""
+        through, either, nor the MAN's beyond the bus). Models whose trailer shrank short of their
+        own give way first (``_spanning``)."""
         articulated = self._spanning([h for h in hypotheses if h[0].articulated], ground_z_m, top_seen)
         rigid = [h for h in hypotheses if not h[0].articulated]
         if self._one_sweep() and any(self._explains(h[2], h[0]) for h in rigid):
