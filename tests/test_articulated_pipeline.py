@@ -1872,53 +1872,6 @@ def test_a_start_that_saw_no_rear_face_takes_its_trailers_reach_as_a_lower_bound
         assert name == "unknown" and estimate == pytest.approx(length, abs=0.1)
 
 
-def test_rays_at_an_upright_patch_end_before_on_or_beyond_it():
-    """A 10 m box's side 10 m from a sensor: the rays that meet a patch on that side end on it; on
-    its plane beyond the box's end, they pass on to the ground; behind a post nearer the sensor,
-    they end before it."""
-    from i2v_loc.stages.visibility import Rays
-
-    sensor = np.array([0.0, -10.0, 4.0])
-    box = WorldBox(np.array([0.0, 1.25]), 0.0, Box(5.0, 10.0, 2.5, 1.0, 2.5), 1)
-    post = WorldBox(np.array([-7.5, -5.0]), 0.0, Box(0.5, 1.0, 0.5, 0.0, 5.0), 1)
-    rays: Rays = cast_rays([box, post], [sensor])
-    along, up = np.array([1.0, 0.0, 0.0]), np.array([0.0, 0.0, 2.0])
-    hidden, on, through = rays.at_patch(0, np.array([-2.0, 0.0, 1.25]), along, up, 0.5)
-    assert on >= 10 and hidden == through == 0
-    hidden, on, through = rays.at_patch(0, np.array([6.0, 0.0, 1.25]), along, up, 0.5)
-    assert through >= 10 and hidden == on == 0
-    hidden, on, through = rays.at_patch(0, np.array([-15.5, 0.0, 1.25]), along, up, 0.5)
-    assert hidden >= 10 and on == through == 0
-
-
-def test_a_trailers_side_seen_to_end_short_of_the_catalogues_is_where_it_ends():
-    """A MAN's tractor with an unknown 10.5 m trailer, seen from one side: the start fit saw no rear
-    face. The rays that hit the side in its last metre go on past where it would continue, onto the
-    ground: the trailer ends at its reach (named ``unknown``, 10.5 m), not at the catalogue's
-    13.68 m. With a wall hiding where it would continue, the catalogue's length stands."""
-    man = VehicleModel.from_config("man_tgx", PARAMS.vehicles["man_tgx"])
-    unknown = with_trailer_length(man, 10.5)
-    sensor = np.array([-6.0, -15.0, 4.0])
-    body = world_boxes(unknown, 0.0, 0.0, 0.0)
-    end_x = body[1].center_xy[0] - 10.5 / 2
-    side_y = -unknown.trailer.width_m / 2
-    on_wall = (-8.0 - sensor[1]) / (side_y - sensor[1])  # where the sight lines cross the wall's line
-    wall_x = sensor[0] + on_wall * (np.array([end_x - 1.5, end_x - 0.2]) - sensor[0])
-    wall = WorldBox(np.array([wall_x.mean(), -8.0]), 0.0, Box(np.ptp(wall_x) / 2, np.ptp(wall_x), 0.3, 0.0, 5.0), 1)
-    named = {}
-    for others in ([], [wall]):
-        points = vehicle_points(unknown, 0.0, 0.0, 0.0, sensors=[sensor], others=others)
-        tracker = VehicleTracker(PARAMS.articulated, PARAMS.vehicles)
-        tracker.dimensions.rays = cast_rays(body + others, [sensor])
-        drifted = Prior(0.0, 0.0, 0.0, 0.0, with_trailer_length(man, 11.6), free_trailer_length=True)
-        m = fit(points, drifted, PARAMS.articulated, iterations=10)
-        assert m.rear_points < 3
-        track = tracker._track(1, with_trailer_length(man, m.trailer_length_m), m, 0.0, 0.0, 0.0, points)
-        named[len(others)] = (tracker.dimensions._type_name(track), track.trailer_length.estimate)
-    assert named[0][0] == "unknown" and named[0][1] == pytest.approx(10.5, abs=0.15)
-    assert named[1] == ("man_tgx", man.trailer.length_m)
-
-
 def test_a_width_counts_from_its_third_frame_and_brackets_from_their_tenth():
     """A dock shelter's wall can pass for a side in one frame (a Twizy's 1.75 m trailer, 1.99 m):
     both sides' widths count from the third, their median then; one side's brackets count from

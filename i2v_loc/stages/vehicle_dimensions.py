@@ -90,12 +90,6 @@ OPEN_ENDS = (FRONT, REAR)
 # both sides seen: one frame's width can be a dock shelter's (a Twizy's 1.75 m trailer, 1.99)
 WIDTH_MIN_OBSERVATIONS = 3
 BRACKETS_SETTLED = 10  # a unit's widths bracketed from one side (``_width_across_end``) before they count
-SIDE_END_MIN_SHORT_M = 0.5  # a trailer's side ending this much short of the catalogue's is asked (``_side_ends``)
-SIDE_END_ZONE_M = 1.0  # of the side before its reach, where the sensor must see it
-SIDE_END_GAP_M = 0.3  # behind the reach, where the side's continuation is looked for
-SIDE_END_INSET_M = 0.2  # of the body's height band, at its floor and top
-SIDE_END_MARGIN_M = 0.5  # a return this near the side's plane is on it
-SIDE_END_SEEN_MIN = 3
 BRACKETS_KEPT = 20  # then no more: each costs a pass over the frame's rays (about 2 ms for four OS1-32)
 CORNER_BRACKET_M = 0.15  # a side's spacing of voxel centroids and columns seen at 20-30 deg, at 20 m
 # a ray ending this far past an end face's plane passed it (its points: within 0.05 m), though it
@@ -778,10 +772,6 @@ class DimensionLearner:
         listed = self.catalogue.get(model.name)
         if not seen_end and m.trailer_length_m is not None and listed is not None:
             reach = trailer_reach(m, model, points, ground_z_m, self.params.fit_inlier_m)
-            if self._side_ends(m, model, reach, listed.trailer.length_m, ground_z_m):
-                length = _Extent(reach, window)
-                length.add(reach)
-                return length
             length = _Extent(max(reach, listed.trailer.length_m), window)
             length.add_bound(reach)
             return length
@@ -789,42 +779,6 @@ class DimensionLearner:
         if seen_end:
             length.add(length_m)
         return length
-
-    def _side_ends(
-        self, m: Measurement, model: VehicleModel, reach_m: float, listed_m: float, ground_z_m: float
-    ) -> bool:
-        """Whether a sensor that sees a side of the trailer up to its ``reach_m`` (``SIDE_END_SEEN_MIN``
-        returns on it in its last ``SIDE_END_ZONE_M``) has no return on, nor before, where that side
-        would go on (``SIDE_END_ZONE_M`` from ``SIDE_END_GAP_M`` behind the reach, short of the
-        catalogue's ``listed_m``), and no sensor has ``SIDE_END_SEEN_MIN`` there: the beams that hit
-        the side short of its end went on past it. Seen from one side, an unknown 10.5 m trailer
-        started as a MAN with the catalogue's 13.68 m for 4 frames, 1.5 m off (held-out
-        generalization +2500; 0-2 rays per frame crossed behind its end: beams that return nothing
-        leave no ray), and a Volvo seen by paper `l1` as a MAN for 3 frames. A MAN entering the
-        view cab first shows its side on behind its reach, where a sensor sees it; behind
-        something that hides it, the catalogue's length stands."""
-        if self.rays is None or listed_m - reach_m < SIDE_END_MIN_SHORT_M:
-            return False
-        trailer = model.trailer
-        kingpin, yaw = unit_origins(m.vector, model)[1]
-        axis, low = np.array([np.cos(yaw), np.sin(yaw), 0.0]), ground_z_m + trailer.floor_m + SIDE_END_INSET_M
-        up = np.array([0.0, 0.0, trailer.height_m - 2 * SIDE_END_INSET_M])
-        end = trailer.front_m - reach_m
-        ends = continues = False
-        origins = self.rays.origins @ np.asarray(self.rays.to_level).T
-        for sign in (1.0, -1.0):
-            out = sign * np.array([-np.sin(yaw), np.cos(yaw), 0.0])
-            side = np.array([*kingpin, low]) + out * trailer.width_m / 2
-            for sweep, origin in enumerate(origins):
-                if not np.all(np.isfinite(origin)) or (origin - side) @ out <= 0.0:
-                    continue
-                _, seen, _ = self.rays.at_patch(sweep, side + axis * end, axis * SIDE_END_ZONE_M, up, SIDE_END_MARGIN_M)
-                length = min(listed_m - reach_m - SIDE_END_GAP_M, SIDE_END_ZONE_M)
-                start = end - SIDE_END_GAP_M - length
-                hidden, on, _ = self.rays.at_patch(sweep, side + axis * start, axis * length, up, SIDE_END_MARGIN_M)
-                continues = continues or on >= SIDE_END_SEEN_MIN
-                ends = ends or (seen >= SIDE_END_SEEN_MIN and hidden == 0 and on == 0)
-        return ends and not continues
 
 
 def _hinge(track: VehicleTrack) -> tuple[float, float]:

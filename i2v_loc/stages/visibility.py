@@ -71,29 +71,6 @@ class Rays:
         not per crossing asked."""
         return np.zeros(len(self.points)) if self.lag_s is None else np.asarray(self.lag_s, dtype=float)
 
-    def at_patch(
-        self, sweep: int, corner: np.ndarray, along: np.ndarray, up: np.ndarray, margin_m: float
-    ) -> tuple[int, int, int]:
-        """The returns of ``sweep`` whose rays meet the upright patch ``corner + u along + v up``
-        (level frame, u and v in [0, 1]): how many end ``margin_m`` or more before it (something
-        hides it), within ``margin_m`` of it (on it), and ``margin_m`` or more beyond it (through)."""
-        origin = np.asarray(self.to_level) @ self.origins[sweep]
-        ray = self.level_points[self.bounds[sweep] : self.bounds[sweep + 1]] - origin
-        normal = np.cross(along, up)
-        facing = ray @ normal
-        with np.errstate(divide="ignore", invalid="ignore"):
-            t = ((corner - origin) @ normal) / facing  # where the ray meets the patch's plane; 1 at its return
-            met = origin + t[:, None] * ray - corner
-            u, v = met @ along / (along @ along), met @ up / (up @ up)
-        inside = (t > 0.0) & (u >= 0.0) & (u <= 1.0) & (v >= 0.0) & (v <= 1.0)
-        length = np.linalg.norm(ray[inside], axis=1)
-        ahead_m = (1.0 - t[inside]) * length  # the return's distance past the patch
-        return (
-            int(np.count_nonzero(ahead_m <= -margin_m)),
-            int(np.count_nonzero(np.abs(ahead_m) < margin_m)),
-            int(np.count_nonzero(ahead_m >= margin_m)),
-        )
-
     @cached_property
     def level_points(self) -> np.ndarray:
         """Every ray's return, level frame (N, 3)."""
