@@ -94,6 +94,7 @@ WIDTH_MIN_OBSERVATIONS = 3
 # and TOP_APART_M outside the other unit's, once TOP_MIN_POINTS stand there (``_learn_tops``)
 TOP_RANK = 3
 TOP_GROW_M = 0.1
+TOP_END_INSET_M = 0.5  # inside a unit's ends: a dock's wall stands right behind a docked trailer's rear
 TOP_APART_M = 1.0  # a trailer's front not learned yet lies up to half a metre off its model's
 TOP_MIN_POINTS = 10
 TOP_MARGIN_M = 0.1  # above the prior's top: a roof's noise and clutter reach higher than its box
@@ -465,7 +466,8 @@ class DimensionLearner:
 
     def _learn_tops(self, track: VehicleTrack, m: Measurement, points: np.ndarray) -> list[float]:
         """Each unit's height: up to where its claimed ``points`` reach (the ``TOP_RANK``-th highest
-        within ``TOP_GROW_M`` of its box at the fit ``m``, ``TOP_APART_M`` outside the other unit's
+        within ``TOP_GROW_M`` of its sides and ``TOP_END_INSET_M`` inside its ends at the fit ``m``
+        (a building's wall behind a docked Twizy's trailer made it 4.4 m high, 2.85), ``TOP_APART_M`` outside the other unit's
         box, below ``MAX_VEHICLE_HEIGHT_M``; their ``TOP_QUANTILE`` over the frames that had
         ``TOP_MIN_POINTS`` there) once ``TOP_MARGIN_M`` above the catalogue's, never below it:
         beams that pass over a far cab's roof see it lower than it is, points above a box's top are
@@ -478,7 +480,7 @@ class DimensionLearner:
         at = Prior(m.x_m, m.y_m, m.yaw_rad, m.hitch_rad, model)
         z_rel = points[:, 2] - track.ground_z_m
         low = z_rel <= MAX_VEHICLE_HEIGHT_M
-        inside = [in_unit_box(points, at, u, TOP_GROW_M) for u in range(len(model.boxes))]
+        inside = [in_unit_box(points, at, u, TOP_GROW_M, -TOP_END_INSET_M) for u in range(len(model.boxes))]
         heights = []
         for u, (box, top) in enumerate(zip(model.boxes, track.tops)):
             mine = z_rel[inside[u] & ~in_unit_box(points, at, 1 - u, TOP_APART_M) & low]
