@@ -1879,7 +1879,7 @@ def test_a_unit_is_as_high_as_its_points_reach_above_the_catalogues_top():
     its height, and the heights count as seen; frames that see less of it (beams passing over its
     roof) do not lower it. A cab lower than the catalogue's keeps the catalogue's (beams passing
     over a far roof do not show where it is); points above any vehicle (a canopy over the bay, 5 m
-    up) are no roof."""
+    up) are no roof, nor is a dock's wall right behind the trailer."""
     model = volvo()
     learner = VehicleTracker(PARAMS.articulated, PARAMS.vehicles).dimensions
 
@@ -1905,6 +1905,10 @@ def test_a_unit_is_as_high_as_its_points_reach_above_the_catalogues_top():
     cab_xy = model.box_centers(0.0, 5.0, 0.0)[0]
     canopy = np.column_stack([np.repeat(cab_xy[None], 20, axis=0) + np.linspace(-1, 1, 20)[:, None], np.full(20, 5.0)])
     assert learned(2.5, canopy).model.tractor.top_m == model.tractor.top_m
+    rear_x = model.box_centers(0.0, 5.0, 0.0)[1][0] - model.trailer.length_m / 2
+    across, up = np.meshgrid(np.linspace(-1.2, 1.2, 9), np.linspace(0.5, 4.5, 9))
+    wall = np.column_stack([np.full(across.size, rear_x - 0.05), 5.0 + across.ravel(), up.ravel()])  # a dock's
+    assert learned(2.5, wall).model.trailer.top_m == model.trailer.top_m
 
 
 def test_a_width_counts_from_its_third_frame_and_brackets_from_their_tenth():
