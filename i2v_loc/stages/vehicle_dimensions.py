@@ -31,7 +31,6 @@ from i2v_loc.stages.hinged_fit import (
     TurnFrame,
     fit,
     fit_hinge,
-    in_unit_box,
     rear_sigma_m,
     with_rear_end,
 )
@@ -90,15 +89,6 @@ ANYWHERE = (-np.inf, np.inf)  # no bound along a unit
 OPEN_ENDS = (FRONT, REAR)
 # both sides seen: one frame's width can be a dock shelter's (a Twizy's 1.75 m trailer, 1.99)
 WIDTH_MIN_OBSERVATIONS = 3
-# an articulated unit's top: the TOP_RANK-th highest of its claimed points within TOP_GROW_M of its box
-# and TOP_APART_M outside the other unit's, once TOP_MIN_POINTS stand there (``_learn_tops``)
-TOP_RANK = 3
-TOP_GROW_M = 0.1
-TOP_END_INSET_M = 0.5  # inside a unit's ends: a dock's wall stands right behind a docked trailer's rear
-TOP_APART_M = 1.0  # a trailer's front not learned yet lies up to half a metre off its model's
-TOP_MIN_POINTS = 10
-TOP_MARGIN_M = 0.1  # above the prior's top: a roof's noise and clutter reach higher than its box
-TOP_QUANTILE = 0.75  # of the frames' tops (a frame's is a lower bound; the median of a cab's flipped frame to frame)
 BRACKETS_SETTLED = 10  # a unit's widths bracketed from one side (``_width_across_end``) before they count
 BRACKETS_KEPT = 20  # then no more: each costs a pass over the frame's rays (about 2 ms for four OS1-32)
 CORNER_BRACKET_M = 0.15  # a side's spacing of voxel centroids and columns seen at 20-30 deg, at 20 m
@@ -273,21 +263,18 @@ class VehicleTrack:
     )  # per kind of end, those seen moving: deque of (yard xy, x, kingpin xy)
     rigid_seen: tuple[bool, bool, bool] = (True, True, True)  # a rigid one's sizes came from its points
     cab_gone: int = 0  # frames in a row its unseen cab's place was seen through (``_cab_seen_through``)
-    tops: list[_Extent] = field(default_factory=list)  # an articulated one's units' tops above the ground
 
     def dimensions_seen(self) -> tuple[tuple[bool, bool, bool], ...]:
         """Per unit, which of its length, width and height its points measured: a rigid one's as it
         started (one face shows one of its length and width) and its width once both sides showed;
         an articulated one's lengths and widths once observed (the cab's length also once the hinge's
-        fit pins it within ``HINGE_MAX_STD_M``), its heights once its points reached
-        ``TOP_MARGIN_M`` above the catalogue's (``_learn_tops``)."""
+        fit pins it within ``HINGE_MAX_STD_M``), its heights never (the catalogue's)."""
         width = [w.observed for w in self.widths]
         if self.trailer_length is None:
             return ((self.rigid_seen[0], self.rigid_seen[1] or width[0], self.rigid_seen[2]),)
-        height = [_top_raised(top) for top in self.tops]
         return (
-            (self.cab_length.median is not None or self._cab_fitted(), width[0], height[0]),
-            (self.trailer_length.median is not None, width[1], height[1]),
+            (self.cab_length.median is not None or self._cab_fitted(), width[0], False),
+            (self.trailer_length.median is not None, width[1], False),
         )
 
     def _cab_fitted(self) -> bool:
@@ -338,7 +325,6 @@ class DimensionLearner:
             ground_z_m,
             hinge_prior,
             reach,
-            tops=[_Extent(box.top_m, window) for box in model.boxes] if model.articulated else [],
         )
 
     def with_seen_end(self, track: VehicleTrack, m: Measurement, points: np.ndarray) -> Measurement:
@@ -394,15 +380,12 @@ class DimensionLearner:
                     track.widths[u].add_bracket(width)
         widths = _unit_widths(track.widths)
         tractor = {"width_m": widths[0]}
-        heights = self._learn_tops(track, m, points) if model.trailer is not None else None
-        if heights is not None:
-            tractor["height_m"] = heights[0]
         if track.cab_length is not None:
             self._learn_cab_length(track, m, local[0])
             tractor["length_m"] = _cab_length(track)
         learned = {"tractor": _changed(model.tractor, **tractor)}
         if model.trailer is not None:
-            trailer = {"width_m": widths[1], "height_m": heights[1]}
+            trailer = {"width_m": widths[1]}
             if track.trailer_length is not None:
                 if not track.at_wall:  # its rear end went with the wall, or lies beyond it
                     self._learn_trailer_length(track, m, local[1], widths[1], points)
@@ -463,31 +446,6 @@ class DimensionLearner:
             return None
         width = outward * side_m + (beside.min() - last) / 2
         return width if VEHICLE_WIDTH_M[0] <= width <= VEHICLE_WIDTH_M[1] else None
-
-    def _learn_tops(self, track: VehicleTrack, m: Measurement, points: np.ndarray) -> list[float]:
-        """Each unit's height: up to where its claimed ``points`` reach (the ``TOP_RANK``-th highest
-        within ``TOP_GROW_M`` of its sides and ``TOP_END_INSET_M`` inside its ends at the fit ``m``
-        (a building's wall behind a docked Twizy's trailer made it 4.4 m high, 2.85), ``TOP_APART_M`` outside the other unit's
-        box, below ``MAX_VEHICLE_HEIGHT_M``; their ``TOP_QUANTILE`` over the frames that had
-        ``TOP_MIN_POINTS`` there) once ``TOP_MARGIN_M`` above the catalogue's, never below it:
-        beams that pass over a far cab's roof see it lower than it is, points above a box's top are
-        the body's. An unknown tractor's cab 3.0 m high, its model 2.5 m (the Volvo's), seen from
-        one side by generalization +2500 `l2`: the points above its model's roof were no cab's,
-        and the fit turned the cab up to 3 deg onto what was left in a docking's turn (at most 1.4
-        deg fitted 3.0 m high). (Outside the other unit's box alone, an unknown trailer's front
-        0.4 m ahead of its model's made its cab as high as the trailer.)"""
-        model = track.model
-        at = Prior(m.x_m, m.y_m, m.yaw_rad, m.hitch_rad, model)
-        z_rel = points[:, 2] - track.ground_z_m
-        low = z_rel <= MAX_VEHICLE_HEIGHT_M
-        inside = [in_unit_box(points, at, u, TOP_GROW_M, -TOP_END_INSET_M) for u in range(len(model.boxes))]
-        heights = []
-        for u, (box, top) in enumerate(zip(model.boxes, track.tops)):
-            mine = z_rel[inside[u] & ~in_unit_box(points, at, 1 - u, TOP_APART_M) & low]
-            if len(mine) >= TOP_MIN_POINTS:
-                top.add(float(np.partition(mine, -TOP_RANK)[-TOP_RANK]))
-            heights.append(_height(top, box))
-        return heights
 
     def _sides_faced(self, m: Measurement, model: VehicleModel) -> list[bool]:
         """Per unit, whether both its sides face a sensor of the frame (each is outside one of its
@@ -579,17 +537,9 @@ class DimensionLearner:
             length.prior = prior.trailer.length_m
         for extent, box in zip(track.widths, prior.boxes):
             extent.prior = box.width_m
-        for top, box in zip(track.tops, prior.boxes):
-            top.prior = box.top_m
         widths = _unit_widths(track.widths)  # from the new type's where not measured
-        heights = [_height(top, box) for top, box in zip(track.tops, prior.boxes)]
-        tractor = replace(
-            prior.tractor,
-            width_m=widths[0],
-            length_m=cab.estimate if cab else prior.tractor.length_m,
-            height_m=heights[0],
-        )
-        trailer = replace(prior.trailer, width_m=widths[1], length_m=model.trailer.length_m, height_m=heights[1])
+        tractor = replace(prior.tractor, width_m=widths[0], length_m=cab.estimate if cab else prior.tractor.length_m)
+        trailer = replace(prior.trailer, width_m=widths[1], length_m=model.trailer.length_m)
         track.model = replace(prior.with_boxes(tractor, trailer), trailer_axle_m=model.trailer_axle_m)
         track.catalogue_name = name
         # learned again from the old axle
@@ -847,23 +797,6 @@ def _cab_length(track: VehicleTrack) -> float:
     if not track.cab_length.counted and track.hinge is not None and track.hinge.cab_length_m is not None:
         return track.hinge.cab_length_m
     return track.cab_length.estimate
-
-
-def _height(top: _Extent, box: Box) -> float:
-    """The height of ``box`` whose top its points reach up to ``top``: the prior's unless they
-    reach ``TOP_MARGIN_M`` above it."""
-    return (_top_reached(top) if _top_raised(top) else top.prior) - box.floor_m
-
-
-def _top_reached(top: _Extent) -> float:
-    """The ``TOP_QUANTILE`` of the frames' tops: each is as high as the body reaches at least (a
-    frame's beams may pass over the roof or stop short of it), a few are higher (clutter)."""
-    ordered = top.values.ordered
-    return ordered[min(int(TOP_QUANTILE * len(ordered)), len(ordered) - 1)]
-
-
-def _top_raised(top: _Extent) -> bool:
-    return bool(top.values) and _top_reached(top) > top.prior + TOP_MARGIN_M
 
 
 def _changed(obj, **values):
