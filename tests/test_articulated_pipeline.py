@@ -25,6 +25,7 @@ from i2v_loc.stages.unit_frames import face_seen, free_length_at, supported, wit
 from i2v_loc.stages.vehicle_dimensions import (
     LENGTH_CONVERGED_OBSERVATIONS,
     TURN_MAX_SPEED_STD_M_S,
+    VehicleTrack,
     _Extent,
     _sides_along,
 )
@@ -1870,6 +1871,45 @@ def test_a_start_that_saw_no_rear_face_takes_its_trailers_reach_as_a_lower_bound
     for length in (11.1, 15.0):
         name, estimate = named[length, length == 11.1]
         assert name == "unknown" and estimate == pytest.approx(length, abs=0.1)
+
+
+def test_a_cab_is_as_high_as_its_points_reach_above_the_catalogues_top():
+    """A Volvo-sized vehicle whose cab stands 3.5 m high (the Volvo's 3.0) seen from one side: its
+    tracked cab grows to where the side's points reach (within their spacing) and its height counts
+    as seen; frames that see less of it (beams passing over its roof) do not lower it. A cab lower
+    than the catalogue's keeps the catalogue's (beams passing over a far roof do not show where it
+    is); points above any vehicle (a canopy over the bay, 5 m up) are no roof. A trailer keeps the
+    catalogue's height however high its points reach (a door behind a docked one rises above it)."""
+    model = volvo()
+    learner = VehicleTracker(PARAMS.articulated, PARAMS.vehicles).dimensions
+
+    def learned(cab_m: float, trailer_m: float = 0.0, extra=None, then_below_m: float = np.inf) -> VehicleTrack:
+        truth = model.with_boxes(
+            replace(model.tractor, height_m=model.tractor.height_m + cab_m),
+            replace(model.trailer, height_m=model.trailer.height_m + trailer_m),
+        )
+        points = vehicle_points(truth, 0.0, 5.0, 0.0, sensors=[(0.0, -15.0, 6.0)], spacing=0.1)
+        if extra is not None:
+            points = np.vstack([points, extra])
+        m = fit(points, Prior(0.0, 5.0, 0.0, 0.0, model), PARAMS.articulated, iterations=20)
+        filt = SimpleNamespace(speed_m_s=0.0, kingpin_m=model.kingpin_behind_axle_m)
+        track = learner.new_track(1, model, m, filt, 0.0, points)
+        for k in range(6):  # from the fourth frame on, the beams pass over the roof below then_below_m
+            learner.learn_sizes(track, m, points if k < 3 else points[points[:, 2] < then_below_m])
+        return track
+
+    cab_top = model.tractor.top_m
+    tall = learned(0.5)
+    assert tall.model.tractor.top_m == pytest.approx(cab_top + 0.5, abs=0.12)
+    assert learned(0.5, then_below_m=cab_top + 0.2).model.tractor.top_m == tall.model.tractor.top_m  # a lower view
+    assert tall.dimensions_seen()[0][2] and not tall.dimensions_seen()[1][2]
+    low = learned(-1.0)
+    assert low.model.tractor.top_m == cab_top and not low.dimensions_seen()[0][2]
+    cab_xy = model.box_centers(0.0, 5.0, 0.0)[0]
+    canopy = np.column_stack([np.repeat(cab_xy[None], 20, axis=0) + np.linspace(-1, 1, 20)[:, None], np.full(20, 5.0)])
+    assert learned(-0.5, extra=canopy).model.tractor.top_m == cab_top
+    high_trailer = learned(0.0, trailer_m=0.5)
+    assert high_trailer.model.trailer.top_m == model.trailer.top_m and not high_trailer.dimensions_seen()[1][2]
 
 
 def test_a_width_counts_from_its_third_frame_and_brackets_from_their_tenth():

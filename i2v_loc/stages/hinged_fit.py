@@ -162,21 +162,26 @@ def thin_by_unit(points: np.ndarray, max_points: int, prior: Prior) -> np.ndarra
     return np.asarray(points[kernels.strided_pick(on_tractor, k_tractor, max_points - k_tractor)], dtype=float)
 
 
-def in_unit_box(points: np.ndarray, prior: Prior, unit: int, grow_m: float) -> np.ndarray:
-    """Which of ``points`` lie (xy) in the prior's box of ``unit`` (0 tractor, 1 trailer) grown by ``grow_m``."""
+def in_unit_box(
+    points: np.ndarray, prior: Prior, unit: int, grow_m: float, grow_along_m: float | None = None
+) -> np.ndarray:
+    """Which of ``points`` lie (xy) in the prior's box of ``unit`` (0 tractor, 1 trailer) grown by
+    ``grow_m`` (along its length by ``grow_along_m`` instead, if given)."""
     inside = np.empty(len(points), dtype=bool)
-    kernels.in_upright_box(np.ascontiguousarray(points), _unit_box_rows(prior, grow_m)[unit], inside)
+    kernels.in_upright_box(np.ascontiguousarray(points), _unit_box_rows(prior, grow_m, grow_along_m)[unit], inside)
     return inside
 
 
-def _unit_box_rows(prior: Prior, grow_m: float) -> list[np.ndarray]:
-    """Each unit's box of the prior grown by ``grow_m`` as ``kernels.in_upright_box`` takes it."""
+def _unit_box_rows(prior: Prior, grow_m: float, grow_along_m: float | None = None) -> list[np.ndarray]:
+    """Each unit's box of the prior grown by ``grow_m`` (along its length by ``grow_along_m`` if
+    given) as ``kernels.in_upright_box`` takes it."""
+    along = grow_m if grow_along_m is None else grow_along_m
     centres = prior.model.box_centers(prior.x_m, prior.y_m, prior.yaw_rad, prior.hitch_rad)
     rows = []
     for unit, (centre, box) in enumerate(zip(centres, prior.model.boxes)):
         yaw = prior.yaw_rad + (prior.hitch_rad if unit else 0.0)
         rows.append(
-            np.array([*centre, math.cos(yaw), math.sin(yaw), box.length_m / 2 + grow_m, box.width_m / 2 + grow_m])
+            np.array([*centre, math.cos(yaw), math.sin(yaw), box.length_m / 2 + along, box.width_m / 2 + grow_m])
         )
     return rows
 

@@ -31,6 +31,7 @@ from i2v_loc.stages.hinged_fit import (
     TurnFrame,
     fit,
     fit_hinge,
+    in_unit_box,
     rear_sigma_m,
     with_rear_end,
 )
@@ -89,6 +90,15 @@ ANYWHERE = (-np.inf, np.inf)  # no bound along a unit
 OPEN_ENDS = (FRONT, REAR)
 # both sides seen: one frame's width can be a dock shelter's (a Twizy's 1.75 m trailer, 1.99)
 WIDTH_MIN_OBSERVATIONS = 3
+# an articulated vehicle's cab top: the TOP_RANK-th highest of its claimed points within TOP_GROW_M of
+# the cab's box and TOP_APART_M outside the trailer's, once TOP_MIN_POINTS stand there (``_learn_cab_top``)
+TOP_RANK = 3
+TOP_GROW_M = 0.1
+TOP_END_INSET_M = 0.5  # inside the cab's ends: a wall or another vehicle may stand right before it
+TOP_APART_M = 1.0  # a trailer's front not learned yet lies up to half a metre off its model's
+TOP_MIN_POINTS = 10
+TOP_MARGIN_M = 0.1  # above the prior's top: a roof's noise and clutter reach higher than its box
+TOP_QUANTILE = 0.75  # of the frames' tops (a frame's is a lower bound; the median of a cab's flipped frame to frame)
 BRACKETS_SETTLED = 10  # a unit's widths bracketed from one side (``_width_across_end``) before they count
 BRACKETS_KEPT = 20  # then no more: each costs a pass over the frame's rays (about 2 ms for four OS1-32)
 CORNER_BRACKET_M = 0.15  # a side's spacing of voxel centroids and columns seen at 20-30 deg, at 20 m
@@ -263,17 +273,19 @@ class VehicleTrack:
     )  # per kind of end, those seen moving: deque of (yard xy, x, kingpin xy)
     rigid_seen: tuple[bool, bool, bool] = (True, True, True)  # a rigid one's sizes came from its points
     cab_gone: int = 0  # frames in a row its unseen cab's place was seen through (``_cab_seen_through``)
+    cab_top: _Extent | None = None  # an articulated one's cab's top above the ground
 
     def dimensions_seen(self) -> tuple[tuple[bool, bool, bool], ...]:
         """Per unit, which of its length, width and height its points measured: a rigid one's as it
         started (one face shows one of its length and width) and its width once both sides showed;
         an articulated one's lengths and widths once observed (the cab's length also once the hinge's
-        fit pins it within ``HINGE_MAX_STD_M``), its heights never (the catalogue's)."""
+        fit pins it within ``HINGE_MAX_STD_M``), its cab's height once its points reached
+        ``TOP_MARGIN_M`` above the catalogue's (``_learn_cab_top``), its trailer's height never."""
         width = [w.observed for w in self.widths]
         if self.trailer_length is None:
             return ((self.rigid_seen[0], self.rigid_seen[1] or width[0], self.rigid_seen[2]),)
         return (
-            (self.cab_length.median is not None or self._cab_fitted(), width[0], False),
+            (self.cab_length.median is not None or self._cab_fitted(), width[0], _top_raised(self.cab_top)),
             (self.trailer_length.median is not None, width[1], False),
         )
 
@@ -325,6 +337,7 @@ class DimensionLearner:
             ground_z_m,
             hinge_prior,
             reach,
+            cab_top=_Extent(model.tractor.top_m, window) if model.articulated else None,
         )
 
     def with_seen_end(self, track: VehicleTrack, m: Measurement, points: np.ndarray) -> Measurement:
@@ -380,6 +393,8 @@ class DimensionLearner:
                     track.widths[u].add_bracket(width)
         widths = _unit_widths(track.widths)
         tractor = {"width_m": widths[0]}
+        if model.trailer is not None:
+            tractor["height_m"] = self._learn_cab_top(track, m, points)
         if track.cab_length is not None:
             self._learn_cab_length(track, m, local[0])
             tractor["length_m"] = _cab_length(track)
@@ -446,6 +461,26 @@ class DimensionLearner:
             return None
         width = outward * side_m + (beside.min() - last) / 2
         return width if VEHICLE_WIDTH_M[0] <= width <= VEHICLE_WIDTH_M[1] else None
+
+    def _learn_cab_top(self, track: VehicleTrack, m: Measurement, points: np.ndarray) -> float:
+        """The cab's height: up to where its claimed ``points`` reach (the ``TOP_RANK``-th highest
+        within ``TOP_GROW_M`` of its sides and ``TOP_END_INSET_M`` inside its ends at the fit ``m``,
+        ``TOP_APART_M`` outside the trailer's box, below ``MAX_VEHICLE_HEIGHT_M``; their
+        ``TOP_QUANTILE`` over the frames that had ``TOP_MIN_POINTS`` there) once ``TOP_MARGIN_M``
+        above the catalogue's, never below it: beams that pass over a far cab's roof see it lower
+        than it is, points above a box's top are the body's. An unknown tractor's cab 3.5 m high,
+        its model 3.0 m (the Volvo's), seen from one side by generalization +2500 `l2`: the points
+        above its model's roof were no face's, and the fit turned the cab up to 3 deg onto what was
+        left in a docking's turn (at most 1.4 deg fitted 3.5 m high). A trailer keeps the
+        catalogue's height: the door behind a docked one rises above its roof inside its box
+        (docs/pipeline.md, Heights)."""
+        at = Prior(m.x_m, m.y_m, m.yaw_rad, m.hitch_rad, track.model)
+        z_rel = points[:, 2] - track.ground_z_m
+        on_cab = in_unit_box(points, at, 0, TOP_GROW_M, -TOP_END_INSET_M) & (z_rel <= MAX_VEHICLE_HEIGHT_M)
+        mine = z_rel[on_cab & ~in_unit_box(points, at, 1, TOP_APART_M)]
+        if len(mine) >= TOP_MIN_POINTS:
+            track.cab_top.add(float(np.partition(mine, -TOP_RANK)[-TOP_RANK]))
+        return _height(track.cab_top, track.model.tractor)
 
     def _sides_faced(self, m: Measurement, model: VehicleModel) -> list[bool]:
         """Per unit, whether both its sides face a sensor of the frame (each is outside one of its
@@ -522,8 +557,8 @@ class DimensionLearner:
 
     def _retype(self, track: VehicleTrack, name: str) -> None:
         """The learned sizes match another catalogue vehicle better than the start's: take its
-        figures the points do not measure (tractor front, floors, heights, kingpin (learned again from
-        its axle), trailer front; the cab's and the trailer's lengths until measured), keep the
+        figures the points do not measure (tractor front, floors, heights (the cab's until measured),
+        kingpin (learned again from its axle), trailer front; the cab's and the trailer's lengths until measured), keep the
         measured widths and lengths. (An unknown 6.5 m trailer started as the MAN, renamed a Volvo
         where its moving points kept ending, fell back to the MAN's 13.68 m whenever they spread, and
         was renamed back and forth for 7 s, its centre 3.6 m off.)"""
@@ -537,8 +572,14 @@ class DimensionLearner:
             length.prior = prior.trailer.length_m
         for extent, box in zip(track.widths, prior.boxes):
             extent.prior = box.width_m
+        track.cab_top.prior = prior.tractor.top_m
         widths = _unit_widths(track.widths)  # from the new type's where not measured
-        tractor = replace(prior.tractor, width_m=widths[0], length_m=cab.estimate if cab else prior.tractor.length_m)
+        tractor = replace(
+            prior.tractor,
+            width_m=widths[0],
+            length_m=cab.estimate if cab else prior.tractor.length_m,
+            height_m=_height(track.cab_top, prior.tractor),
+        )
         trailer = replace(prior.trailer, width_m=widths[1], length_m=model.trailer.length_m)
         track.model = replace(prior.with_boxes(tractor, trailer), trailer_axle_m=model.trailer_axle_m)
         track.catalogue_name = name
@@ -797,6 +838,23 @@ def _cab_length(track: VehicleTrack) -> float:
     if not track.cab_length.counted and track.hinge is not None and track.hinge.cab_length_m is not None:
         return track.hinge.cab_length_m
     return track.cab_length.estimate
+
+
+def _height(top: _Extent, box: Box) -> float:
+    """The height of ``box`` whose top its points reach up to ``top``: the prior's unless they
+    reach ``TOP_MARGIN_M`` above it."""
+    return (_top_reached(top) if _top_raised(top) else top.prior) - box.floor_m
+
+
+def _top_reached(top: _Extent) -> float:
+    """The ``TOP_QUANTILE`` of the frames' tops: each is as high as the body reaches at least (a
+    frame's beams may pass over the roof or stop short of it), a few are higher (clutter)."""
+    ordered = top.values.ordered
+    return ordered[min(int(TOP_QUANTILE * len(ordered)), len(ordered) - 1)]
+
+
+def _top_raised(top: _Extent | None) -> bool:
+    return top is not None and bool(top.values) and _top_reached(top) > top.prior + TOP_MARGIN_M
 
 
 def _changed(obj, **values):
