@@ -313,7 +313,7 @@ def test_the_hinge_fitted_to_a_turns_frames_at_once_is_the_truth_where_single_fr
         free = fit(points, replace(Prior(m.x_m, m.y_m, m.yaw_rad, m.hitch_rad, model), free_kingpin=True),
                    PARAMS.articulated, iterations=20)  # fmt: skip
         single_kingpins.append(free.kingpin_m)
-        frames.append(TurnFrame.of(m, 0.0, model))
+        frames.append(TurnFrame.of(m, 0.0, model, PARAMS.articulated.fit_top_band_m))
     hinge = fit_hinge(frames, model, PARAMS.articulated)
     assert hinge.kingpin_m == pytest.approx(0.0, abs=0.03)
     assert hinge.trailer_front_m == pytest.approx(1.5, abs=0.03)
@@ -328,7 +328,7 @@ def _turn_frames(truth: VehicleModel, model: VehicleModel, sensor, hitches_deg, 
         yaw, hitch = TRUTH[2] + np.radians(3 * k), np.radians(hitch_deg)
         points = vehicle_points(truth, TRUTH[0], TRUTH[1], yaw, hitch, sensors=[sensor], seed=k)
         m = fit(points, Prior(TRUTH[0], TRUTH[1], yaw, hitch, model), PARAMS.articulated, iterations=20)
-        frames.append(TurnFrame.of(m, 0.0, model))
+        frames.append(TurnFrame.of(m, 0.0, model, PARAMS.articulated.fit_top_band_m))
     return frames
 
 
@@ -374,18 +374,20 @@ def test_the_cabs_length_is_fitted_with_the_hinge_only_once_its_rear_face_showed
     assert behind.cab_length_m is not None
 
 
-def test_a_turn_frame_counts_the_cabs_rear_points_below_its_roof_only():
-    """Points a fit put on the cab's rear face above its roof are not on it (a trailer's front seen
-    above a lower cab): ``TurnFrame.of`` does not count them, nor the trailer's or another face's."""
-    model = volvo()
+def test_a_turn_frame_counts_the_cabs_rear_points_below_its_roof_band_only():
+    """Points a fit put on the cab's rear face in its roof band or above its roof are not on it (the
+    roof's edge, or a trailer's front seen above a lower cab): ``TurnFrame.of`` does not count them,
+    nor the trailer's or another face's."""
+    model, band = volvo(), PARAMS.articulated.fit_top_band_m
     top = model.tractor.top_m
-    heights = np.array([1.0, 1.5, 2.0, top - 0.05, top + 0.1, top + 0.2, 2.0, 2.0])
+    heights = np.array([1.0, 1.5, 2.0, top - band - 0.05, top - band + 0.05, top + 0.2, 2.0, 2.0])
     points = np.column_stack([np.zeros((len(heights), 2)), heights + 0.4])  # on ground 0.4 m high
     unit = np.array([0, 0, 0, 0, 0, 0, 1, 0], dtype=np.int8)
     face = np.array([REAR] * 7 + [LEFT], dtype=np.int8)
     m = Measurement(*TRUTH, 0.0, np.eye(4), points, unit, 0.0, face=face)
-    assert TurnFrame.of(m, 0.4, model).cab_rear_points == 4
-    assert TurnFrame.of(m, 0.0, model).cab_rear_points == 3
+    assert TurnFrame.of(m, 0.4, model, band).cab_rear_points == 4
+    assert TurnFrame.of(m, 0.0, model, band).cab_rear_points == 3
+    assert TurnFrame.of(m, 0.4, model, 0.0).cab_rear_points == 5
 
 
 def test_a_rear_end_seen_moves_the_fit_along_the_trailer_as_far_as_the_fit_is_unsure():

@@ -376,10 +376,12 @@ class TurnFrame:
     cab_rear_points: int
 
     @classmethod
-    def of(cls, m: Measurement, ground_z_m: float, model: VehicleModel) -> TurnFrame:
-        """The frame of the fit ``m``, made with ``model``."""
+    def of(cls, m: Measurement, ground_z_m: float, model: VehicleModel, top_band_m: float) -> TurnFrame:
+        """The frame of the fit ``m``, made with ``model``; the points it put on the cab's rear face
+        below its roof band (``top_band_m`` deep: points there are its roof's edge, or a trailer's
+        front showing above the cab, as ``unit_frames.face_seen`` has it) counted."""
         cab = model.tractor
-        below_roof = m.points[:, 2] - ground_z_m <= cab.floor_m + cab.height_m
+        below_roof = m.points[:, 2] - ground_z_m < cab.top_m - top_band_m
         on_rear = int(np.count_nonzero((m.unit == 0) & (m.face == REAR) & below_roof))
         return cls(m.points, ground_z_m, m.vector, on_rear)
 

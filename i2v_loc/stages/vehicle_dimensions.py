@@ -546,7 +546,7 @@ class DimensionLearner:
 
     def _fit_turn(self, track: VehicleTrack, prior: Prior, own: Measurement) -> None:
         """``own`` kept as a frame of the turn, and the hinge fitted to the frames kept (``_learn_hinge``)."""
-        track.turn.append(TurnFrame.of(own, prior.ground_z_m, track.model))
+        track.turn.append(TurnFrame.of(own, prior.ground_z_m, track.model, self.params.fit_top_band_m))
         cab = track.cab_length
         cab_prior = None if cab.counted else (cab.prior, CAB_LENGTH_SIGMA_M)
         hinge = fit_hinge(list(track.turn), track.model, self.params, cab_prior=cab_prior)
