@@ -1873,6 +1873,34 @@ def test_a_start_that_saw_no_rear_face_takes_its_trailers_reach_as_a_lower_bound
         assert name == "unknown" and estimate == pytest.approx(length, abs=0.1)
 
 
+def test_a_catalogue_trailer_the_rays_crossed_beyond_the_points_is_as_long_as_they_reach():
+    """An unknown 11.1 m trailer seen from one side, its rear face hidden, fitted as the MAN (13.68
+    m): where rays crossed the MAN's trailer behind the points and ended on the ground beyond, its
+    body is not there; the trailer is as long as the points reach, and named by that (``unknown``).
+    Where rays end in that place too (on a post 1.2 m behind the points: something stands there), or
+    no rays come, the catalogue's length stands (a MAN's rear out of view is no shorter MAN)."""
+    man = VehicleModel.from_config("man_tgx", PARAMS.vehicles["man_tgx"])
+    truth = with_trailer_length(man, 11.1)
+    sensor = (-4.0, -14.0, 6.0)
+    points = vehicle_points(truth, 0.0, 0.0, 0.0, sensors=[sensor], drop=((1, "rear"),))
+    m = fit(points, Prior(0.0, 0.0, 0.0, 0.0, man, free_trailer_length=True), PARAMS.articulated, iterations=10)
+    boxes = world_boxes(truth, 0.0, 0.0, 0.0)
+    rear_x = boxes[1].center_xy[0] - truth.trailer.length_m / 2
+    post = WorldBox(np.array([rear_x - 1.5, 0.0]), 0.0, Box(0.3, 0.6, 1.0, 0.0, 5.0), 1)
+    found = {}
+    for case, rays in (
+        ("seen", cast_rays(boxes, [sensor])),
+        ("post", cast_rays(boxes + [post], [sensor])),
+        ("none", None),
+    ):
+        tracker = VehicleTracker(PARAMS.articulated, PARAMS.vehicles)
+        tracker.dimensions.rays = rays
+        track = tracker._track(1, man, m, 0.0, 0.0, 0.0, points)
+        found[case] = (tracker.dimensions._type_name(track), track.model.trailer.length_m)
+    assert found["seen"][0] == "unknown" and found["seen"][1] == pytest.approx(11.1, abs=0.15)
+    assert found["post"] == found["none"] == ("man_tgx", man.trailer.length_m)
+
+
 def test_a_cab_is_as_high_as_its_points_reach_above_the_catalogues_top():
     """A Volvo-sized vehicle whose cab stands 3.5 m high (the Volvo's 3.0) seen from one side: its
     tracked cab grows to where the side's points reach (within their spacing) and its height counts

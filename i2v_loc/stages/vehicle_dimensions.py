@@ -750,23 +750,48 @@ class DimensionLearner:
     ) -> bool:
         """Whether at least ``END_SEEN_MIN_RAYS`` rays crossed the trailer's body behind ``end_m`` (its
         frame; a slab ``END_SEEN_LENGTH_M`` long from ``END_SEEN_OFFSET_M`` behind it, or shorter,
-        back to ``back_to_m``; ``SOLID_INSET_M`` inside its sides, floor and roof), one of them within
-        ``END_SEEN_REACH_M`` of the slab's front, and none ended in it: the body ends there. A
-        shadow's edge is no end: the trailer hidden behind it stops the rays that would cross (those
-        passing further back show only that it ends before them); a return in the slab is a surface
-        there (its own rear face, a dock)."""
-        if self.rays is None:
-            return False
-        model, inset = track.model, SOLID_INSET_M
+        back to ``back_to_m``), one of them within ``END_SEEN_REACH_M`` of the slab's front, and none
+        ended in it: the body ends there. A shadow's edge is no end: the trailer hidden behind it
+        stops the rays that would cross (those passing further back show only that it ends before
+        them); a return in the slab is a surface there (its own rear face, a dock)."""
         front = end_m - END_SEEN_OFFSET_M
         length = min(END_SEEN_LENGTH_M, front - back_to_m)
-        yaw = m.yaw_rad + m.hitch_rad
-        centre = _on_trailer_axis(m, model, front - length / 2)
-        floor, top = track.ground_z_m + model.trailer.floor_m, track.ground_z_m + model.trailer.top_m
-        crossed, ended, reach = self.rays.through(
-            tuple(centre), yaw, length / 2, width_m / 2 - inset, (floor + inset, top - inset), GAP_SEEN_BEYOND_M
-        )
+        crossed, ended, reach = self._rays_behind(track.model, m, track.ground_z_m, front, length, width_m)
         return crossed >= END_SEEN_MIN_RAYS and ended == 0 and reach >= length / 2 - END_SEEN_REACH_M
+
+    def _listed_seen_through(
+        self, model: VehicleModel, m: Measurement, ground_z_m: float, reach_m: float, listed_m: float
+    ) -> bool:
+        """Whether the start's rays crossed the catalogue's trailer (``listed_m`` long) behind where
+        its points reach (``reach_m`` behind its front; ``model``: the start's, with the catalogue's
+        front) at least ``END_SEEN_MIN_RAYS`` times, one of them ``END_SEEN_REACH_M`` or more ahead
+        of its rear, and none ended there: its body is not there. Any rays count, not only those
+        right behind the points (``_seen_empty_behind``: where the trailer ends): the catalogue's
+        body would stop them all. Seen from one side by paper `l1`, a Volvo (its points reaching
+        6.9 m behind the trailer's front) started as a MAN (13.68 m) whose trailer's hind 6.5 m
+        four rays crossed, and was reported as one for 3 frames."""
+        front = model.trailer.front_m - reach_m - END_SEEN_OFFSET_M
+        length = listed_m - reach_m - END_SEEN_OFFSET_M
+        if self.rays is None or length <= END_SEEN_REACH_M:
+            return False
+        crossed, ended, ahead = self._rays_behind(model, m, ground_z_m, front, length, model.trailer.width_m)
+        return crossed >= END_SEEN_MIN_RAYS and ended == 0 and ahead >= END_SEEN_REACH_M - length / 2
+
+    def _rays_behind(
+        self, model: VehicleModel, m: Measurement, ground_z_m: float, front_m: float, length_m: float, width_m: float
+    ) -> tuple[int, int, float]:
+        """``Rays.through`` the trailer's body (``SOLID_INSET_M`` inside its sides, floor and roof) in
+        the slab ``length_m`` long behind ``front_m`` (its frame, x) at the fit ``m``: how many rays
+        crossed it, how many ended in it, how far ahead of its middle the crossing ones reach."""
+        if self.rays is None:
+            return 0, 0, -np.inf
+        centre = _on_trailer_axis(m, model, front_m - length_m / 2)
+        floor, top = ground_z_m + model.trailer.floor_m, ground_z_m + model.trailer.top_m
+        inset = SOLID_INSET_M
+        return self.rays.through(
+            tuple(centre), m.yaw_rad + m.hitch_rad, length_m / 2, width_m / 2 - inset, (floor + inset, top - inset),
+            GAP_SEEN_BEYOND_M,
+        )  # fmt: skip
 
     def _trailer_axle(self, track: VehicleTrack) -> float:
         """L2 scaled with the trailer's length behind the kingpin (the catalogue's proportion)."""
@@ -807,13 +832,14 @@ class DimensionLearner:
         measured where it saw the rear face; else the trailer reaches at least as far as its points
         do (``unit_frames.trailer_reach``), and the catalogue's longer length stands until the end shows (a MAN
         entering the region, its rear beyond it, was named ``unknown`` with the 11.1 m its points
-        reached, for 8 s)."""
+        reached, for 8 s), unless rays crossed it beyond them (``_listed_seen_through``)."""
         window, length_m = self.params.dimension_window, model.trailer.length_m
         seen_end = m.rear_points >= REAR_FACE_MIN_POINTS  # the start fit saw where the trailer ends
         listed = self.catalogue.get(model.name)
         if not seen_end and m.trailer_length_m is not None and listed is not None:
             reach = trailer_reach(m, model, points, ground_z_m, self.params.fit_inlier_m)
-            length = _Extent(max(reach, listed.trailer.length_m), window)
+            refuted = self._listed_seen_through(model, m, ground_z_m, reach, listed.trailer.length_m)
+            length = _Extent(reach if refuted else max(reach, listed.trailer.length_m), window)
             length.add_bound(reach)
             return length
         length = _Extent(length_m, window)
