@@ -30,7 +30,14 @@ from i2v_loc.stages.vehicle_dimensions import (
     _sides_along,
 )
 from i2v_loc.stages.vehicle_model import Box, VehicleModel
-from i2v_loc.stages.vehicle_start import SEED_RETRY_FRAMES, Background, Seed, _gap_filled, _gap_open
+from i2v_loc.stages.vehicle_start import (
+    SEED_RETRY_FRAMES,
+    Background,
+    Seed,
+    _cab_explains_around,
+    _gap_filled,
+    _gap_open,
+)
 from i2v_loc.stages.vehicle_tracker import (
     SETTLED_SLACK_M,
     VehicleReport,
@@ -1871,6 +1878,30 @@ def test_a_start_that_saw_no_rear_face_takes_its_trailers_reach_as_a_lower_bound
     for length in (11.1, 15.0):
         name, estimate = named[length, length == 11.1]
         assert name == "unknown" and estimate == pytest.approx(length, abs=0.1)
+
+
+def test_a_start_cab_explains_the_points_around_it():
+    """A Twizy's cab explains the points around it, and so does a Volvo's whose unknown trailer's front
+    stands 1.0 m ahead of its model's (in the gap: the trailer's, not the cab's). A car driving past
+    a container, fitted as a Twizy's cab with the container for its 7.7 m trailer, does not: its
+    body runs on past the cab's box at 110 deg to it."""
+    twizy = VehicleModel.from_config("twizy", PARAMS.vehicles["twizy"])
+    pose = Measurement(0.0, 0.0, 0.0, 0.0, np.eye(4), np.zeros((0, 3)), np.zeros(0, np.int8), 0.0)
+    params = PARAMS.articulated
+    assert _cab_explains_around(vehicle_points(twizy, 0.0, 0.0, 0.0, sensors=SENSORS), pose, twizy, 0.0, params)
+    model = volvo()
+    ahead = model.with_boxes(model.tractor, replace(model.trailer, front_m=model.trailer.front_m + 1.0))
+    assert _cab_explains_around(vehicle_points(ahead, 0.0, 0.0, 0.0, sensors=SENSORS), pose, model, 0.0, params)
+    container = with_trailer_length(twizy, 7.7)
+    trailer_xy = container.box_centers(0.0, 0.0, 0.0)[1]
+    trailer_only = VehicleModel.rigid("container", 7.7, container.trailer.width_m, 2.5)
+    cab_xy = twizy.box_centers(0.0, 0.0, 0.0)[0]
+    car = VehicleModel.rigid("car", 4.5, 1.8, 1.5, 0.2)
+    points = np.vstack([
+        vehicle_points(trailer_only, trailer_xy[0], trailer_xy[1], 0.0, sensors=SENSORS),
+        vehicle_points(car, cab_xy[0] + 0.3, cab_xy[1], np.radians(110.0), sensors=SENSORS),
+    ])  # fmt: skip
+    assert not _cab_explains_around(points, pose, container, 0.0, params)
 
 
 def test_a_catalogue_trailer_the_rays_crossed_beyond_the_points_is_as_long_as_they_reach():
