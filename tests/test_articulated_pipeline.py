@@ -1776,6 +1776,7 @@ def _start_of_a_man(monkeypatch, lacking: set, refuted: set):
     monkeypatch.setattr(vs, "supported", lambda m, *a, **k: id(m) not in lacking)
     monkeypatch.setattr(vs, "_gap_filled", lambda c, m, *a: id(m) in refuted)
     monkeypatch.setattr(vs, "_rear_closed", lambda *a: False)  # the fits the other way round end on its cab
+    monkeypatch.setattr(vs, "_cab_explains_around", lambda *a: True)  # a Volvo's cab on the MAN's does not
     tracker = VehicleTracker(PARAMS.articulated, PARAMS.vehicles)
     for name in ("_hinge_shown", "_stands_on_wheels", "_explains"):
         monkeypatch.setattr(tracker.starts, name, lambda *a: True)
