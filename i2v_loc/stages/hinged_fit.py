@@ -364,6 +364,16 @@ def _observed(marginal: np.ndarray, prior_sigmas: np.ndarray, floor: np.ndarray)
     return kernels.observed_directions(marginal, np.array(prior_sigmas, dtype=float), floor)
 
 
+def on_face_below_roof(
+    m: Measurement, model: VehicleModel, unit: int, face: int, ground_z_m: float, top_band_m: float
+) -> np.ndarray:
+    """Which of the fit's points it put on ``face`` of ``unit`` below that unit's roof band
+    (``top_band_m`` deep, above the ground at ``ground_z_m``): points in the band are the roof's
+    edge running on past the face, or another body's showing above the unit."""
+    roof_below = ground_z_m + model.boxes[unit].top_m - top_band_m
+    return (m.unit == unit) & (m.face == face) & (m.points[:, 2] < roof_below)
+
+
 @dataclass(frozen=True)
 class TurnFrame:
     """One frame of a turn kept for the joint hinge fit (``fit_hinge``): its fit's thinned points,
@@ -380,9 +390,7 @@ class TurnFrame:
         """The frame of the fit ``m``, made with ``model``; the points it put on the cab's rear face
         below its roof band (``top_band_m`` deep: points there are its roof's edge, or a trailer's
         front showing above the cab, as ``unit_frames.face_seen`` has it) counted."""
-        cab = model.tractor
-        below_roof = m.points[:, 2] - ground_z_m < cab.top_m - top_band_m
-        on_rear = int(np.count_nonzero((m.unit == 0) & (m.face == REAR) & below_roof))
+        on_rear = int(np.count_nonzero(on_face_below_roof(m, model, 0, REAR, ground_z_m, top_band_m)))
         return cls(m.points, ground_z_m, m.vector, on_rear)
 
 

@@ -14,6 +14,7 @@ from i2v_loc.stages.hinged_fit import (
     TRAILER_LENGTH_RANGE_M,
     Measurement,
     Prior,
+    on_face_below_roof,
 )
 from i2v_loc.stages.vehicle_model import Box, VehicleModel
 
@@ -66,8 +67,7 @@ def face_seen(m: Measurement, model: VehicleModel, unit: int, face: int, ground_
     its box pulled back 0.3-0.9 m by a dock's door behind it, passed for its front face, and the
     reach learned on it put the trailer 1 m back. ``model``: the one the fit ``m`` was made with
     (its unit's axis is the middle)."""
-    roof_below = ground_z_m + model.boxes[unit].top_m - top_band_m
-    on = (m.unit == unit) & (m.face == face) & (m.points[:, 2] < roof_below)
+    on = on_face_below_roof(m, model, unit, face, ground_z_m, top_band_m)
     if np.count_nonzero(on) < 2:
         return False
     across = unit_frames(m.points[on], m.vector, model)[unit][:, 1]
