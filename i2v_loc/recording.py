@@ -74,6 +74,10 @@ class SensorScans:
         offsets = self.column_time_ns[col_idx].astype(np.float64) * 1e-9
         return pts.astype(np.float32), offsets.astype(np.float32)
 
+    def unreturned(self, frame: int, directions: np.ndarray) -> np.ndarray:
+        """The unit directions (M, 3) float32, sensor frame, of the rays of ``frame`` that returned nothing."""
+        return directions[self.range_mm[frame] == 0].astype(np.float32)
+
 
 def beam_directions(beam_altitude_deg: np.ndarray, beam_azimuth_offset_deg: np.ndarray, columns: int) -> np.ndarray:
     """Unit rays (beams, columns, 3): azimuth = 2*pi*(1 - c/columns) + offset, clockwise sweep."""
@@ -291,7 +295,11 @@ class Recording(RecordingFiles):
                 continue
             points, offsets = scans.points(index, self._directions[name])
             frame.scans[name] = SensorScan(
-                sensor=name, stamp_s=float(scans.stamp_ns[index]) * 1e-9, points=points, time_offset_s=offsets
+                sensor=name,
+                stamp_s=float(scans.stamp_ns[index]) * 1e-9,
+                points=points,
+                time_offset_s=offsets,
+                unreturned=scans.unreturned(index, self._directions[name]),
             )
         return frame
 

@@ -17,11 +17,11 @@ import re
 import shutil
 import subprocess
 import sys
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 from i2v_loc.formats import open_recording
-from i2v_loc.frame import Frame, SensorScan
+from i2v_loc.frame import Frame
 from i2v_loc.recording import RecordingError
 
 DEFAULT_SCENARIO = "docking"
@@ -91,12 +91,7 @@ class ReplaySource:
         if lap == 0:
             return frame
         shift_s = lap * self.duration_s
-        scans = {
-            name: SensorScan(
-                sensor=s.sensor, stamp_s=s.stamp_s + shift_s, points=s.points, time_offset_s=s.time_offset_s
-            )
-            for name, s in frame.scans.items()
-        }
+        scans = {name: replace(s, stamp_s=s.stamp_s + shift_s) for name, s in frame.scans.items()}
         return Frame(index=k, scans=scans)
 
     @property

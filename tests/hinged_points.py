@@ -122,24 +122,43 @@ def _entry(sensor: np.ndarray, direction: np.ndarray, b: WorldBox) -> np.ndarray
     return np.where((t_near < t_far) & (t_near > 0), t_near, np.inf)
 
 
-def cast_rays(boxes: list[WorldBox], sensors, columns: int = 1024, beams: int = 32):
+def cast_rays(
+    boxes: list[WorldBox], sensors, columns: int = 1024, beams: int = 32, ground_reach_m: float = np.inf,
+    drop_on_boxes_every: int = 0,
+):  # fmt: skip
     """Each sensor's rays as a spinning LiDAR casts them (``columns`` azimuths, ``beams`` elevations
     from -2 to -45 deg), each ending on the nearest box or on flat ground (z = 0): a vehicle's gap
-    shows as rays passing through it onto the ground or another vehicle beyond."""
-    from i2v_loc.stages.visibility import Rays
+    shows as rays passing through it onto the ground or another vehicle beyond. Ground farther than
+    ``ground_reach_m`` (horizontally) returns nothing, nor does every ``drop_on_boxes_every``-th ray
+    ending on a box (a dark body far off): those rays are the ``Rays``' ``unreturned``, reaching 120 m."""
+    from i2v_loc.stages.visibility import Rays, Unreturned
 
     azimuth, elevation = np.meshgrid(
         np.linspace(0.0, 2 * np.pi, columns, endpoint=False), np.radians(np.linspace(-2.0, -45.0, beams))
     )
     direction = np.column_stack([np.cos(azimuth.ravel()), np.sin(azimuth.ravel()), np.tan(elevation.ravel())])
-    parts = []
+    parts, unreturned = [], []
     for sensor in np.asarray(sensors, dtype=float):
-        t = sensor[2] / -direction[:, 2]  # the ground
+        ground = sensor[2] / -direction[:, 2]
+        t = np.where(ground <= ground_reach_m, ground, np.inf)
         for b in boxes:
             t = np.minimum(t, _entry(sensor, direction, b))
-        parts.append(sensor + direction * t[:, None])
-    bounds = np.arange(len(parts) + 1) * len(direction)
-    return Rays(np.vstack(parts).astype(np.float32), np.asarray(sensors, dtype=float), bounds, np.eye(3))
+        returned = np.isfinite(t)
+        if drop_on_boxes_every:
+            on_box = np.flatnonzero(returned & (t < ground))
+            returned[on_box[::drop_on_boxes_every]] = False
+        parts.append(sensor + direction[returned] * t[returned, None])
+        unreturned.append(direction[~returned] / np.linalg.norm(direction[~returned], axis=1, keepdims=True))
+    sensors = np.asarray(sensors, dtype=float).reshape(-1, 3)
+    lost = Unreturned(
+        np.vstack(unreturned).astype(np.float32),
+        np.repeat(np.eye(3)[None], len(sensors), axis=0),
+        sensors,
+        np.cumsum([0] + [len(u) for u in unreturned]),
+        np.full(len(sensors), 120.0),
+    )
+    bounds = np.cumsum([0] + [len(p) for p in parts])
+    return Rays(np.vstack(parts).astype(np.float32), sensors, bounds, np.eye(3), unreturned=lost)
 
 
 def unhidden(points: np.ndarray, boxes: list[WorldBox], sensor) -> np.ndarray:

@@ -1910,7 +1910,9 @@ def test_a_catalogue_trailer_the_rays_crossed_beyond_the_points_is_as_long_as_th
     m): where rays crossed the MAN's trailer behind the points and ended on the ground beyond, its
     body is not there; the trailer is as long as the points reach, and named by that (``unknown``).
     Where rays end in that place too (on a post 1.2 m behind the points: something stands there), or
-    no rays come, the catalogue's length stands (a MAN's rear out of view is no shorter MAN)."""
+    no rays come, the catalogue's length stands (a MAN's rear out of view is no shorter MAN). Rays
+    that returned nothing (no ground within the sensor's reach) count where they outnumber the
+    returns on the MAN's hind part four times: not from a dark MAN dropping every other return."""
     man = VehicleModel.from_config("man_tgx", PARAMS.vehicles["man_tgx"])
     truth = with_trailer_length(man, 11.1)
     sensor = (-4.0, -14.0, 6.0)
@@ -1919,18 +1921,26 @@ def test_a_catalogue_trailer_the_rays_crossed_beyond_the_points_is_as_long_as_th
     boxes = world_boxes(truth, 0.0, 0.0, 0.0)
     rear_x = boxes[1].center_xy[0] - truth.trailer.length_m / 2
     post = WorldBox(np.array([rear_x - 1.5, 0.0]), 0.0, Box(0.3, 0.6, 1.0, 0.0, 5.0), 1)
+    dark_man = cast_rays(world_boxes(man, 0.0, 0.0, 0.0), [sensor], ground_reach_m=15.0, drop_on_boxes_every=2)
     found = {}
     for case, rays in (
         ("seen", cast_rays(boxes, [sensor])),
+        ("unreturned", cast_rays(boxes, [sensor], ground_reach_m=15.0)),
         ("post", cast_rays(boxes + [post], [sensor])),
+        ("dark man", dark_man),
         ("none", None),
     ):
         tracker = VehicleTracker(PARAMS.articulated, PARAMS.vehicles)
         tracker.dimensions.rays = rays
         track = tracker._track(1, man, m, 0.0, 0.0, 0.0, points)
         found[case] = (tracker.dimensions._type_name(track), track.model.trailer.length_m)
-    assert found["seen"][0] == "unknown" and found["seen"][1] == pytest.approx(11.1, abs=0.15)
-    assert found["post"] == found["none"] == ("man_tgx", man.trailer.length_m)
+    for case in ("seen", "unreturned"):
+        assert found[case][0] == "unknown" and found[case][1] == pytest.approx(11.1, abs=0.15)
+    assert found["post"] == found["dark man"] == found["none"] == ("man_tgx", man.trailer.length_m)
+    assert (
+        cast_rays(boxes, [sensor], ground_reach_m=15.0).through((rear_x - 1.5, 0.0), 0.0, 1.0, 0.7, (1.5, 3.5), 0.3)[0]
+        == 0
+    )  # the unreturned ones alone showed it empty
 
 
 def test_a_cab_is_as_high_as_its_points_reach_above_the_catalogues_top():

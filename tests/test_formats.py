@@ -115,6 +115,25 @@ def test_layout_gives_the_native_points_and_states(fmt, layout, native, native_s
     assert_same_states(run_states(out, tmp_path / "states.jsonl"), native_states)
 
 
+def test_the_rays_that_returned_nothing_are_the_zero_ranges_where_the_layout_has_them(native, tmp_path):
+    """A recording's and an Ouster pcap's sweeps tell the rays that returned nothing: one per zero
+    range, along its beam (the pcap's through the SDK's lookup table, within 1 mrad of the
+    recording's beam tables); a PCD folder's points do not tell them."""
+    rec = Recording(native)
+    pcap = open_recording(convert_recording(rec, tmp_path / "pcap", "pcap"))
+    pcd = open_recording(convert_recording(rec, tmp_path / "pcd", "pcd"))
+    for k in (0, COUNT - 1):
+        for name, scan in rec.frame(k).scans.items():
+            scans = rec.scans(name)
+            beam, _ = np.nonzero(scans.range_mm[k] == 0)
+            elevation = np.degrees(np.arcsin(scan.unreturned[:, 2]))
+            assert len(beam) > 0 and np.abs(elevation - scans.beam_altitude_deg[beam]).max() < 1e-3
+            told = pcap.frame(k).scans[name].unreturned
+            cosine = np.clip(np.sum(told * scan.unreturned, axis=1), -1.0, 1.0)
+            assert told.shape == scan.unreturned.shape and np.arccos(cosine).max() < 1e-3
+            assert pcd.frame(k).scans[name].unreturned is None
+
+
 def test_mcap_storage_is_mcap(native, tmp_path):
     out = convert_recording(Recording(native), tmp_path / "bag", "mcap")
     info = yaml.safe_load((out / "metadata.yaml").read_text())["rosbag2_bagfile_information"]

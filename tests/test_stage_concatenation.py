@@ -59,6 +59,22 @@ def test_the_merge_tells_each_used_sweeps_rows_and_sensor_position():
     assert merged.sweep_origins[0].tolist() == [10.0, 0.0, 4.0] and np.isnan(merged.sweep_origins[1]).all()
 
 
+def test_the_rays_that_returned_nothing_reach_as_far_as_their_sensor_in_the_yard_frame():
+    """A sweep's rays that returned nothing end where its sensor's reach does, turned and moved by
+    its extrinsics (sensor a: turned 90 deg, at x 10 m); a sweep that does not tell them, or is out
+    of sync, adds none; none told at all: not known."""
+    sensors = [*SENSORS, SensorConfig(name="c", time_offset_s=-0.5)]
+    stage = Concatenation(ConcatenationParams(voxel_size_m=0, sync_tolerance_s=0.05), sensors)
+    east_and_down = np.array([[1, 0, 0], [0, 0, -1]], dtype=np.float32)
+    told = SensorScan("a", 2.0, np.array([[5, 0, -4]], dtype=np.float32), None, unreturned=east_and_down)
+    late = SensorScan("c", 2.6, np.array([[1, 1, 1]], dtype=np.float32), None, unreturned=east_and_down)
+    merged = stage.merge({"a": told, "b": scan("b", 2.0, [[3, 2, -3]]), "c": late})
+    reach = SENSORS[0].max_range_m
+    np.testing.assert_allclose(merged.unreturned.ends, [[10.0, reach, 4.0], [10.0, 0.0, 4.0 - reach]], atol=1e-3)
+    assert merged.unreturned.origins.tolist() == [[10.0, 0.0, 4.0]]
+    assert stage.merge({"b": scan("b", 2.0, [[3, 2, -3]])}).unreturned is None
+
+
 def test_missing_empty_and_nan_are_counted_not_raised():
     sensors = SENSORS + [SensorConfig(name="c")]
     stage = Concatenation(ConcatenationParams(voxel_size_m=0), sensors)

@@ -15,9 +15,9 @@ def row(y, z, xs=np.linspace(-3, 3, 61)):
     return np.column_stack([xs, np.full(len(xs), y), np.full(len(xs), z)]).astype(np.float32)
 
 
-def rays(points, origins=SENSOR, bounds=None, to_level=np.eye(3)):
+def rays(points, origins=SENSOR, bounds=None, to_level=np.eye(3), unreturned=None):
     bounds = np.array([0, len(points)]) if bounds is None else np.asarray(bounds)
-    return Rays(points, np.asarray(origins, dtype=float), bounds, to_level)
+    return Rays(points, np.asarray(origins, dtype=float), bounds, to_level, unreturned=unreturned)
 
 
 def sampled_through(points, origin, box=BOX, samples=4000):
@@ -161,3 +161,23 @@ def test_rays_are_carried_with_a_moving_unit_from_their_capture_time():
     assert moved.crossings(*args, motion)[:, 0] == pytest.approx([0.5], abs=1e-6)
     assert still.crossings(*args, motion)[:, 0] == pytest.approx([0.0])  # no lags known: as captured
     assert moved.crossings(*args)[:, 0] == pytest.approx([0.0])  # no motion: as captured
+
+
+def test_rays_that_returned_nothing_cross_every_box_on_their_way_out_to_the_sensors_reach():
+    """Unreturned rays from the sensor (at y -10, 3 m up) reach 20 m: those aimed at the box cross
+    it wherever it stands within their reach (none ends in it), those aimed beside it do not, and a
+    sensor turned 90 deg turns its rays with it. Returns alone never count them."""
+    from i2v_loc.stages.visibility import Unreturned
+
+    at_box = np.array([0.0, 10.0, -1.5]) / np.linalg.norm([0.0, 10.0, -1.5])  # down into the box's middle
+    beside = np.array([0.6, 1.0, -0.15]) / np.linalg.norm([0.6, 1.0, -0.15])  # passes 6 m off to its side
+    lost = Unreturned(np.array([at_box, at_box, beside], np.float32), np.eye(3)[None], SENSOR, np.array([0, 3]), [20.0])
+    box = {k: v for k, v in BOX.items() if k != "beyond_m"}
+    seen = rays(row(1.5, 0.0), unreturned=lost)
+    assert seen.unreturned_through(**box) == (2, pytest.approx(0.0, abs=1e-9))
+    assert rays(row(1.5, 0.0)).unreturned_through(**box) == (0, -np.inf)
+    turned = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])  # the sensor's x is the yard's y
+    along_x = np.array([[10.0, 0.0, -1.5]]) / np.linalg.norm([10.0, 0.0, -1.5])
+    lost = Unreturned(along_x.astype(np.float32), turned[None], SENSOR, np.array([0, 1]), [20.0])
+    assert rays(row(1.5, 0.0), unreturned=lost).unreturned_through(**box)[0] == 1
+    assert seen.through(**BOX)[0] == sampled_through(row(1.5, 0.0), SENSOR[0])

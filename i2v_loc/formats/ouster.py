@@ -28,6 +28,7 @@ LIDAR_PORT = 7502
 IMU_PORT = 7503
 SERIAL_BASE = 992100000000  # serial numbers of the simulated sensors: base + position
 FRAME_ID_MODULO = 1 << 16  # frame_id is 16 bits in the packet header
+UNIT_LOOKUP_MM = 100_000  # a pixel's direction: its point at 100 m, the beam's origin offset (mm) aside
 
 
 def _sdk():
@@ -148,6 +149,7 @@ class SweepDecoder:
         self.name = name
         self.batcher = core.FrameBatcher(info)
         self.lut = core.XYZLut(info, use_extrinsics=False)
+        self.directions = _unit(self.lut(np.full((info.h, info.w), UNIT_LOOKUP_MM, dtype=np.uint32)))
         self.frame = core.LidarFrame(info)
         self.column_period_ns = 1e9 / (info.format.fps * info.w)
         self.per_packet = info.format.columns_per_packet
@@ -198,8 +200,14 @@ class SweepDecoder:
         hit = (ranges > 0) & valid_columns[None, :]
         xyz = self.lut(lf)[hit]
         offsets = (stamps[None, :] - start_ns).repeat(lf.h, axis=0)[hit] * 1e-9
-        scan = SensorScan(sensor=self.name, stamp_s=start_ns * 1e-9, points=xyz, time_offset_s=offsets)
+        unreturned = self.directions[(ranges == 0) & valid_columns[None, :]]
+        scan = SensorScan(self.name, start_ns * 1e-9, xyz, offsets, unreturned=unreturned)
         return int(lf.frame_id), scan
+
+
+def _unit(xyz: np.ndarray) -> np.ndarray:
+    """(h, w, 3) points as float32 unit vectors."""
+    return (xyz / np.linalg.norm(xyz, axis=-1, keepdims=True)).astype(np.float32)
 
 
 def _pcap_packets(path: Path, info, rejected: dict):

@@ -120,7 +120,14 @@ class ArticulatedPipeline(ParameterHandoff):
             level_points = self.level.points(points)
             known = np.isfinite(merged.sweep_origins).all(axis=1).any()  # else no ray is known (a cloud file)
             rays = (
-                Rays(merged.points, merged.sweep_origins, merged.sweep_bounds, self.level.rotation, merged.lag_s)
+                Rays(
+                    merged.points,
+                    merged.sweep_origins,
+                    merged.sweep_bounds,
+                    self.level.rotation,
+                    merged.lag_s,
+                    merged.unreturned,
+                )
                 if known
                 else None
             )

@@ -25,6 +25,7 @@ from i2v_loc.geometry import extrinsics_matrix
 from i2v_loc.params import ConcatenationParams, SensorConfig
 from i2v_loc.stages import kernels
 from i2v_loc.stages.primitives import voxel_centroids
+from i2v_loc.stages.visibility import Unreturned
 
 DROP_REASONS = ("out_of_sync", "empty", "missing", "nan_points")
 
@@ -54,6 +55,7 @@ class ConcatenationResult:
     lag_s: np.ndarray | None = None  # (N,) reference time minus each point's capture time (``merge`` only)
     sweep_bounds: np.ndarray | None = None  # (S + 1,) each used sweep's first row, then N (``merge`` only)
     sweep_origins: np.ndarray | None = None  # (S, 3) their sensors' positions, yard frame, NaN if unknown (merge)
+    unreturned: Unreturned | None = None  # the used sweeps' rays that returned nothing, where known (merge)
 
 
 class Concatenation:
@@ -71,7 +73,7 @@ class Concatenation:
         if self.params.motion_interpolation and motion:
             self.interpolate(points, merged.lag_s, motion)
         merged.points, _ = voxel_centroids(points, self.params.voxel_size_m)
-        merged.lag_s = merged.sweep_bounds = merged.sweep_origins = None  # the rows are voxels now
+        merged.lag_s = merged.sweep_bounds = merged.sweep_origins = merged.unreturned = None  # the rows are voxels now
         return merged
 
     def merge(self, scans: dict[str, SensorScan]) -> ConcatenationResult:
@@ -130,7 +132,21 @@ class Concatenation:
             dtype=float,
         ).reshape(-1, 3)
         names = [name for name, *_ in kept_sweeps]
-        return ConcatenationResult(points, reference_s, names, faults, dropped, lag_s, bounds, origins)
+        unreturned = self._unreturned([scans[name] for name in names])
+        return ConcatenationResult(points, reference_s, names, faults, dropped, lag_s, bounds, origins, unreturned)
+
+    def _unreturned(self, used: list[SensorScan]) -> Unreturned | None:
+        """The rays of the ``used`` sweeps that returned nothing, of those that tell them."""
+        told = [scan for scan in used if scan.from_sensor and scan.unreturned is not None]
+        if not told:
+            return None
+        return Unreturned(
+            np.concatenate([scan.unreturned for scan in told]),
+            np.array([self._to_yard[scan.sensor][0] for scan in told], dtype=float),
+            np.array([self._to_yard[scan.sensor][1] for scan in told], dtype=float),
+            np.array(list(itertools.accumulate((len(scan.unreturned) for scan in told), initial=0))),
+            np.array([self.sensors[scan.sensor].max_range_m for scan in told], dtype=float),
+        )
 
     # ----------------------------------------------------------------- synchronisation
 

@@ -82,6 +82,9 @@ END_SEEN_OFFSET_M = 0.3  # past the hindmost point: a side's points are up to a 
 END_SEEN_LENGTH_M = 2.0
 END_SEEN_MIN_RAYS = 2
 END_SEEN_REACH_M = 1.0
+UNRETURNED_MIN_RAYS = 10  # a dark body far off drops a few returns: no handful of those shows it empty
+UNRETURNED_PER_RETURN = 4  # and a body returns most of the rays that reach it
+FACE_SHELL_M = 0.3  # around a body's faces: its returns (a sweep's motion and noise spread them)
 END_TRAVEL_M = 0.3  # a moving trailer's end counts once it has gone this far with it (not stayed put)
 END_HISTORY = 50  # frames of ends kept to judge that by
 ANYWHERE = (-np.inf, np.inf)  # no bound along a unit
@@ -782,16 +785,28 @@ class DimensionLearner:
     ) -> tuple[int, int, float]:
         """``Rays.through`` the trailer's body (``SOLID_INSET_M`` inside its sides, floor and roof) in
         the slab ``length_m`` long behind ``front_m`` (its frame, x) at the fit ``m``: how many rays
-        crossed it, how many ended in it, how far ahead of its middle the crossing ones reach."""
+        crossed it, how many ended in it, how far ahead of its middle the crossing ones reach. The
+        rays that returned nothing count among the crossing ones where at least
+        ``UNRETURNED_MIN_RAYS`` crossed and they outnumber the returns on the body's faces
+        (``FACE_SHELL_M`` around them) ``UNRETURNED_PER_RETURN`` times: a body there returns most
+        rays that reach it. Seen from one side, an unknown 10.5 m trailer started as a MAN's
+        (13.68 m) whose hind 3 m no return crossed: the beams at its heights ended on no ground
+        within the sensor's reach, and 29 of them crossed it."""
         if self.rays is None:
             return 0, 0, -np.inf
-        centre = _on_trailer_axis(m, model, front_m - length_m / 2)
+        centre = tuple(_on_trailer_axis(m, model, front_m - length_m / 2))
+        heading, half_length = m.yaw_rad + m.hitch_rad, length_m / 2
         floor, top = ground_z_m + model.trailer.floor_m, ground_z_m + model.trailer.top_m
-        inset = SOLID_INSET_M
-        return self.rays.through(
-            tuple(centre), m.yaw_rad + m.hitch_rad, length_m / 2, width_m / 2 - inset, (floor + inset, top - inset),
-            GAP_SEEN_BEYOND_M,
-        )  # fmt: skip
+        solid = (width_m / 2 - SOLID_INSET_M, (floor + SOLID_INSET_M, top - SOLID_INSET_M))
+        crossed, ended, reach = self.rays.through(centre, heading, half_length, *solid, GAP_SEEN_BEYOND_M)
+        unreturned, unreturned_reach = self.rays.unreturned_through(centre, heading, half_length, *solid)
+        if unreturned < UNRETURNED_MIN_RAYS:
+            return crossed, ended, reach
+        faces = (width_m / 2 + FACE_SHELL_M, (floor - FACE_SHELL_M, top + FACE_SHELL_M))
+        on_faces = self.rays.through(centre, heading, half_length, *faces, GAP_SEEN_BEYOND_M)[1]
+        if unreturned < UNRETURNED_PER_RETURN * on_faces:
+            return crossed, ended, reach
+        return crossed + unreturned, ended, max(reach, unreturned_reach)
 
     def _trailer_axle(self, track: VehicleTrack) -> float:
         """L2 scaled with the trailer's length behind the kingpin (the catalogue's proportion)."""

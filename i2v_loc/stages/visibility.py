@@ -17,6 +17,29 @@ from i2v_loc.stages.kinematic_filter import UnitMotion
 
 
 @dataclass(eq=False)
+class Unreturned:
+    """The rays of a frame's sweeps that returned nothing: nothing surfaced along them as far as
+    their sensor reaches, or nothing that reflected enough (a dark body far off drops some of its
+    returns, so these weigh against the returns a place had, never alone)."""
+
+    directions: np.ndarray  # (M, 3) unit, each in its sensor's frame, the sweeps one after the other
+    rotations: np.ndarray  # (S, 3, 3) each sweep's sensor frame to the yard frame
+    origins: np.ndarray  # (S, 3) yard frame
+    bounds: np.ndarray  # (S + 1,) the sweeps' first rows, then M
+    ranges_m: np.ndarray  # (S,) how far each sweep's sensor reaches
+
+    @cached_property
+    def ends(self) -> np.ndarray:
+        """Each ray's far end (M, 3), yard frame: where its sensor's reach ends."""
+        ends = np.empty_like(self.directions)
+        for rotation, origin, reach_m, a, b in zip(
+            self.rotations, self.origins, self.ranges_m, self.bounds[:-1], self.bounds[1:]
+        ):
+            ends[a:b] = (self.directions[a:b] * reach_m) @ rotation.T + origin
+        return ends
+
+
+@dataclass(eq=False)
 class Rays:
     """A frame's rays: each sweep's returns (yard frame) and its sensor's origin; ``to_level`` turns
     the yard frame into the frame the questions are asked in (the tracker's level frame)."""
@@ -26,6 +49,7 @@ class Rays:
     bounds: np.ndarray  # (S + 1,) the sweeps' first rows, then N
     to_level: np.ndarray  # (3, 3) rotation
     lag_s: np.ndarray | None = None  # (N,) the frame's reference time minus each ray's capture time
+    unreturned: Unreturned | None = None  # the rays that returned nothing (None: not known)
 
     def through(
         self, center_xy: tuple[float, float], yaw_rad: float, half_length_m: float, half_width_m: float,
@@ -35,13 +59,24 @@ class Rays:
         bottom and top) and end at least ``beyond_m`` past the point where they leave it, how many
         end in it, and how far ahead of the box's centre along its length the crossing rays reach
         inside it (-inf for none)."""
-        box = np.array(
-            [*center_xy, np.cos(yaw_rad), np.sin(yaw_rad), half_length_m, half_width_m, *z_range_m], dtype=float
-        )
+        box = _box(center_xy, yaw_rad, half_length_m, half_width_m, z_range_m)
         through, ended, front = kernels.rays_through_box(
             self.points, self.origins, self.bounds, self._rotation, box, float(beyond_m)
         )
         return int(through), int(ended), float(front)
+
+    def unreturned_through(
+        self, center_xy: tuple[float, float], yaw_rad: float, half_length_m: float, half_width_m: float,
+        z_range_m: tuple[float, float],
+    ) -> tuple[int, float]:  # fmt: skip
+        """How many of the rays that returned nothing cross the upright box (as ``through``), and
+        how far ahead of its centre along its length they reach inside it (-inf for none)."""
+        rays = self.unreturned
+        if rays is None or not len(rays.directions):
+            return 0, -np.inf
+        box = _box(center_xy, yaw_rad, half_length_m, half_width_m, z_range_m)
+        through, _, front = kernels.rays_through_box(rays.ends, rays.origins, rays.bounds, self._rotation, box, 0.0)
+        return int(through), float(front)
 
     def crossings(
         self, point_xy: np.ndarray, direction_xy: np.ndarray, half_length_m: float, top_z_m: float, beyond_m: float,
@@ -95,6 +130,16 @@ class Rays:
                 for origin, a, b in zip(self.origins, self.bounds[:-1], self.bounds[1:])
             ]
         )
+
+
+def _box(
+    center_xy: tuple[float, float], yaw_rad: float, half_length_m: float, half_width_m: float,
+    z_range_m: tuple[float, float],
+) -> np.ndarray:  # fmt: skip
+    """An upright box as the kernels take it: centre, cos and sin of its yaw, half sizes, bottom, top."""
+    return np.array(
+        [*center_xy, np.cos(yaw_rad), np.sin(yaw_rad), half_length_m, half_width_m, *z_range_m], dtype=float
+    )
 
 
 def _elevations(points: np.ndarray, origins: np.ndarray) -> np.ndarray:
