@@ -1,6 +1,8 @@
 """What the sensors saw through: a ray from a sensor to its return crossed every place between,
 so a place a ray crossed and ended beyond holds no surface (the points alone cannot tell an empty
-place from a hidden one: a pole's shadow on a trailer's side is a hole in its points too).
+place from a hidden one: a pole's shadow on a trailer's side is a hole in its points too). A ray
+that returned nothing crossed everything within its sensor's reach (``Unreturned``), or met a
+surface too dark to answer: it weighs against the returns a place had, never alone.
 
 Asked rarely (a vehicle's start), so nothing is precomputed: each question is one compiled pass
 over the frame's rays."""
