@@ -772,12 +772,19 @@ class DimensionLearner:
         right behind the points (``_seen_empty_behind``: where the trailer ends): the catalogue's
         body would stop them all. Seen from one side by paper `l1`, a Volvo (its points reaching
         6.9 m behind the trailer's front) started as a MAN (13.68 m) whose trailer's hind 6.5 m
-        four rays crossed, and was reported as one for 3 frames."""
+        four rays crossed, and was reported as one for 3 frames. Rays that returned nothing count
+        too (``_unreturned_behind``); not for where a trailer ends (``_seen_empty_behind``), which
+        takes its side's hindmost point though the slab's rays show only that the body ends within
+        ``END_SEEN_OFFSET_M`` behind it: counted there, a Volvo hidden beside a MAN had its trailer
+        learned 6.03 m (6.30) for 5 s."""
         front = model.trailer.front_m - reach_m - END_SEEN_OFFSET_M
         length = listed_m - reach_m - END_SEEN_OFFSET_M
         if self.rays is None or length <= END_SEEN_REACH_M:
             return False
-        crossed, ended, ahead = self._rays_behind(model, m, ground_z_m, front, length, model.trailer.width_m)
+        slab = (model, m, ground_z_m, front, length, model.trailer.width_m)
+        crossed, ended, ahead = self._rays_behind(*slab)
+        unreturned, unreturned_ahead = self._unreturned_behind(*slab)
+        crossed, ahead = crossed + unreturned, max(ahead, unreturned_ahead)
         return crossed >= END_SEEN_MIN_RAYS and ended == 0 and ahead >= END_SEEN_REACH_M - length / 2
 
     def _rays_behind(
@@ -785,28 +792,30 @@ class DimensionLearner:
     ) -> tuple[int, int, float]:
         """``Rays.through`` the trailer's body (``SOLID_INSET_M`` inside its sides, floor and roof) in
         the slab ``length_m`` long behind ``front_m`` (its frame, x) at the fit ``m``: how many rays
-        crossed it, how many ended in it, how far ahead of its middle the crossing ones reach. The
-        rays that returned nothing count among the crossing ones where at least
-        ``UNRETURNED_MIN_RAYS`` crossed and they outnumber the returns on the body's faces
-        (``FACE_SHELL_M`` around them) ``UNRETURNED_PER_RETURN`` times: a body there returns most
-        rays that reach it. Seen from one side, an unknown 10.5 m trailer started as a MAN's
-        (13.68 m) whose hind 3 m no return crossed: the beams at its heights ended on no ground
-        within the sensor's reach, and 29 of them crossed it."""
+        crossed it, how many ended in it, how far ahead of its middle the crossing ones reach."""
         if self.rays is None:
             return 0, 0, -np.inf
-        centre = tuple(_on_trailer_axis(m, model, front_m - length_m / 2))
-        heading, half_length = m.yaw_rad + m.hitch_rad, length_m / 2
-        floor, top = ground_z_m + model.trailer.floor_m, ground_z_m + model.trailer.top_m
-        solid = (width_m / 2 - SOLID_INSET_M, (floor + SOLID_INSET_M, top - SOLID_INSET_M))
-        crossed, ended, reach = self.rays.through(centre, heading, half_length, *solid, GAP_SEEN_BEYOND_M)
-        unreturned, unreturned_reach = self.rays.unreturned_through(centre, heading, half_length, *solid)
+        slab = _slab(model, m, ground_z_m, front_m, length_m, width_m, SOLID_INSET_M)
+        return self.rays.through(*slab, GAP_SEEN_BEYOND_M)
+
+    def _unreturned_behind(
+        self, model: VehicleModel, m: Measurement, ground_z_m: float, front_m: float, length_m: float, width_m: float
+    ) -> tuple[int, float]:
+        """The rays that returned nothing through the slab of ``_rays_behind`` and how far ahead of its
+        middle they reach, where at least ``UNRETURNED_MIN_RAYS`` crossed and they outnumber the
+        returns on the body's faces (``FACE_SHELL_M`` around them) ``UNRETURNED_PER_RETURN`` times: a
+        body there returns most rays that reach it (else none: 0, -inf). Seen from one side, an
+        unknown 10.5 m trailer started as a MAN's (13.68 m) whose hind 3 m no return crossed: the
+        beams at its heights ended on no ground within the sensor's reach, and 29 of them crossed it."""
+        if self.rays is None:
+            return 0, -np.inf
+        slab = _slab(model, m, ground_z_m, front_m, length_m, width_m, SOLID_INSET_M)
+        unreturned, reach = self.rays.unreturned_through(*slab)
         if unreturned < UNRETURNED_MIN_RAYS:
-            return crossed, ended, reach
-        faces = (width_m / 2 + FACE_SHELL_M, (floor - FACE_SHELL_M, top + FACE_SHELL_M))
-        on_faces = self.rays.through(centre, heading, half_length, *faces, GAP_SEEN_BEYOND_M)[1]
-        if unreturned < UNRETURNED_PER_RETURN * on_faces:
-            return crossed, ended, reach
-        return crossed + unreturned, ended, max(reach, unreturned_reach)
+            return 0, -np.inf
+        shell = _slab(model, m, ground_z_m, front_m, length_m, width_m, -FACE_SHELL_M)
+        on_faces = self.rays.through(*shell, GAP_SEEN_BEYOND_M)[1]
+        return (unreturned, reach) if unreturned >= UNRETURNED_PER_RETURN * on_faces else (0, -np.inf)
 
     def _trailer_axle(self, track: VehicleTrack) -> float:
         """L2 scaled with the trailer's length behind the kingpin (the catalogue's proportion)."""
@@ -861,6 +870,18 @@ class DimensionLearner:
         if seen_end:
             length.add(length_m)
         return length
+
+
+def _slab(
+    model: VehicleModel, m: Measurement, ground_z_m: float, front_m: float, length_m: float, width_m: float,
+    inset_m: float,
+) -> tuple:  # fmt: skip
+    """The trailer's body (``width_m`` wide) in the slab ``length_m`` long behind ``front_m`` (its
+    frame, x) at the fit ``m``, ``inset_m`` inside its sides, floor and roof (outside: negative), as
+    ``Rays.through`` takes a box: centre, yaw, half length, half width, bottom and top."""
+    centre = tuple(_on_trailer_axis(m, model, front_m - length_m / 2))
+    floor, top = ground_z_m + model.trailer.floor_m, ground_z_m + model.trailer.top_m
+    return centre, m.yaw_rad + m.hitch_rad, length_m / 2, width_m / 2 - inset_m, (floor + inset_m, top - inset_m)
 
 
 def _hinge(track: VehicleTrack) -> tuple[float, float]:
