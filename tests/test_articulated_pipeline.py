@@ -1912,7 +1912,9 @@ def test_a_catalogue_trailer_the_rays_crossed_beyond_the_points_is_as_long_as_th
     Where rays end in that place too (on a post 1.2 m behind the points: something stands there), or
     no rays come, the catalogue's length stands (a MAN's rear out of view is no shorter MAN). Rays
     that returned nothing (no ground within the sensor's reach) count where they outnumber the
-    returns on the MAN's hind part four times: not from a dark MAN dropping every other return."""
+    returns on the MAN's hind part four times: not from a dark MAN dropping every other return; nor
+    where the trailer ends behind a side's hindmost point (returns only: the end is taken at that
+    point, and a slab crossed right behind it shows only that the body ends within 0.3 m)."""
     man = VehicleModel.from_config("man_tgx", PARAMS.vehicles["man_tgx"])
     truth = with_trailer_length(man, 11.1)
     sensor = (-4.0, -14.0, 6.0)
@@ -1925,7 +1927,7 @@ def test_a_catalogue_trailer_the_rays_crossed_beyond_the_points_is_as_long_as_th
     found = {}
     for case, rays in (
         ("seen", cast_rays(boxes, [sensor])),
-        ("unreturned", cast_rays(boxes, [sensor], ground_reach_m=15.0)),
+        ("unreturned", unreturned := cast_rays(boxes, [sensor], ground_reach_m=15.0)),
         ("post", cast_rays(boxes + [post], [sensor])),
         ("dark man", dark_man),
         ("none", None),
@@ -1937,6 +1939,12 @@ def test_a_catalogue_trailer_the_rays_crossed_beyond_the_points_is_as_long_as_th
     for case in ("seen", "unreturned"):
         assert found[case][0] == "unknown" and found[case][1] == pytest.approx(11.1, abs=0.15)
     assert found["post"] == found["dark man"] == found["none"] == ("man_tgx", man.trailer.length_m)
+    end_m = man.trailer.front_m - 11.1  # where a trailer ends counts returns only (they pin it closer)
+    for case, rays, ends in (("seen", cast_rays(boxes, [sensor]), True), ("unreturned", unreturned, False)):
+        tracker = VehicleTracker(PARAMS.articulated, PARAMS.vehicles)
+        tracker.dimensions.rays = rays
+        track = tracker._track(1, man, m, 0.0, 0.0, 0.0, points)
+        assert tracker.dimensions._seen_empty_behind(track, m, end_m, man.trailer.width_m) is ends, case
     assert (
         cast_rays(boxes, [sensor], ground_reach_m=15.0).through((rear_x - 1.5, 0.0), 0.0, 1.0, 0.7, (1.5, 3.5), 0.3)[0]
         == 0
