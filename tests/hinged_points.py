@@ -151,10 +151,9 @@ def cast_rays(
         unreturned.append(direction[~returned] / np.linalg.norm(direction[~returned], axis=1, keepdims=True))
     sensors = np.asarray(sensors, dtype=float).reshape(-1, 3)
     lost = Unreturned(
-        np.vstack(unreturned).astype(np.float32),
+        [u.astype(np.float32) for u in unreturned],
         np.repeat(np.eye(3)[None], len(sensors), axis=0),
         sensors,
-        np.cumsum([0] + [len(u) for u in unreturned]),
         np.full(len(sensors), 120.0),
     )
     bounds = np.cumsum([0] + [len(p) for p in parts])

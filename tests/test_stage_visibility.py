@@ -171,13 +171,13 @@ def test_rays_that_returned_nothing_cross_every_box_on_their_way_out_to_the_sens
 
     at_box = np.array([0.0, 10.0, -1.5]) / np.linalg.norm([0.0, 10.0, -1.5])  # down into the box's middle
     beside = np.array([0.6, 1.0, -0.15]) / np.linalg.norm([0.6, 1.0, -0.15])  # passes 6 m off to its side
-    lost = Unreturned(np.array([at_box, at_box, beside], np.float32), np.eye(3)[None], SENSOR, np.array([0, 3]), [20.0])
+    lost = Unreturned([np.array([at_box, at_box, beside], np.float32)], np.eye(3)[None], SENSOR, [20.0])
     box = {k: v for k, v in BOX.items() if k != "beyond_m"}
     seen = rays(row(1.5, 0.0), unreturned=lost)
     assert seen.unreturned_through(**box) == (2, pytest.approx(0.0, abs=1e-9))
     assert rays(row(1.5, 0.0)).unreturned_through(**box) == (0, -np.inf)
     turned = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])  # the sensor's x is the yard's y
     along_x = np.array([[10.0, 0.0, -1.5]]) / np.linalg.norm([10.0, 0.0, -1.5])
-    lost = Unreturned(along_x.astype(np.float32), turned[None], SENSOR, np.array([0, 1]), [20.0])
+    lost = Unreturned([along_x.astype(np.float32)], turned[None], SENSOR, [20.0])
     assert rays(row(1.5, 0.0), unreturned=lost).unreturned_through(**box)[0] == 1
     assert seen.through(**BOX)[0] == sampled_through(row(1.5, 0.0), SENSOR[0])

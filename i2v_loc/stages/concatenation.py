@@ -141,10 +141,9 @@ class Concatenation:
         if not told:
             return None
         return Unreturned(
-            np.concatenate([scan.unreturned for scan in told]),
+            [scan.unreturned for scan in told],
             np.array([self._to_yard[scan.sensor][0] for scan in told], dtype=float),
             np.array([self._to_yard[scan.sensor][1] for scan in told], dtype=float),
-            np.array(list(itertools.accumulate((len(scan.unreturned) for scan in told), initial=0))),
             np.array([self.sensors[scan.sensor].max_range_m for scan in told], dtype=float),
         )
 

@@ -22,23 +22,25 @@ from i2v_loc.stages.kinematic_filter import UnitMotion
 class Unreturned:
     """The rays of a frame's sweeps that returned nothing: nothing surfaced along them as far as
     their sensor reaches, or nothing that reflected enough (a dark body far off drops some of its
-    returns, so these weigh against the returns a place had, never alone)."""
+    returns, so these weigh against the returns a place had, never alone). Kept per sweep as the
+    sweeps gave them; their ends are worked out only when asked (a start's check)."""
 
-    directions: np.ndarray  # (M, 3) unit, each in its sensor's frame, the sweeps one after the other
+    directions: list[np.ndarray]  # per sweep (M_k, 3) unit, in its sensor's frame
     rotations: np.ndarray  # (S, 3, 3) each sweep's sensor frame to the yard frame
     origins: np.ndarray  # (S, 3) yard frame
-    bounds: np.ndarray  # (S + 1,) the sweeps' first rows, then M
     ranges_m: np.ndarray  # (S,) how far each sweep's sensor reaches
 
     @cached_property
     def ends(self) -> np.ndarray:
-        """Each ray's far end (M, 3), yard frame: where its sensor's reach ends."""
-        ends = np.empty_like(self.directions)
-        for rotation, origin, reach_m, a, b in zip(
-            self.rotations, self.origins, self.ranges_m, self.bounds[:-1], self.bounds[1:]
-        ):
-            ends[a:b] = (self.directions[a:b] * reach_m) @ rotation.T + origin
-        return ends
+        """Each ray's far end (M, 3) float32, yard frame, where its sensor's reach ends; the sweeps
+        one after the other (rows ``bounds``)."""
+        parts = zip(self.directions, self.rotations, self.origins, self.ranges_m)
+        return np.concatenate([(d * r) @ rotation.T + o for d, rotation, o, r in parts]).astype(np.float32)
+
+    @cached_property
+    def bounds(self) -> np.ndarray:
+        """(S + 1,) each sweep's first row of ``ends``, then M."""
+        return np.cumsum([0] + [len(d) for d in self.directions])
 
 
 @dataclass(eq=False)
@@ -74,7 +76,7 @@ class Rays:
         """How many of the rays that returned nothing cross the upright box (as ``through``), and
         how far ahead of its centre along its length they reach inside it (-inf for none)."""
         rays = self.unreturned
-        if rays is None or not len(rays.directions):
+        if rays is None or not sum(len(d) for d in rays.directions):
             return 0, -np.inf
         box = _box(center_xy, yaw_rad, half_length_m, half_width_m, z_range_m)
         through, _, front = kernels.rays_through_box(rays.ends, rays.origins, rays.bounds, self._rotation, box, 0.0)
