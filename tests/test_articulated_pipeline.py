@@ -286,6 +286,33 @@ def test_a_track_is_reported_with_the_length_its_start_frame_shows():
     assert np.hypot(*(centre - true_centre)) < 0.15
 
 
+def test_a_length_is_measured_between_the_two_end_faces_when_a_frame_shows_both():
+    """A Volvo-sized vehicle whose trailer is 6.5 m long, its front 1.0 m ahead of the kingpin,
+    tracked with the front 0.15 m short and the length 0.15 m short (each had been learned from the
+    other). Two sensors, one ahead and one behind, at a 30 deg hitch: the frame shows the trailer's
+    front face and its rear face, and its length fitted between them is the truth within 2 cm
+    (fitted from the model's front, the cab's points held it at 6.41 m). At -30 deg the front face
+    is hidden behind the cab and the length is fitted from the model's front, as before."""
+    model = volvo()
+    truth = replace(model, trailer=replace(model.trailer, front_m=1.0, length_m=6.5))
+    learned = replace(truth, trailer=replace(truth.trailer, front_m=0.85, length_m=6.35))
+    sensors = [(10.0, 8.0, 4.0), (-12.0, 6.0, 4.0)]
+    band = PARAMS.articulated.fit_top_band_m
+    lengths = {}
+    for hitch_deg in (30.0, -30.0):
+        hitch = np.radians(hitch_deg)
+        points = vehicle_points(truth, 0.0, 0.0, 0.0, hitch, sensors=sensors, spacing=0.1, seed=3)
+        m = fit(points, Prior(0.0, 0.0, 0.0, hitch, learned), PARAMS.articulated, iterations=20)
+        tracker = VehicleTracker(PARAMS.articulated, PARAMS.vehicles)
+        track = tracker._track(1, learned, m, 0.0, 0.0, 0.0, points)
+        track.model = learned
+        assert face_seen(m, learned, 1, REAR, 0.0, band)
+        front_seen = face_seen(m, learned, 1, FRONT, 0.0, band)
+        lengths[hitch_deg] = (front_seen, tracker.dimensions._fitted_length(track, m, points, 6.35))
+    assert lengths[30.0][0] and lengths[30.0][1] == pytest.approx(6.5, abs=0.02)
+    assert not lengths[-30.0][0] and lengths[-30.0][1] == pytest.approx(6.39, abs=0.03)
+
+
 def test_a_trailer_length_learned_long_leaves_the_pose_and_the_rear_end_where_the_points_are():
     """A Volvo FH standing at a -45 deg hitch, seen by one sensor beside its trailer's rear: the rear
     face, the cab's side and front, not the trailer's front. Its trailer's length was learned 6.51 m

@@ -675,10 +675,17 @@ class DimensionLearner:
         its rear face shows in it (``seen_m``), when they pin it within ``LENGTH_MAX_STD_M``. (The length
         the frame's fit shows is the model's own whenever the cab's place along the vehicle is pinned
         weakly: a length learned 0.2 m long from a start frame's points, not de-skewed, stayed so, and
-        the fits put the tractor 0.2 m off.)"""
+        the fits put the tractor 0.2 m off.) Where the frame shows the trailer's front face too, the
+        front is fitted with it (the kingpin free): the length lies between the two faces. Else it
+        is measured from the model's front, and a front learned short made the length short, which
+        held the front short in the turn's joint fit (gen +2500 `l2`+`l4`'s unknown 16 m trailer:
+        15.7 m, its front 0.4 m short, its cab's yaw 1-2 deg off through the turn)."""
         if seen_m < TRAILER_LENGTH_RANGE_M[0]:  # its front face, seen from ahead
             return None
-        free = fit(points, free_length_at(m, track.model, seen_m, track.ground_z_m), self.params)
+        prior = free_length_at(m, track.model, seen_m, track.ground_z_m)
+        if face_seen(m, track.model, 1, FRONT, track.ground_z_m, self.params.fit_top_band_m):
+            prior = replace(prior, free_kingpin=True)
+        free = fit(points, prior, self.params)
         if free is None or free.trailer_length_std_m > LENGTH_MAX_STD_M:
             return None
         return free.trailer_length_m
