@@ -75,8 +75,9 @@ class SensorScans:
         return pts.astype(np.float32), offsets.astype(np.float32)
 
     def unreturned(self, frame: int, directions: np.ndarray) -> np.ndarray:
-        """The unit directions (M, 3) float32, sensor frame, of the rays of ``frame`` that returned nothing."""
-        return directions[self.range_mm[frame] == 0].astype(np.float32)
+        """The unit directions (M, 3) float32, sensor frame, of the rays of ``frame`` that returned
+        nothing (``directions``: float32 ones are taken as they are, not copied again)."""
+        return directions[self.range_mm[frame] == 0].astype(np.float32, copy=False)
 
 
 def beam_directions(beam_altitude_deg: np.ndarray, beam_azimuth_offset_deg: np.ndarray, columns: int) -> np.ndarray:
@@ -218,6 +219,7 @@ class Recording(RecordingFiles):
             raise RecordingError(f"{meta_file}: no 'sensors' list with names") from err
         self._scans: dict[str, SensorScans] = {}
         self._directions: dict[str, np.ndarray] = {}
+        self._directions32: dict[str, np.ndarray] = {}  # the unreturned rays' (cast once, not per frame)
         self._ground_truth: list[dict] | None = None
         # What ``frame(..., skip_damaged=True)`` left out: sensor -> why (file missing or unreadable,
         # or fewer frames than meta.yaml says).
@@ -277,6 +279,7 @@ class Recording(RecordingFiles):
                 raise RecordingError(f"{file}: unreadable scan file of sensor {sensor}: {err}") from err
             self._scans[sensor] = scans
             self._directions[sensor] = scans.unit_directions()
+            self._directions32[sensor] = self._directions[sensor].astype(np.float32)
         return self._scans[sensor]
 
     def frame(self, index: int, sensors: Sequence[str] | None = None, skip_damaged: bool = False) -> Frame:
@@ -299,7 +302,7 @@ class Recording(RecordingFiles):
                 stamp_s=float(scans.stamp_ns[index]) * 1e-9,
                 points=points,
                 time_offset_s=offsets,
-                unreturned=scans.unreturned(index, self._directions[name]),
+                unreturned=scans.unreturned(index, self._directions32[name]),
             )
         return frame
 
