@@ -76,7 +76,7 @@ class Rays:
         """How many of the rays that returned nothing cross the upright box (as ``through``), and
         how far ahead of its centre along its length they reach inside it (-inf for none)."""
         rays = self.unreturned
-        if rays is None or not sum(len(d) for d in rays.directions):
+        if rays is None or not rays.bounds[-1]:
             return 0, -np.inf
         box = _box(center_xy, yaw_rad, half_length_m, half_width_m, z_range_m)
         through, _, front = kernels.rays_through_box(rays.ends, rays.origins, rays.bounds, self._rotation, box, 0.0)
