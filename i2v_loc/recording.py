@@ -10,6 +10,7 @@ import json
 import zipfile
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -302,7 +303,7 @@ class Recording(RecordingFiles):
                 stamp_s=float(scans.stamp_ns[index]) * 1e-9,
                 points=points,
                 time_offset_s=offsets,
-                unreturned=scans.unreturned(index, self._directions32[name]),
+                unreturned=partial(scans.unreturned, index, self._directions32[name]),
             )
         return frame
 

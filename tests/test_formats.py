@@ -126,12 +126,13 @@ def test_the_rays_that_returned_nothing_are_the_zero_ranges_where_the_layout_has
         for name, scan in rec.frame(k).scans.items():
             scans = rec.scans(name)
             beam, _ = np.nonzero(scans.range_mm[k] == 0)
-            elevation = np.degrees(np.arcsin(scan.unreturned[:, 2]))
+            lost = scan.unreturned_directions()
+            elevation = np.degrees(np.arcsin(lost[:, 2]))
             assert len(beam) > 0 and np.abs(elevation - scans.beam_altitude_deg[beam]).max() < 1e-3
-            told = pcap.frame(k).scans[name].unreturned
-            cosine = np.clip(np.sum(told * scan.unreturned, axis=1), -1.0, 1.0)
-            assert told.shape == scan.unreturned.shape and np.arccos(cosine).max() < 1e-3
-            assert pcd.frame(k).scans[name].unreturned is None
+            told = pcap.frame(k).scans[name].unreturned_directions()
+            cosine = np.clip(np.sum(told * lost, axis=1), -1.0, 1.0)
+            assert told.shape == lost.shape and np.arccos(cosine).max() < 1e-3
+            assert pcd.frame(k).scans[name].unreturned_directions() is None
 
 
 def test_mcap_storage_is_mcap(native, tmp_path):

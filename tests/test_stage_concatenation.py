@@ -75,6 +75,26 @@ def test_the_rays_that_returned_nothing_reach_as_far_as_their_sensor_in_the_yard
     assert stage.merge({"b": scan("b", 2.0, [[3, 2, -3]])}).unreturned is None
 
 
+def test_rays_that_returned_nothing_given_when_asked_are_picked_out_only_when_their_ends_are():
+    """A reader may defer picking out a sweep's rays that returned nothing (a recording's four
+    sweeps cost 1.3 ms a frame, and only a vehicle's start asks): the merge does not ask, their
+    ends are those of the rays given at once, and they are picked out once."""
+    stage = Concatenation(ConcatenationParams(voxel_size_m=0), SENSORS)
+    east_and_down = np.array([[1, 0, 0], [0, 0, -1]], dtype=np.float32)
+    asked = []
+
+    def deferred():
+        asked.append(1)
+        return east_and_down
+
+    points = np.array([[5, 0, -4]], dtype=np.float32)
+    merged = stage.merge({"a": SensorScan("a", 2.0, points, None, unreturned=deferred)})
+    assert asked == []
+    given = stage.merge({"a": SensorScan("a", 2.0, points, None, unreturned=east_and_down)})
+    np.testing.assert_array_equal(merged.unreturned.ends, given.unreturned.ends)
+    assert merged.unreturned.bounds.tolist() == [0, 2] and asked == [1]
+
+
 def test_missing_empty_and_nan_are_counted_not_raised():
     sensors = SENSORS + [SensorConfig(name="c")]
     stage = Concatenation(ConcatenationParams(voxel_size_m=0), sensors)

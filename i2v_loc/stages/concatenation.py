@@ -141,7 +141,7 @@ class Concatenation:
         if not told:
             return None
         return Unreturned(
-            [scan.unreturned for scan in told],
+            [scan.unreturned_directions for scan in told],
             np.array([self._to_yard[scan.sensor][0] for scan in told], dtype=float),
             np.array([self._to_yard[scan.sensor][1] for scan in told], dtype=float),
             np.array([self.sensors[scan.sensor].max_range_m for scan in told], dtype=float),

@@ -9,6 +9,7 @@ over the frame's rays."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from functools import cached_property
 
@@ -23,12 +24,19 @@ class Unreturned:
     """The rays of a frame's sweeps that returned nothing: nothing surfaced along them as far as
     their sensor reaches, or nothing that reflected enough (a dark body far off drops some of its
     returns, so these weigh against the returns a place had, never alone). Kept per sweep as the
-    sweeps gave them; their ends are worked out only when asked (a start's check)."""
+    sweeps gave them, or as what gives them; picked out and their ends worked out only when asked
+    (a start's check)."""
 
-    directions: list[np.ndarray]  # per sweep (M_k, 3) unit, in its sensor's frame
+    # per sweep (M_k, 3) unit, in its sensor's frame, or what gives them (``SensorScan.unreturned_directions``)
+    sweeps: list[np.ndarray | Callable[[], np.ndarray]]
     rotations: np.ndarray  # (S, 3, 3) each sweep's sensor frame to the yard frame
     origins: np.ndarray  # (S, 3) yard frame
     ranges_m: np.ndarray  # (S,) how far each sweep's sensor reaches
+
+    @cached_property
+    def directions(self) -> list[np.ndarray]:
+        """Per sweep (M_k, 3) unit, in its sensor's frame."""
+        return [d() if callable(d) else d for d in self.sweeps]
 
     @cached_property
     def ends(self) -> np.ndarray:
