@@ -20,6 +20,7 @@ from i2v_loc.params import ArticulatedParams
 from i2v_loc.stages import kernels
 from i2v_loc.stages.faces import END_FACE_WIDTH_M
 from i2v_loc.stages.hinged_fit import (
+    CAB_LENGTH_RANGE_M,
     FRONT,
     LEFT,
     REAR,
@@ -54,7 +55,13 @@ from i2v_loc.stages.unit_frames import (
     with_trailer_length,
 )
 from i2v_loc.stages.vehicle_model import MAX_VEHICLE_HEIGHT_M, Box, VehicleModel
-from i2v_loc.stages.vehicle_start import GAP_SEEN_BEYOND_M, RIGID_MIN_WIDTH_M, SOLID_INSET_M
+from i2v_loc.stages.vehicle_start import (
+    GAP_SEEN_BEYOND_M,
+    GAP_TEST_MAX_HITCH_RAD,
+    RIGID_MIN_WIDTH_M,
+    SOLID_INSET_M,
+    gap_band,
+)
 from i2v_loc.stages.visibility import Rays
 
 SIDE_MIN_POINTS = 5
@@ -82,6 +89,8 @@ END_SEEN_OFFSET_M = 0.3  # past the hindmost point: a side's points are up to a 
 END_SEEN_LENGTH_M = 2.0
 END_SEEN_MIN_RAYS = 2
 END_SEEN_REACH_M = 1.0
+CAB_GAP_SLAB_M = 0.25  # of the gap between a cab and its trailer, asked of the rays (a MAN's is 0.6 m)
+CAB_ENDS_KEPT = 20  # cab lengths from a side's end, then no more: each costs a pass over the frame's rays
 UNRETURNED_MIN_RAYS = 10  # a dark body far off drops a few returns: no handful of those shows it empty
 UNRETURNED_PER_RETURN = 4  # and a body returns most of the rays that reach it
 FACE_SHELL_M = 0.3  # around a body's faces: its returns (a sweep's motion and noise spread them)
@@ -399,7 +408,7 @@ class DimensionLearner:
         if model.trailer is not None:
             tractor["height_m"] = self._learn_cab_top(track, m, points)
         if track.cab_length is not None:
-            self._learn_cab_length(track, m, local[0])
+            self._learn_cab_length(track, m, local[0], points)
             tractor["length_m"] = _cab_length(track)
         learned = {"tractor": _changed(model.tractor, **tractor)}
         if model.trailer is not None:
@@ -498,18 +507,65 @@ class DimensionLearner:
             for q, box in zip(local, model.boxes)
         ]
 
-    def _learn_cab_length(self, track: VehicleTrack, m: Measurement, q: np.ndarray) -> None:
-        """The cab's length: between the middles of its front and rear faces' points, when both are
-        seen (``face_seen``; its front pins it in the fit; an unknown tractor's cab 0.27 m shorter
-        than the MAN's put its box centre 0.13 m off). (Five points on each, before: with the chassis
-        behind the cab no longer on its rear face, an unknown tractor's cab had them only after 20 s.)"""
-        seen = [
-            face_seen(m, track.model, 0, face, track.ground_z_m, self.params.fit_top_band_m) for face in (FRONT, REAR)
-        ]
-        if not all(seen):
+    def _learn_cab_length(self, track: VehicleTrack, m: Measurement, q: np.ndarray, points: np.ndarray) -> None:
+        """The cab's length: from the middle of its front face's points to the middle of its rear
+        face's, when both are seen (``face_seen``; its front pins it in the fit; an unknown
+        tractor's cab 0.27 m shorter than the MAN's put its box centre 0.13 m off), or, with its
+        rear face unseen, to where its side ends before the gap (``_cab_side_end``). (Five points on
+        each face, before: with the chassis behind the cab no longer on its rear face, an unknown
+        tractor's cab had them only after 20 s.)"""
+        model, band = track.model, self.params.fit_top_band_m
+        if not face_seen(m, model, 0, FRONT, track.ground_z_m, band):
             return
-        (_, front), (_, rear) = (kernels.face_median(q, 0, m.unit, m.face, 0, f, ANYWHERE) for f in (FRONT, REAR))
-        track.cab_length.add(front - rear)
+        _, front = kernels.face_median(q, 0, m.unit, m.face, 0, FRONT, ANYWHERE)
+        if face_seen(m, model, 0, REAR, track.ground_z_m, band):
+            _, rear = kernels.face_median(q, 0, m.unit, m.face, 0, REAR, ANYWHERE)
+        elif len(track.cab_length.values) < CAB_ENDS_KEPT:
+            rear = self._cab_side_end(track, m, q, points)
+        else:
+            return
+        if rear is not None and CAB_LENGTH_RANGE_M[0] <= front - rear <= CAB_LENGTH_RANGE_M[1]:
+            track.cab_length.add(front - rear)
+
+    def _cab_side_end(self, track: VehicleTrack, m: Measurement, q: np.ndarray, points: np.ndarray) -> float | None:
+        """Where the cab's side ends (its frame, x) when the rays show the gap behind it empty: the
+        hindmost of the claimed ``points`` on a side the fit's ``q`` show along the cab, at the
+        gap's heights (above the trailer's floor, below the lower roof), reached from the side's
+        fitted hindmost without a gap of ``END_SEEN_OFFSET_M`` (a column's spacing), when at least
+        ``END_SEEN_MIN_RAYS`` rays crossed the body's slab ``CAB_GAP_SLAB_M`` long that far behind
+        it, and none ended there. Nearly straight only (a trailer's front corner swings into the
+        gap at a hitch angle), and in frames de-skewed with a speed known within
+        ``TURN_MAX_SPEED_STD_M_S`` (the front face and the side's end may be swept apart in time). A straight unknown tractor's cab is seen from its sides and its
+        front, its rear face hidden by its trailer's: the generalization suite's 6.5 m trailer's
+        cab (2.3 m) kept the catalogue Volvo's 2.55 m for 9 s, until its turn fitted the hinge, its
+        box centre 0.12 m back."""
+        model = track.model
+        if (
+            self.rays is None
+            or abs(m.hitch_rad) > GAP_TEST_MAX_HITCH_RAD
+            or track.filter.speed_std_m_s > TURN_MAX_SPEED_STD_M_S
+        ):
+            return None
+        cab, low_high = model.tractor, gap_band(model)
+        claimed = unit_frames(points, m.vector, model)[0]
+        z_rel = points[:, 2] - track.ground_z_m
+        at_gap = (z_rel >= low_high[0]) & (z_rel <= low_high[1])
+        ends = []
+        for face, sign in ((LEFT, 1.0), (RIGHT, -1.0)):
+            fitted = q[(m.unit == 0) & (m.face == face), 0]
+            if len(fitted) < SIDE_MIN_POINTS:
+                continue
+            on_side = at_gap & (np.abs(claimed[:, 1] - sign * cab.width_m / 2) <= self.params.fit_inlier_m)
+            ends.append(reached_back(float(fitted.min()), claimed[on_side, 0], END_SEEN_OFFSET_M))
+        if not ends:
+            return None
+        end = max(ends)  # the other side may run on past it: a wall beside the cab
+        centre = _on_tractor_axis(m, end - END_SEEN_OFFSET_M - CAB_GAP_SLAB_M / 2)
+        heights = (track.ground_z_m + low_high[0], track.ground_z_m + low_high[1])
+        crossed, ended, _ = self.rays.through(
+            centre, m.yaw_rad, CAB_GAP_SLAB_M / 2, cab.width_m / 2 - SOLID_INSET_M, heights, GAP_SEEN_BEYOND_M
+        )
+        return end if crossed >= END_SEEN_MIN_RAYS and ended == 0 else None
 
     def _learn_hinge(self, track: VehicleTrack, prior: Prior, points: np.ndarray, own: Measurement) -> None:
         """The kingpin's offset shows only at a hitch angle (straight, it trades with the trailer's
@@ -932,6 +988,11 @@ def _changed(obj, **values):
     if all(getattr(obj, name) == value for name, value in values.items()):
         return obj
     return replace(obj, **values)
+
+
+def _on_tractor_axis(m: Measurement, x_m: float) -> tuple[float, float]:
+    """The point ``x_m`` along the tractor's axis (its frame) at the fit ``m``, level frame xy."""
+    return (m.x_m + x_m * math.cos(m.yaw_rad), m.y_m + x_m * math.sin(m.yaw_rad))
 
 
 def _on_trailer_axis(m: Measurement, model: VehicleModel, x_m: float) -> np.ndarray:

@@ -762,7 +762,7 @@ class VehicleStarts:
         if half_width <= 0.0:
             return False
         centre = np.array([m.x_m, m.y_m]) + rotate_xy((start + length / 2, (sides[0] + sides[1]) / 2), m.yaw_rad)
-        low, high = _gap_band(model)
+        low, high = gap_band(model)
         seen, _, _ = self.rays.through(
             tuple(centre), m.yaw_rad, length / 2, half_width, (ground_z_m + low, ground_z_m + high), GAP_SEEN_BEYOND_M
         )
@@ -1146,7 +1146,7 @@ def _gap_looked_into(cluster: np.ndarray, m: Measurement, model: VehicleModel, g
         return False
     (q,) = unit_frames(cluster, m.vector, model.with_boxes(model.tractor, None))
     z_rel = cluster[:, 2] - ground_z_m
-    low, high = _gap_band(model)
+    low, high = gap_band(model)
     inside = (
         (q[:, 0] >= trailer_front - GAP_FACE_MARGIN_M)
         & (q[:, 0] <= model.tractor.rear_m + GAP_FACE_MARGIN_M)
@@ -1175,7 +1175,7 @@ def _gap_counts(
     slice_m = max(length, CAB_SLICE_MIN_M)
     (q,) = unit_frames(cluster, m.vector, model.with_boxes(model.tractor, None))
     z_rel = cluster[:, 2] - ground_z_m
-    low, high = _gap_band(model)
+    low, high = gap_band(model)
     # the cab's sides count with their surface: a parked trailer's side running on through the
     # "gap" lay just outside the model's cab width and left the gap empty (held-out seeds)
     band = (np.abs(q[:, 1]) <= model.tractor.width_m / 2 + END_BAND_M) & (z_rel >= low) & (z_rel <= high)
@@ -1207,7 +1207,7 @@ def _gap_middle(model: VehicleModel) -> tuple[float, float]:
     return trailer_front + length / 2, length
 
 
-def _gap_band(model: VehicleModel) -> tuple[float, float]:
+def gap_band(model: VehicleModel) -> tuple[float, float]:
     """The heights above the ground of the gap test: above the trailer's floor, below the lower roof."""
     return model.trailer.floor_m + END_BAND_M, min(model.tractor.top_m, model.trailer.top_m) - END_BAND_M
 
