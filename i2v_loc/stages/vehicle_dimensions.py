@@ -89,7 +89,7 @@ END_SEEN_OFFSET_M = 0.3  # past the hindmost point: a side's points are up to a 
 END_SEEN_LENGTH_M = 2.0
 END_SEEN_MIN_RAYS = 2
 END_SEEN_REACH_M = 1.0
-CAB_GAP_SLAB_M = 0.25  # of the gap between a cab and its trailer, asked of the rays (a MAN's is 0.6 m)
+CAB_END_BRACKET_M = 0.2  # a cab's end between its side's last point and the first ray behind it (a column apart)
 CAB_ENDS_KEPT = 20  # cab lengths from a side's end, then no more: each costs a pass over the frame's rays
 UNRETURNED_MIN_RAYS = 10  # a dark body far off drops a few returns: no handful of those shows it empty
 UNRETURNED_PER_RETURN = 4  # and a body returns most of the rays that reach it
@@ -528,14 +528,18 @@ class DimensionLearner:
             track.cab_length.add(front - rear)
 
     def _cab_side_end(self, track: VehicleTrack, m: Measurement, q: np.ndarray, points: np.ndarray) -> float | None:
-        """Where the cab's side ends (its frame, x) when the rays show the gap behind it empty: the
-        hindmost of the claimed ``points`` on a side the fit's ``q`` show along the cab, at the
-        gap's heights (above the trailer's floor, below the lower roof), reached from the side's
-        fitted hindmost without a gap of ``END_SEEN_OFFSET_M`` (a column's spacing), when at least
-        ``END_SEEN_MIN_RAYS`` rays crossed the body's slab ``CAB_GAP_SLAB_M`` long that far behind
-        it, and none ended there. Nearly straight only (a trailer's front corner swings into the
-        gap at a hitch angle), and in frames de-skewed with a speed known within
-        ``TURN_MAX_SPEED_STD_M_S`` (the front face and the side's end may be swept apart in time). A straight unknown tractor's cab is seen from its sides and its
+        """Where the cab ends (its frame, x) behind a side the fit's ``q`` show along it, its rear
+        face unseen: between the side's hindmost point and the foremost ray that crossed the side's
+        plane behind it (``Rays.crossings``, each ray carried with the cab from its capture time),
+        their middle when they bracket it within ``CAB_END_BRACKET_M`` and ``END_SEEN_MIN_RAYS``
+        crossed. The side's hindmost point: of the claimed ``points`` on its plane at the gap's
+        heights (above the trailer's floor, below the lower roof), reached from the side's fitted
+        hindmost without a gap of ``END_SEEN_OFFSET_M`` (a column's spacing); it lies up to a
+        column's spacing inside the end (taken as the end, the Volvo's and the Twizy's cabs came out
+        0.08-0.09 m short), the rays up to one behind. No ray crosses where a trailer's side runs on
+        in line behind the cab. Nearly straight only (a trailer's front corner swings into the gap
+        at a hitch angle), and in frames de-skewed with a speed known within
+        ``TURN_MAX_SPEED_STD_M_S``. A straight unknown tractor's cab is seen from its sides and its
         front, its rear face hidden by its trailer's: the generalization suite's 6.5 m trailer's
         cab (2.3 m) kept the catalogue Volvo's 2.55 m for 9 s, until its turn fitted the hinge, its
         box centre 0.12 m back."""
@@ -546,26 +550,28 @@ class DimensionLearner:
             or track.filter.speed_std_m_s > TURN_MAX_SPEED_STD_M_S
         ):
             return None
-        cab, low_high = model.tractor, gap_band(model)
+        cab, (low, high) = model.tractor, gap_band(model)
         claimed = unit_frames(points, m.vector, model)[0]
         z_rel = points[:, 2] - track.ground_z_m
-        at_gap = (z_rel >= low_high[0]) & (z_rel <= low_high[1])
-        ends = []
+        at_gap = (z_rel >= low) & (z_rel <= high)
+        (origin, yaw), _ = unit_origins(m.vector, model)
+        along, across = np.array([np.cos(yaw), np.sin(yaw)]), np.array([-np.sin(yaw), np.cos(yaw)])
+        motion = unit_motions(track.filter.state, model)[0]
         for face, sign in ((LEFT, 1.0), (RIGHT, -1.0)):
             fitted = q[(m.unit == 0) & (m.face == face), 0]
             if len(fitted) < SIDE_MIN_POINTS:
                 continue
-            on_side = at_gap & (np.abs(claimed[:, 1] - sign * cab.width_m / 2) <= self.params.fit_inlier_m)
-            ends.append(reached_back(float(fitted.min()), claimed[on_side, 0], END_SEEN_OFFSET_M))
-        if not ends:
-            return None
-        end = max(ends)  # the other side may run on past it: a wall beside the cab
-        centre = _on_tractor_axis(m, end - END_SEEN_OFFSET_M - CAB_GAP_SLAB_M / 2)
-        heights = (track.ground_z_m + low_high[0], track.ground_z_m + low_high[1])
-        crossed, ended, _ = self.rays.through(
-            centre, m.yaw_rad, CAB_GAP_SLAB_M / 2, cab.width_m / 2 - SOLID_INSET_M, heights, GAP_SEEN_BEYOND_M
-        )
-        return end if crossed >= END_SEEN_MIN_RAYS and ended == 0 else None
+            side_y = sign * cab.width_m / 2
+            on_side = at_gap & (np.abs(claimed[:, 1] - side_y) <= self.params.fit_inlier_m)
+            end = reached_back(float(fitted.min()), claimed[on_side, 0], END_SEEN_OFFSET_M)
+            rays = self.rays.crossings(
+                origin + end * along + side_y * across, along, CAB_END_BRACKET_M,
+                track.ground_z_m + high, GAP_SEEN_BEYOND_M, motion,
+            )  # fmt: skip
+            behind = end + rays[rays[:, 1] >= track.ground_z_m + low, 0]
+            if len(behind) >= END_SEEN_MIN_RAYS:  # those ahead of the end: carried a little too far
+                return (end + min(float(behind.max()), end)) / 2
+        return None
 
     def _learn_hinge(self, track: VehicleTrack, prior: Prior, points: np.ndarray, own: Measurement) -> None:
         """The kingpin's offset shows only at a hitch angle (straight, it trades with the trailer's
