@@ -20,7 +20,6 @@ from i2v_loc.params import ArticulatedParams
 from i2v_loc.stages import kernels
 from i2v_loc.stages.faces import END_FACE_WIDTH_M
 from i2v_loc.stages.hinged_fit import (
-    CAB_LENGTH_RANGE_M,
     FRONT,
     LEFT,
     REAR,
@@ -155,6 +154,8 @@ class _Extent:
     bounds: _Window = field(default_factory=_Window)
     median: float | None = None
     lower_bound: float = -np.inf
+    uppers: _Window = field(default_factory=_Window)  # per-frame upper bounds (the unit ends before)
+    upper_bound: float = np.inf
     brackets: _Window = field(default_factory=_Window)  # a unit's width from one side (``_width_across_end``)
     bracket_median: float | None = None
     reaches: deque = field(default_factory=lambda: deque(maxlen=STILL_END_FRAMES))
@@ -168,6 +169,11 @@ class _Extent:
 
     def add_bound(self, value: float) -> None:
         self.lower_bound = _windowed_median(self.bounds, value, self.window)
+
+    def add_bracket_of_end(self, lower: float, upper: float) -> None:
+        """A frame's bounds on either side: the unit reaches at least ``lower`` and at most ``upper``."""
+        self.add_bound(lower)
+        self.upper_bound = _windowed_median(self.uppers, upper, self.window)
 
     def add_reach(self, value: float) -> None:
         """How far the unit's points reach in a frame in which it moved."""
@@ -209,9 +215,9 @@ class _Extent:
 
     @property
     def estimate(self) -> float:
-        """The measured value; at least the lower bound until settled (a face seen outweighs points
-        that only reach further)."""
-        return self.measured if self.settled else max(self.measured, self.lower_bound)
+        """The measured value; until settled at least the lower bound (a face seen outweighs points
+        that only reach further) and, below it, at most the upper bound."""
+        return self.measured if self.settled else max(min(self.measured, self.upper_bound), self.lower_bound)
 
 
 def _unit_widths(extents: list[_Extent]) -> list[float]:
@@ -510,33 +516,36 @@ class DimensionLearner:
     def _learn_cab_length(self, track: VehicleTrack, m: Measurement, q: np.ndarray, points: np.ndarray) -> None:
         """The cab's length: from the middle of its front face's points to the middle of its rear
         face's, when both are seen (``face_seen``; its front pins it in the fit; an unknown
-        tractor's cab 0.27 m shorter than the MAN's put its box centre 0.13 m off), or, with its
-        rear face unseen, to where its side ends before the gap (``_cab_side_end``). (Five points on
-        each face, before: with the chassis behind the cab no longer on its rear face, an unknown
-        tractor's cab had them only after 20 s.)"""
+        tractor's cab 0.27 m shorter than the MAN's put its box centre 0.13 m off). With its rear
+        face unseen, from its front face to where a side ends before the gap, a bracket
+        (``_cab_side_end``): the prior (the catalogue's or the hinge's) is kept within it. (Five
+        points on each face, before: with the chassis behind the cab no longer on its rear face, an
+        unknown tractor's cab had them only after 20 s.)"""
         model, band = track.model, self.params.fit_top_band_m
         if not face_seen(m, model, 0, FRONT, track.ground_z_m, band):
             return
         _, front = kernels.face_median(q, 0, m.unit, m.face, 0, FRONT, ANYWHERE)
         if face_seen(m, model, 0, REAR, track.ground_z_m, band):
             _, rear = kernels.face_median(q, 0, m.unit, m.face, 0, REAR, ANYWHERE)
-        elif len(track.cab_length.values) < CAB_ENDS_KEPT:
-            rear = self._cab_side_end(track, m, q, points)
-        else:
-            return
-        if rear is not None and CAB_LENGTH_RANGE_M[0] <= front - rear <= CAB_LENGTH_RANGE_M[1]:
             track.cab_length.add(front - rear)
+        elif len(track.cab_length.bounds) < CAB_ENDS_KEPT:
+            end = self._cab_side_end(track, m, q, points)
+            if end is not None:
+                track.cab_length.add_bracket_of_end(front - end[0], front - end[1])
 
-    def _cab_side_end(self, track: VehicleTrack, m: Measurement, q: np.ndarray, points: np.ndarray) -> float | None:
+    def _cab_side_end(
+        self, track: VehicleTrack, m: Measurement, q: np.ndarray, points: np.ndarray
+    ) -> tuple[float, float] | None:
         """Where the cab ends (its frame, x) behind a side the fit's ``q`` show along it, its rear
         face unseen: between the side's hindmost point and the foremost ray that crossed the side's
         plane behind it (``Rays.crossings``, each ray carried with the cab from its capture time),
-        their middle when they bracket it within ``CAB_END_BRACKET_M`` and ``END_SEEN_MIN_RAYS``
-        crossed. The side's hindmost point: of the claimed ``points`` on its plane at the gap's
+        when they bracket it within ``CAB_END_BRACKET_M`` and ``END_SEEN_MIN_RAYS`` crossed: the
+        two (the cab reaches the one, not the other). The side's hindmost point: of the claimed ``points`` on its plane at the gap's
         heights (above the trailer's floor, below the lower roof), reached from the side's fitted
         hindmost without a gap of ``END_SEEN_OFFSET_M`` (a column's spacing); it lies up to a
-        column's spacing inside the end (taken as the end, the Volvo's and the Twizy's cabs came out
-        0.08-0.09 m short), the rays up to one behind. No ray crosses where a trailer's side runs on
+        column's spacing inside the end, the rays up to one behind (the end taken at the point, the
+        Volvo's and the Twizy's cabs came out 0.08-0.09 m short; at the bracket's middle, the
+        MAN's 0.09 m long, and its kingpin and hitch followed in its turns). No ray crosses where a trailer's side runs on
         in line behind the cab. Nearly straight only (a trailer's front corner swings into the gap
         at a hitch angle), and in frames de-skewed with a speed known within
         ``TURN_MAX_SPEED_STD_M_S``. A straight unknown tractor's cab is seen from its sides and its
@@ -570,7 +579,7 @@ class DimensionLearner:
             )  # fmt: skip
             behind = end + rays[rays[:, 1] >= track.ground_z_m + low, 0]
             if len(behind) >= END_SEEN_MIN_RAYS:  # those ahead of the end: carried a little too far
-                return (end + min(float(behind.max()), end)) / 2
+                return end, min(float(behind.max()), end)
         return None
 
     def _learn_hinge(self, track: VehicleTrack, prior: Prior, points: np.ndarray, own: Measurement) -> None:
