@@ -88,7 +88,7 @@ END_SEEN_OFFSET_M = 0.3  # past the hindmost point: a side's points are up to a 
 END_SEEN_LENGTH_M = 2.0
 END_SEEN_MIN_RAYS = 2
 END_SEEN_REACH_M = 1.0
-CAB_END_BRACKET_M = 0.2  # a cab's end between its side's last point and the first ray behind it (a column apart)
+CAB_END_BRACKET_M = 0.2  # a cab's side's last point to the first ray behind it: a column's spacing or so
 CAB_ENDS_KEPT = 20  # cab lengths from a side's end, then no more: each costs a pass over the frame's rays
 UNRETURNED_MIN_RAYS = 10  # a dark body far off drops a few returns: no handful of those shows it empty
 UNRETURNED_PER_RETURN = 4  # and a body returns most of the rays that reach it
@@ -154,7 +154,7 @@ class _Extent:
     bounds: _Window = field(default_factory=_Window)
     median: float | None = None
     lower_bound: float = -np.inf
-    uppers: _Window = field(default_factory=_Window)  # per-frame upper bounds (the unit ends before)
+    uppers: _Window = field(default_factory=_Window)  # per-frame upper bounds (rays passed where it would reach)
     upper_bound: float = np.inf
     brackets: _Window = field(default_factory=_Window)  # a unit's width from one side (``_width_across_end``)
     bracket_median: float | None = None
@@ -170,10 +170,9 @@ class _Extent:
     def add_bound(self, value: float) -> None:
         self.lower_bound = _windowed_median(self.bounds, value, self.window)
 
-    def add_bracket_of_end(self, lower: float, upper: float) -> None:
-        """A frame's bounds on either side: the unit reaches at least ``lower`` and at most ``upper``."""
-        self.add_bound(lower)
-        self.upper_bound = _windowed_median(self.uppers, upper, self.window)
+    def add_upper_bound(self, value: float) -> None:
+        """A frame's upper bound: the unit reaches at most this far (rays passed beyond)."""
+        self.upper_bound = _windowed_median(self.uppers, value, self.window)
 
     def add_reach(self, value: float) -> None:
         """How far the unit's points reach in a frame in which it moved."""
@@ -517,10 +516,10 @@ class DimensionLearner:
         """The cab's length: from the middle of its front face's points to the middle of its rear
         face's, when both are seen (``face_seen``; its front pins it in the fit; an unknown
         tractor's cab 0.27 m shorter than the MAN's put its box centre 0.13 m off). With its rear
-        face unseen, from its front face to where a side ends before the gap, a bracket
-        (``_cab_side_end``): the prior (the catalogue's or the hinge's) is kept within it. (Five
-        points on each face, before: with the chassis behind the cab no longer on its rear face, an
-        unknown tractor's cab had them only after 20 s.)"""
+        face unseen, at most from its front face to where the rays show the gap behind a side
+        (``_cab_side_end``): an upper bound (``_Extent.add_upper_bound``). (Five points on each
+        face, before: with the chassis behind the cab no longer on its rear face, an unknown
+        tractor's cab had them only after 20 s.)"""
         model, band = track.model, self.params.fit_top_band_m
         if not face_seen(m, model, 0, FRONT, track.ground_z_m, band):
             return
@@ -528,30 +527,28 @@ class DimensionLearner:
         if face_seen(m, model, 0, REAR, track.ground_z_m, band):
             _, rear = kernels.face_median(q, 0, m.unit, m.face, 0, REAR, ANYWHERE)
             track.cab_length.add(front - rear)
-        elif len(track.cab_length.bounds) < CAB_ENDS_KEPT:
+        elif len(track.cab_length.uppers) < CAB_ENDS_KEPT:
             end = self._cab_side_end(track, m, q, points)
             if end is not None:
-                track.cab_length.add_bracket_of_end(front - end[0], front - end[1])
+                track.cab_length.add_upper_bound(front - end)
 
-    def _cab_side_end(
-        self, track: VehicleTrack, m: Measurement, q: np.ndarray, points: np.ndarray
-    ) -> tuple[float, float] | None:
-        """Where the cab ends (its frame, x) behind a side the fit's ``q`` show along it, its rear
-        face unseen: between the side's hindmost point and the foremost ray that crossed the side's
-        plane behind it (``Rays.crossings``, each ray carried with the cab from its capture time),
-        when they bracket it within ``CAB_END_BRACKET_M`` and ``END_SEEN_MIN_RAYS`` crossed: the
-        two (the cab reaches the one, not the other). The side's hindmost point: of the claimed ``points`` on its plane at the gap's
+    def _cab_side_end(self, track: VehicleTrack, m: Measurement, q: np.ndarray, points: np.ndarray) -> float | None:
+        """Where (its frame, x) the cab has ended, its rear face unseen: the foremost ray that
+        crossed the plane of a side the fit's ``q`` show along the cab, behind the side's hindmost
+        point and within ``CAB_END_BRACKET_M`` of it (``Rays.crossings``, each ray carried with the
+        cab from its capture time; ``END_SEEN_MIN_RAYS`` of them; those ahead of the point count
+        at it). The side's hindmost point: of the claimed ``points`` on its plane at the gap's
         heights (above the trailer's floor, below the lower roof), reached from the side's fitted
-        hindmost without a gap of ``END_SEEN_OFFSET_M`` (a column's spacing); it lies up to a
-        column's spacing inside the end, the rays up to one behind (the end taken at the point, the
-        Volvo's and the Twizy's cabs came out 0.08-0.09 m short; at the bracket's middle, the
-        MAN's 0.09 m long, and its kingpin and hitch followed in its turns). No ray crosses where a trailer's side runs on
-        in line behind the cab. Nearly straight only (a trailer's front corner swings into the gap
-        at a hitch angle), and in frames de-skewed with a speed known within
-        ``TURN_MAX_SPEED_STD_M_S``. A straight unknown tractor's cab is seen from its sides and its
-        front, its rear face hidden by its trailer's: the generalization suite's 6.5 m trailer's
-        cab (2.3 m) kept the catalogue Volvo's 2.55 m for 9 s, until its turn fitted the hinge, its
-        box centre 0.12 m back."""
+        hindmost without a gap of ``END_SEEN_OFFSET_M`` (a column's spacing). No ray crosses where
+        a trailer's side runs on in line behind the cab. Nearly straight only (a trailer's front
+        corner swings into the gap at a hitch angle), and in frames de-skewed with a speed known
+        within ``TURN_MAX_SPEED_STD_M_S``. A straight unknown tractor's cab is seen from its sides
+        and its front, its rear face hidden by its trailer's: the generalization suite's 6.5 m
+        trailer's cab (2.3 m) kept the catalogue Volvo's 2.55 m for 9 s, until its turn fitted the
+        hinge, its box centre 0.12 m back. (The side's hindmost point taken for the cab's end put
+        the Volvo's and the Twizy's 0.08-0.09 m short; the middle between it and the ray, the
+        MAN's 0.09 m long: its hindmost side point lay 0.08 m past its rear; used as a lower
+        bound, it did that too. Each moved the known cabs' kingpins and hitches in their turns.)"""
         model = track.model
         if (
             self.rays is None
@@ -579,7 +576,7 @@ class DimensionLearner:
             )  # fmt: skip
             behind = end + rays[rays[:, 1] >= track.ground_z_m + low, 0]
             if len(behind) >= END_SEEN_MIN_RAYS:  # those ahead of the end: carried a little too far
-                return end, min(float(behind.max()), end)
+                return min(float(behind.max()), end)
         return None
 
     def _learn_hinge(self, track: VehicleTrack, prior: Prior, points: np.ndarray, own: Measurement) -> None:
