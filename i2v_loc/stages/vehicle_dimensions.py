@@ -146,7 +146,9 @@ class _Extent:
     Per-frame lower bounds (the unit reaches at least that far) count through their median too: a
     dock's bumpers right behind a trailer reach on from it for some frames, then fall behind. A reach
     that stays put while the unit moves (``add_reach``) is where it ends: the edge of a shadow moves
-    along a moving unit, its end does not (seen from one side, a trailer's rear face never shows)."""
+    along a moving unit, its end does not (seen from one side, a trailer's rear face never shows).
+    Per-frame upper bounds (``add_upper_bound``: rays passed where the unit would reach) cap the
+    estimate through their median until it is settled."""
 
     prior: float
     window: int
@@ -1000,11 +1002,6 @@ def _changed(obj, **values):
     if all(getattr(obj, name) == value for name, value in values.items()):
         return obj
     return replace(obj, **values)
-
-
-def _on_tractor_axis(m: Measurement, x_m: float) -> tuple[float, float]:
-    """The point ``x_m`` along the tractor's axis (its frame) at the fit ``m``, level frame xy."""
-    return (m.x_m + x_m * math.cos(m.yaw_rad), m.y_m + x_m * math.sin(m.yaw_rad))
 
 
 def _on_trailer_axis(m: Measurement, model: VehicleModel, x_m: float) -> np.ndarray:
