@@ -468,8 +468,7 @@ class DimensionLearner:
         if np.count_nonzero(on_face) < 2:
             return None
         last = np.partition(outward * q[on_face, 1], 1)[1]
-        origin, yaw = unit_origins(m.vector, model)[unit]
-        along, across = np.array([np.cos(yaw), np.sin(yaw)]), np.array([-np.sin(yaw), np.cos(yaw)])
+        origin, along, across = _unit_axes(m, model, unit)
         motion = unit_motions(track.filter.state, model)[unit]
         rays = self.rays.crossings(
             origin + end_m * along, across, box.width_m / 2 + 1.0, heights[1], CORNER_BEYOND_M, motion
@@ -562,8 +561,7 @@ class DimensionLearner:
         claimed = unit_frames(points, m.vector, model)[0]
         z_rel = points[:, 2] - track.ground_z_m
         at_gap = (z_rel >= low) & (z_rel <= high)
-        (origin, yaw), _ = unit_origins(m.vector, model)
-        along, across = np.array([np.cos(yaw), np.sin(yaw)]), np.array([-np.sin(yaw), np.cos(yaw)])
+        origin, along, across = _unit_axes(m, model, 0)
         motion = unit_motions(track.filter.state, model)[0]
         for face, sign in ((LEFT, 1.0), (RIGHT, -1.0)):
             fitted = q[(m.unit == 0) & (m.face == face), 0]
@@ -1002,6 +1000,12 @@ def _changed(obj, **values):
     if all(getattr(obj, name) == value for name, value in values.items()):
         return obj
     return replace(obj, **values)
+
+
+def _unit_axes(m: Measurement, model: VehicleModel, unit: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A unit's origin at the fit ``m`` and its unit vectors along it and across it (to its left)."""
+    origin, yaw = unit_origins(m.vector, model)[unit]
+    return origin, np.array([np.cos(yaw), np.sin(yaw)]), np.array([-np.sin(yaw), np.cos(yaw)])
 
 
 def _on_trailer_axis(m: Measurement, model: VehicleModel, x_m: float) -> np.ndarray:
