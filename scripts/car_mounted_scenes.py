@@ -3,12 +3,19 @@
 
     PYTHONPATH=$PWD python scripts/car_mounted_scenes.py vehicles [--first 0] [--count 150] [--top-deg 2]
     PYTHONPATH=$PWD python scripts/car_mounted_scenes.py parked   [--first 0] [--count 60]
+    PYTHONPATH=$PWD python scripts/car_mounted_scenes.py yard-parked   [--count 60] [--frames 30]
+    PYTHONPATH=$PWD python scripts/car_mounted_scenes.py yard-standing [--count 60] [--frames 30]
 
 ``vehicles``: a MAN, Volvo FH, 12 m coach or 9 m rigid truck 8-40 m away, 2-5 walls, trees and boards
 elsewhere (12 m clear of it); found = a reported vehicle within 10 m of it, false = every other one.
 ``parked``: a catalogue semitrailer standing on its legs 8-30 m away, a pole between it and the car,
 half the scenes with a 10-ft or 20-ft container 0.5-1.5 m off one of its ends; every vehicle is false.
-One line per scene, then the totals. Scenes depend only on their index.
+``yard-parked`` / ``yard-standing``: the same parts seen instead by a yard's OS1-32 on a pole 6 m up for
+``--frames`` sweeps from the service's start (the map still learned, frames to come): a parked
+semitrailer 8-35 m away, a pole before it and always a 10-ft or 20-ft container 0.5-1.5 m off one
+of its ends (every vehicle false); or a MAN or Volvo FH standing straight 8-35 m away (found = the
+frame it is first reported in). One line per scene, then the totals. Scenes depend only on their
+index.
 """
 
 from __future__ import annotations
@@ -26,12 +33,17 @@ import car_mounted as cm  # noqa: E402
 
 from i2v_loc.commands.detect import single_sweep  # noqa: E402
 from i2v_loc.frame import Frame, SensorScan  # noqa: E402
-from i2v_loc.params import Params, load_params  # noqa: E402
+from i2v_loc.params import Extrinsics, Params, SensorConfig, load_params  # noqa: E402
 from i2v_loc.pipelines import build_pipeline  # noqa: E402
 from i2v_loc.sim import meshes as m  # noqa: E402
 
 FOUND_WITHIN_M = 10.0
 NEAR_M = 25.0
+POLE = SensorConfig(name="pole", model="OS1-32", columns=1024, max_range_m=120.0, extrinsics=Extrinsics(z_m=6.0))
+POLE_YAML = (
+    "sensors:\n- name: pole\n  model: OS1-32\n  columns: 1024\n  extrinsics: {z_m: 6.0}\n"
+    "region: {x_min_m: -60, x_max_m: 60, y_min_m: -60, y_max_m: 60}\n"
+)
 
 
 def _polar(rng: np.random.Generator, low_m: float, high_m: float) -> tuple[float, float]:
@@ -65,20 +77,21 @@ def vehicle_scene(index: int) -> tuple[list, str, np.ndarray]:
     return parts, kind, np.array([x, y])
 
 
-def parked_scene(index: int) -> tuple[list, str]:
-    """Parts and a description: a parked semitrailer, a pole before it, maybe a container off an end."""
-    rng = np.random.default_rng(10_000 + index)
+def parked_scene(index: int, yard: bool = False) -> tuple[list, str]:
+    """Parts and a description: a parked semitrailer, a pole before it, maybe (in the yard: always)
+    a container off an end."""
+    rng = np.random.default_rng((20_000 if yard else 10_000) + index)
     name = str(rng.choice(["man_tgx", "volvo_fh"]))
     trailer = Params().vehicles[name].trailer
-    x, y = _polar(rng, 8.0, 30.0)
+    x, y = _polar(rng, 8.0, 35.0 if yard else 30.0)
     bearing, yaw = math.atan2(y, x), rng.uniform(-np.pi, np.pi)
     centre = m.box_center_in_axle_frame(trailer, is_truck=False)
     parts = [m.transformed(m.shifted(m.trailer_mesh(trailer), (-centre[0], 0.0, 0.0)), cm._pose(x, y, yaw))]
     before = rng.uniform(1.0, 4.0)
     pole = (x - before * math.cos(bearing) + rng.uniform(-3, 3), y - before * math.sin(bearing) + rng.uniform(-3, 3))
     parts.append(m.cylinder((*pole, 2.5), 0.12, 5.0, surface="pole"))
-    what = f"{name} trailer"
-    if rng.random() < 0.5:
+    what = f"{name} trailer {math.hypot(x, y):.0f} m away"
+    if yard or rng.random() < 0.5:
         end, gap, length = rng.choice([-1, 1]), rng.uniform(0.5, 1.5), float(rng.choice([6.06, 2.99]))
         along = end * (trailer.length_m / 2 + gap + length / 2)
         parts.append(
@@ -88,19 +101,61 @@ def parked_scene(index: int) -> tuple[list, str]:
     return parts, what
 
 
+def standing_scene(index: int) -> tuple[list, str]:
+    """Parts and a description: a catalogue tractor and semitrailer standing straight."""
+    rng = np.random.default_rng(30_000 + index)
+    name = str(rng.choice(["man_tgx", "volvo_fh"]))
+    x, y = _polar(rng, 8.0, 35.0)
+    yaw = rng.uniform(-np.pi, np.pi)
+    return cm.articulated(name, x, y, yaw), f"{name} standing {math.hypot(x, y):.0f} m away"
+
+
+def yard_reports(params, parts, frames: int, index: int) -> list[int]:
+    """The vehicles reported in each of ``frames`` sweeps of the pole's sensor from the service's start."""
+    pipeline = build_pipeline(params, "default")
+    counts = []
+    for k in range(frames):
+        scan = SensorScan(POLE.name, 0.1 * k, cm.sweep(parts, None, 1000 * index + k, POLE), None, from_sensor=True)
+        counts.append(len(pipeline.process(Frame(k, {POLE.name: scan})).to_json()["vehicles"]))
+    return counts
+
+
 def detect(pipeline_params, parts, top_deg: float | None, index: int) -> list[dict]:
     points = cm.sweep(parts, top_deg, index)
     scan = SensorScan(cm.SENSOR.name, 0.0, points, None, from_sensor=True)
     return build_pipeline(pipeline_params, "default").process(Frame(0, {cm.SENSOR.name: scan})).to_json()["vehicles"]
 
 
+def yard(args) -> int:
+    """Static yard scenes from the service's start: false vehicles, or the frame a standing one is found."""
+    with tempfile.TemporaryDirectory() as tmp:
+        (Path(tmp) / "pole.yaml").write_text(POLE_YAML)
+        params = load_params(Path(tmp) / "pole.yaml")
+    total, firsts = 0, []
+    for index in range(args.first, args.first + args.count):
+        parts, what = parked_scene(index, yard=True) if args.scenes == "yard-parked" else standing_scene(index)
+        counts = yard_reports(params, parts, args.frames, index)
+        first = next((k for k, n in enumerate(counts) if n), None)
+        total, firsts = total + max(counts), firsts + [first]
+        print(f"{index} {what}: at most {max(counts)} reported, the first in frame {first}")
+    if args.scenes == "yard-parked":
+        print(f"false vehicles {total} in {args.count} scenes of {args.frames} frames")
+    else:
+        found = [k for k in firsts if k is not None]
+        print(f"found {len(found)} of {args.count} within {args.frames} frames, {found.count(2)} in frame 2")
+    return 0
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("scenes", choices=["vehicles", "parked"])
+    parser.add_argument("scenes", choices=["vehicles", "parked", "yard-parked", "yard-standing"])
     parser.add_argument("--first", type=int, default=0)
     parser.add_argument("--count", type=int, default=150)
     parser.add_argument("--top-deg", type=float, default=None, help="a 64-beam fan from here 26.8 deg down")
+    parser.add_argument("--frames", type=int, default=30, help="yard scenes: sweeps from the service's start")
     args = parser.parse_args()
+    if args.scenes.startswith("yard"):
+        return yard(args)
     with tempfile.TemporaryDirectory() as tmp:
         (Path(tmp) / "roof.yaml").write_text(cm.params_yaml())
         params = load_params(Path(tmp) / "roof.yaml")

@@ -107,18 +107,20 @@ def sign(x: float, y: float, yaw: float) -> list[m.Mesh]:
     return [m.transformed(part, _pose(x, y, yaw)) for part in [board, *posts]]
 
 
-def sweep(parts: list[m.Mesh], top_deg: float | None = None, seed: int = 0) -> np.ndarray:
+def sweep(
+    parts: list[m.Mesh], top_deg: float | None = None, seed: int = 0, sensor: SensorConfig = SENSOR
+) -> np.ndarray:
     """The sweep's returns in the sensor's frame (float32, NaN-free). ``top_deg``: 64 beams from
     there 26.8 deg down, evenly (a Velodyne HDL-64E's fan reaches 2 deg up), instead of the OS1-64's
-    +-22.5 deg."""
+    +-22.5 deg. ``sensor``: the roof's OS1-64 unless given (a yard's pole)."""
     ground = m.box((0.0, 0.0, -0.05), (300.0, 300.0, 0.1), 0.0, "asphalt")
     # a street's buildings, beyond the region: something stands higher in the view than any vehicle
     # (the sweep's highest return is where the view ends, only if the view reaches no higher)
     buildings = [m.box((0.0, sign * 75.0, 10.0), (60.0, 10.0, 20.0), 0.0, "concrete") for sign in (-1, 1)]
-    lidar = LidarModel.from_config(SENSOR)
+    lidar = LidarModel.from_config(sensor)
     if top_deg is not None:
         fan = np.linspace(top_deg, top_deg - 26.8, 64).astype(np.float32)
-        lidar.beam_table = BeamTable(fan, np.zeros(64, np.float32), SENSOR.columns, "even fan")
+        lidar.beam_table = BeamTable(fan, np.zeros(64, np.float32), sensor.columns, "even fan")
     ranges, _ = YardCaster(m.merge([ground, *buildings, *parts]), [], 1).measure(
         lidar, 0.0, np.random.default_rng(seed)
     )

@@ -547,10 +547,10 @@ def test_a_trailer_front_the_points_pin_in_a_turn_is_learned_though_its_face_is_
     assert max(abs(e) for e in errors_deg[-10:]) < 0.5  # with the MAN's front: 1.5 deg
 
 
-def _one_side_widths(with_rays: bool) -> tuple[float, float]:
+def _one_side_widths(with_rays: bool, frames: int = 20) -> tuple[float, float]:
     """An unknown tractor and trailer, both 2.55 m wide, taken for the catalogue's MAN (2.77),
     standing straight, seen by one sensor off the trailer's rear left corner: its rear face and
-    left side. The model's widths after 20 frames."""
+    left side. The model's widths after ``frames`` frames."""
     man = VehicleModel.from_config("man_tgx", PARAMS.vehicles["man_tgx"])
     truth = man.with_boxes(replace(man.tractor, width_m=2.55), replace(man.trailer, width_m=2.55))
     sensor = [(-18.0, 7.0, 4.0)]
@@ -560,7 +560,7 @@ def _one_side_widths(with_rays: bool) -> tuple[float, float]:
     tracker.tracks.append(
         tracker._track(1, man, fit(points, Prior(0.0, 0.0, 0.0, 0.0, man), PARAMS.articulated), 0.0, 0.0, 0.0)
     )
-    for k in range(1, 21):
+    for k in range(1, frames + 1):
         points = vehicle_points(truth, 0.0, 0.0, 0.0, sensors=sensor, spacing=0.15, seed=k)
         tracker.process(points, flat, 0.1 * k, rays=rays)
     model = tracker.tracks[0].model
@@ -576,6 +576,9 @@ def test_a_width_seen_from_one_side_is_bracketed_at_the_far_corner_of_an_end_fac
     cab, trailer = _one_side_widths(with_rays=True)
     assert trailer == pytest.approx(2.55, abs=0.05)
     assert cab == pytest.approx(trailer)
+    # five brackets that agree and refute the catalogue's 2.77 m count at once
+    assert _one_side_widths(with_rays=True, frames=5)[1] == pytest.approx(2.55, abs=0.05)
+    assert _one_side_widths(with_rays=True, frames=3) == (2.77, 2.77)
 
 
 def test_a_fit_gated_out_is_searched_around_the_kingpin_before_the_prediction_is_kept():
@@ -2076,6 +2079,21 @@ def test_a_cab_is_as_high_as_its_points_reach_above_the_catalogues_top():
     assert learned(-0.5, extra=canopy).model.tractor.top_m == cab_top
     high_trailer = learned(0.0, trailer_m=0.5)
     assert high_trailer.model.trailer.top_m == model.trailer.top_m and not high_trailer.dimensions_seen()[1][2]
+
+
+def test_brackets_that_agree_and_refute_the_prior_count_from_their_fifth():
+    """An unknown unit taken for the MAN (2.77 m): five brackets within 0.05 m of 2.54 count; four do
+    not, nor five whose middle half spreads 0.45 m (two far off)."""
+    width = _Extent(2.77, 50, min_values=3)
+    for value in (2.55, 2.52, 2.57, 2.54):
+        width.add_bracket(value)
+    assert not width.observed and width.estimate == 2.77
+    width.add_bracket(2.53)
+    assert width.observed and width.estimate == pytest.approx(2.54)
+    scattered = _Extent(2.77, 50, min_values=3)
+    for value in (2.55, 3.0, 2.52, 2.97, 2.56):
+        scattered.add_bracket(value)
+    assert not scattered.observed and scattered.estimate == 2.77
 
 
 def test_a_width_counts_from_its_third_frame_and_brackets_from_their_tenth():
