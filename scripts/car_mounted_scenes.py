@@ -33,17 +33,12 @@ import car_mounted as cm  # noqa: E402
 
 from i2v_loc.commands.detect import single_sweep  # noqa: E402
 from i2v_loc.frame import Frame, SensorScan  # noqa: E402
-from i2v_loc.params import Extrinsics, Params, SensorConfig, load_params  # noqa: E402
+from i2v_loc.params import Params, load_params  # noqa: E402
 from i2v_loc.pipelines import build_pipeline  # noqa: E402
 from i2v_loc.sim import meshes as m  # noqa: E402
 
 FOUND_WITHIN_M = 10.0
 NEAR_M = 25.0
-POLE = SensorConfig(name="pole", model="OS1-32", columns=1024, max_range_m=120.0, extrinsics=Extrinsics(z_m=6.0))
-POLE_YAML = (
-    "sensors:\n- name: pole\n  model: OS1-32\n  columns: 1024\n  extrinsics: {z_m: 6.0}\n"
-    "region: {x_min_m: -60, x_max_m: 60, y_min_m: -60, y_max_m: 60}\n"
-)
 
 
 def _polar(rng: np.random.Generator, low_m: float, high_m: float) -> tuple[float, float]:
@@ -115,8 +110,10 @@ def yard_reports(params, parts, frames: int, index: int) -> list[int]:
     pipeline = build_pipeline(params, "default")
     counts = []
     for k in range(frames):
-        scan = SensorScan(POLE.name, 0.1 * k, cm.sweep(parts, None, 1000 * index + k, POLE), None, from_sensor=True)
-        counts.append(len(pipeline.process(Frame(k, {POLE.name: scan})).to_json()["vehicles"]))
+        scan = SensorScan(
+            cm.POLE.name, 0.1 * k, cm.sweep(parts, None, 1000 * index + k, cm.POLE), None, from_sensor=True
+        )
+        counts.append(len(pipeline.process(Frame(k, {cm.POLE.name: scan})).to_json()["vehicles"]))
     return counts
 
 
@@ -129,7 +126,7 @@ def detect(pipeline_params, parts, top_deg: float | None, index: int) -> list[di
 def yard(args) -> int:
     """Static yard scenes from the service's start: false vehicles, or the frame a standing one is found."""
     with tempfile.TemporaryDirectory() as tmp:
-        (Path(tmp) / "pole.yaml").write_text(POLE_YAML)
+        (Path(tmp) / "pole.yaml").write_text(cm.pole_params_yaml())
         params = load_params(Path(tmp) / "pole.yaml")
     total, firsts = 0, []
     for index in range(args.first, args.first + args.count):

@@ -1,6 +1,7 @@
 """One sweep of an OS1-64 on a car's roof (1.8 m), ray-cast (open3d) through constructed scenes on
 flat ground: what a vehicle-mounted sensor sees of trucks, buses, walls, trees and signs (no roof
-above 1.8 m, one face of most things), with the ground's returns around and under them."""
+above 1.8 m, one face of most things), with the ground's returns around and under them. The same
+scenes seen by a yard's pole (``POLE``: an OS1-32 6 m up) give the service's sweeps."""
 
 from __future__ import annotations
 
@@ -18,6 +19,8 @@ SENSOR_HEIGHT_M = 1.8
 SENSOR = SensorConfig(
     name="roof", model="OS1-64", columns=2048, max_range_m=120.0, extrinsics=Extrinsics(z_m=SENSOR_HEIGHT_M)
 )
+
+POLE = SensorConfig(name="pole", model="OS1-32", columns=1024, max_range_m=120.0, extrinsics=Extrinsics(z_m=6.0))
 
 
 def _pose(x: float, y: float, yaw: float) -> np.ndarray:
@@ -133,5 +136,14 @@ def params_yaml() -> str:
     return (
         f"sensors:\n- name: {SENSOR.name}\n  model: OS1-64\n  columns: 2048\n"
         f"  extrinsics: {{z_m: {SENSOR_HEIGHT_M}}}\n"
+        "region: {x_min_m: -60, x_max_m: 60, y_min_m: -60, y_max_m: 60}\n"
+    )
+
+
+def pole_params_yaml() -> str:
+    """A yard's pole sensor (an OS1-32 6 m up) for the service: frames to come, the map learned."""
+    return (
+        f"sensors:\n- name: {POLE.name}\n  model: OS1-32\n  columns: {POLE.columns}\n"
+        f"  extrinsics: {{z_m: {POLE.extrinsics.z_m}}}\n"
         "region: {x_min_m: -60, x_max_m: 60, y_min_m: -60, y_max_m: 60}\n"
     )

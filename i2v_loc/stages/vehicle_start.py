@@ -95,6 +95,11 @@ GAP_LOOKED_MIN_POINTS = 8  # on a face across the gap, seen through its opening
 GAP_FACE_MARGIN_M = 0.15  # the faces bounding the gap: their points' noise and the fit's error along
 END_SLAB_M = 1.0  # beyond a rigid body's end: a ray ending there and none crossing, it goes on (``_ends_free``)
 SOLID_INSET_M = 0.5  # a unit's box this far inside its faces is crossed by no ray (a sweep's motion blurs them)
+CAB_TOP_LOW_M = 0.3  # a cab model's top this far above its points' may be refuted by the rays
+CAB_TOP_ABOVE_M = 0.1  # the rays asked from this far above its highest point (their noise)
+CAB_TOP_MIN_RAYS = 3
+CAB_TOP_MIN_POINTS = 20
+CAB_TOP_INSET_M = 0.1  # inside the cab box's sides and ends: rays grazing a face
 SEEN_THROUGH_RATIO = 0.1  # of the rays ending on a unit, at most this many cross it (real ones: under 0.01)
 CAB_SLICE_MIN_M = 1.0
 CAB_AROUND_M = 2.0  # a cab's surroundings whose points it must explain at the start (``_cab_explains_around``)
@@ -478,6 +483,7 @@ class VehicleStarts:
                 and not self._seen_through(m, self._as_far_as_seen(m, model, cluster, ground_z_m), ground_z_m)
                 and self._stands_on_wheels(cluster, m, model, ground_z_m, top_seen)
                 and not self._cab_grounded(cluster, m, model, ground_z_m)
+                and not self._cab_topped_low(cluster, m, model, ground_z_m)
                 and self._ends_free(m, model, ground_z_m)
             ):
                 return model, m
@@ -618,6 +624,26 @@ class VehicleStarts:
         return (
             model.articulated and self.rays is not None and unit_grounded(self.rays, cluster, m, model, 0, ground_z_m)
         )
+
+    def _cab_topped_low(self, cluster: np.ndarray, m: Measurement, model: VehicleModel, ground_z_m: float) -> bool:
+        """Whether an articulated fit's cab box is empty above the highest of its points: rays crossed
+        it between ``CAB_TOP_ABOVE_M`` over them and its model's top, which lies ``CAB_TOP_LOW_M`` or
+        more higher, and fewer than ``SEEN_THROUGH_RATIO`` as many ended there. A 10-ft container (2.6 m
+        high) 0.5-1.5 m before a parked trailer's front had started as a MAN's cab (3.3 m) with the
+        trailer, from the service's start (13 of 60 yard scenes). Never without rays."""
+        if self.rays is None or not model.articulated:
+            return False
+        box = model.tractor
+        at = Prior(m.x_m, m.y_m, m.yaw_rad, m.hitch_rad, model, ground_z_m)
+        z_rel = cluster[in_unit_box(cluster, at, 0, 0.0), 2] - ground_z_m
+        if len(z_rel) < CAB_TOP_MIN_POINTS or box.top_m - float(z_rel.max()) < CAB_TOP_LOW_M:
+            return False
+        (centre, _) = model.box_centers(m.x_m, m.y_m, m.yaw_rad, m.hitch_rad or 0.0)
+        band = (ground_z_m + float(z_rel.max()) + CAB_TOP_ABOVE_M, ground_z_m + box.top_m)
+        through, ended, _ = self.rays.through(
+            tuple(centre), m.yaw_rad, box.length_m / 2 - CAB_TOP_INSET_M, box.width_m / 2 - CAB_TOP_INSET_M, band, 0.0
+        )
+        return through >= CAB_TOP_MIN_RAYS and ended < SEEN_THROUGH_RATIO * through
 
     def _behind_face(
         self,
