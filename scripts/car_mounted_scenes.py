@@ -105,18 +105,6 @@ def standing_scene(index: int) -> tuple[list, str]:
     return cm.articulated(name, x, y, yaw), f"{name} standing {math.hypot(x, y):.0f} m away"
 
 
-def yard_reports(params, parts, frames: int, index: int) -> list[int]:
-    """The vehicles reported in each of ``frames`` sweeps of the pole's sensor from the service's start."""
-    pipeline = build_pipeline(params, "default")
-    counts = []
-    for k in range(frames):
-        scan = SensorScan(
-            cm.POLE.name, 0.1 * k, cm.sweep(parts, None, 1000 * index + k, cm.POLE), None, from_sensor=True
-        )
-        counts.append(len(pipeline.process(Frame(k, {cm.POLE.name: scan})).to_json()["vehicles"]))
-    return counts
-
-
 def detect(pipeline_params, parts, top_deg: float | None, index: int) -> list[dict]:
     points = cm.sweep(parts, top_deg, index)
     scan = SensorScan(cm.SENSOR.name, 0.0, points, None, from_sensor=True)
@@ -125,13 +113,11 @@ def detect(pipeline_params, parts, top_deg: float | None, index: int) -> list[di
 
 def yard(args) -> int:
     """Static yard scenes from the service's start: false vehicles, or the frame a standing one is found."""
-    with tempfile.TemporaryDirectory() as tmp:
-        (Path(tmp) / "pole.yaml").write_text(cm.pole_params_yaml())
-        params = load_params(Path(tmp) / "pole.yaml")
+    params = cm.pole_params()
     total, firsts = 0, []
     for index in range(args.first, args.first + args.count):
         parts, what = parked_scene(index, yard=True) if args.scenes == "yard-parked" else standing_scene(index)
-        counts = yard_reports(params, parts, args.frames, index)
+        counts = [len(r) for r in cm.yard_reports(parts, args.frames, 1000 * index, params)]
         first = next((k for k, n in enumerate(counts) if n), None)
         total, firsts = total + max(counts), firsts + [first]
         print(f"{index} {what}: at most {max(counts)} reported, the first in frame {first}")

@@ -6,10 +6,14 @@ scenes seen by a yard's pole (``POLE``: an OS1-32 6 m up) give the service's swe
 from __future__ import annotations
 
 import math
+import tempfile
+from pathlib import Path
 
 import numpy as np
 
-from i2v_loc.params import Extrinsics, Params, SensorConfig
+from i2v_loc.frame import Frame, SensorScan
+from i2v_loc.params import Extrinsics, Params, SensorConfig, load_params
+from i2v_loc.pipelines import build_pipeline
 from i2v_loc.sim import meshes as m
 from i2v_loc.sim.kinematics import Articulation, trailer_axle_point
 from i2v_loc.sim.lidar import LidarModel, YardCaster
@@ -140,10 +144,25 @@ def params_yaml() -> str:
     )
 
 
-def pole_params_yaml() -> str:
-    """A yard's pole sensor (an OS1-32 6 m up) for the service: frames to come, the map learned."""
-    return (
+def pole_params() -> Params:
+    """The service's parameters for ``POLE`` alone: frames to come, the map learned."""
+    text = (
         f"sensors:\n- name: {POLE.name}\n  model: OS1-32\n  columns: {POLE.columns}\n"
         f"  extrinsics: {{z_m: {POLE.extrinsics.z_m}}}\n"
         "region: {x_min_m: -60, x_max_m: 60, y_min_m: -60, y_max_m: 60}\n"
     )
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "pole.yaml"
+        path.write_text(text)
+        return load_params(path)
+
+
+def yard_reports(parts: list[m.Mesh], frames: int, first_seed: int = 0, params: Params | None = None) -> list[list]:
+    """The vehicles the service reports in each of ``frames`` sweeps of ``POLE`` from its start (the
+    sweeps' noise seeded ``first_seed`` on)."""
+    pipeline = build_pipeline(params or pole_params(), "default")
+    reports = []
+    for k in range(frames):
+        scan = SensorScan(POLE.name, 0.1 * k, sweep(parts, None, first_seed + k, POLE), None, from_sensor=True)
+        reports.append(pipeline.process(Frame(k, {POLE.name: scan})).to_json()["vehicles"])
+    return reports
