@@ -1081,17 +1081,17 @@ def test_seed_parts_are_joined_by_their_nearest_points():
 
 def test_a_seed_persists_through_a_frame_in_which_its_cluster_merged_with_another():
     """A MAN standing with, in its second frame only, a 40-ft container 0.3 m behind its trailer
-    (one cluster 30 m long with it, longer than any vehicle), or a band of points joining it to a
-    parked trailer 2.5 m beside it (one cluster holding both seeds): the part in the MAN's seed's
-    last footprint is its seed still, and it starts in the third frame (it started in the fifth:
-    its seed was lost with the merged frame). The parked trailer is no vehicle."""
+    (one cluster 30 m long with it), or a band of points joining it to a parked trailer 4 m beside
+    it (one cluster 9.3 m wide): larger than any vehicle, the part in the MAN's seed's last
+    footprint is its seed still, and it starts in the third frame (it started in the fifth: its
+    seed was lost with the merged frame). The parked trailer is no vehicle."""
     man = VehicleModel.from_config("man_tgx", PARAMS.vehicles["man_tgx"])
     trailer_x = man.box_centers(0.0, 3.0, 0.0, 0.0)[1][0]
     behind = trailer_x - man.trailer.length_m / 2 - 0.3 - 6.1
     container = vehicle_points(VehicleModel.rigid("rigid", 12.2, 2.44, 2.6, 0.0), behind, 3.0, 0.0, sensors=SENSORS)
-    beside = 3.0 + 2.77 / 2 + 2.5 + 2.55 / 2
+    beside = 3.0 + 2.77 / 2 + 4.0 + 2.55 / 2
     parked = vehicle_points(VehicleModel.rigid("rigid", 13.6, 2.55, 2.6, 1.2), trailer_x, beside, 0.0, sensors=SENSORS)
-    band = np.column_stack([np.full(30, trailer_x), np.linspace(4.4, 6.6, 30), np.full(30, 2.0)])
+    band = np.column_stack([np.full(40, trailer_x), np.linspace(4.4, 8.1, 40), np.full(40, 2.0)])
     for standing, merging in (([], container), ([parked], band)):
         tracker = VehicleTracker(PARAMS.articulated, PARAMS.vehicles)
         names = []
@@ -1101,6 +1101,24 @@ def test_a_seed_persists_through_a_frame_in_which_its_cluster_merged_with_anothe
             reports = tracker.process(points, flat, 0.1 * k, background=Background.LEARNING)
             names.append([r.model.name for r in reports])
         assert names == [[], [], ["man_tgx"], ["man_tgx"], ["man_tgx"], ["man_tgx"]]
+
+
+def test_a_seed_no_model_explains_is_taken_apart_at_half_the_join_distance():
+    """A MAN standing 1.5 m beside a 40-ft container from the first frame: one seed with it (the
+    seeds join within 2 m: a cab's gap), which no model explains. Taken apart at 1 m, the MAN is a
+    seed of its own and starts in the third frame (before: not within 8 frames, it waited for the
+    seed's retry after 20); the container is no vehicle."""
+    man = VehicleModel.from_config("man_tgx", PARAMS.vehicles["man_tgx"])
+    trailer_x = man.box_centers(0.0, 3.0, 0.0, 0.0)[1][0]
+    beside = 3.0 + 2.77 / 2 + 1.5 + 2.44 / 2
+    box = vehicle_points(VehicleModel.rigid("rigid", 12.2, 2.44, 2.6, 0.0), trailer_x, beside, 0.0, sensors=SENSORS)
+    tracker = VehicleTracker(PARAMS.articulated, PARAMS.vehicles)
+    names = []
+    for k in range(8):
+        points = np.vstack([vehicle_points(man, 0.0, 3.0, 0.0, sensors=SENSORS, seed=k), box])
+        names.append([r.model.name for r in tracker.process(points, flat, 0.1 * k, background=Background.LEARNING)])
+    assert names == [[], []] + [["man_tgx"]] * 6
+    assert abs(tracker.tracks[0].filter.state.y_m - 3.0) < 0.05
 
 
 def test_the_seeds_closeness_test_is_a_kd_tree_query():

@@ -113,6 +113,7 @@ VACATED_M = 0.5  # a first point this far from all of a seed's points now: its p
 VACATED_MIN_SHARE = 0.1
 VACATED_SEEN_MIN_RAYS = 3  # through a place a seed's first points left: seen empty, not hidden
 SEED_FIRST_POINTS = 200
+FOOTPRINT_MAX_WIDTH_M = 8.0  # no vehicle's is wider (a MAN folded 60 deg: 16.0 x 6.1 m)
 CARVE_MARGIN_M = 0.5  # a seed's last footprint grown by a frame's travel at yard speeds (``_seeds_in``)
 START_MOVED_M = 0.5  # a seed of few points starting after the map was learned moved this far (or start_travel_m)
 SHAPE_MIN_UNIT_POINTS = 10  # explained in each unit of a vehicle starting by its shape alone (map not learned)
@@ -322,8 +323,7 @@ class VehicleStarts:
             start = self._start(cluster, rect, seed, float(ground(center[0], center[1])), rigid_allowed)
             if start is None:  # no vehicle (yet): fitted again after a while if its shape changed
                 seed.failed, seed.failed_frame = shape, seed.frames
-                if self._one_sweep():
-                    starts += self._start_apart(cluster, ground, rigid_allowed)
+                starts += self._start_apart(cluster, ground, rigid_allowed, seed)
                 continue
             self.seeds.remove(seed)
             starts.append(start)
@@ -332,24 +332,28 @@ class VehicleStarts:
     def forget(self) -> None:
         self.seeds = []
 
-    def _start_apart(self, cluster: np.ndarray, ground, rigid_allowed: bool) -> list[Start]:
-        """The vehicles among a seed that is none, taken apart at ``APART_VOXEL_M`` (one sweep: no
-        frame to come in which vehicles side by side drive apart). Its voxels bridge a cab's gap, and
-        a street's lanes too: a bus 1.6 m beside a car was one seed 18.7 m by 5.0 m in an Argoverse 2
-        sweep, which no model explains."""
+    def _start_apart(self, cluster: np.ndarray, ground, rigid_allowed: bool, seed: Seed) -> list[Start]:
+        """The vehicles among a seed that is none, taken apart: in one sweep at ``APART_VOXEL_M``, its
+        parts not joined (no frame to come in which vehicles side by side drive apart: its voxels
+        bridge a cab's gap, and a street's lanes too; a bus 1.6 m beside a car was one seed 18.7 m by
+        5.0 m in an Argoverse 2 sweep, which no model explains); with frames to come, its parts
+        joined at half ``start_join_m`` only, each a seed that moved as it did. An unknown 13.6 m
+        tractor-trailer in a lane change was one seed 17 x 11 m with an object 1.5 m beside it from
+        the first frame, no model explained it, and it started once it had moved 10 frames later."""
         p = self.params
+        voxel, join = (APART_VOXEL_M, 0.0) if self._one_sweep() else (p.start_voxel_m, p.start_join_m / 2)
+        travel = seed.center_xy - seed.first_xy
         starts = []
-        for rows in seed_group_rows(cluster, ground, APART_VOXEL_M, p.start_min_height_m, p.fit_min_points, 0.0, 0.0):
+        for rows in seed_group_rows(cluster, ground, voxel, p.start_min_height_m, p.fit_min_points, join, 0.0):
             if len(rows) == len(cluster):
                 return []  # one piece: the seed itself
             part = cluster[rows]
             rect = min_area_rect(part[:, :2])
             if not self._seen_wide(rect):
                 continue  # one face split off: a crown beside another, seen as an end, started as one
-            seed = Seed(
-                rect.center_xy, rect.center_xy, first_points=thin(part, SEED_FIRST_POINTS), points=part, rect=rect
-            )
-            start = self._start(part, rect, seed, float(ground(*rect.center_xy)), rigid_allowed)
+            c = rect.center_xy
+            part_seed = Seed(c, c - travel, points=part, rect=rect, travelled=seed.travelled, left_seen=seed.left_seen)
+            start = self._start(part, rect, part_seed, float(ground(*c)), rigid_allowed)
             if start is not None:
                 starts.append(start)
         return starts
@@ -420,26 +424,31 @@ class VehicleStarts:
         ):
             cluster = points[rows]
             rect = min_area_rect(cluster[:, :2])
-            parts = self._seeds_in(cluster, rect)
-            if len(parts) >= 2 or (parts and rect.length_m > p.start_max_length_m):
+            parts = self._seeds_in(cluster, rect) if _beyond_any_vehicle(rect, p) else []
+            if parts:
                 out += [(cluster[r], part) for r in parts if self._seen_wide(part := min_area_rect(cluster[r, :2]))]
             elif self._seen_wide(rect) or one_face_sized(rect, p):
                 out.append((cluster, rect))
         return out
 
     def _seeds_in(self, cluster: np.ndarray, rect: Rect) -> list[np.ndarray]:
-        """The rows of a cluster (footprint ``rect``) in each seed's last footprint, ``CARVE_MARGIN_M``
-        around it, that holds ``fit_min_points`` of them (a point in several: the nearest centre's).
-        A cluster that holds two seeds, or one and is longer than any vehicle, is taken apart into
-        them: seeds persist through merges. Before the background is learned, a MAN standing beside
-        a parked trailer was one 24 x 12 m cluster with it in some frames and apart in others; its
-        seed, lost with every merged frame, started 4 frames late; one whose points came within a
-        voxel of a 20-ft container's, 25.8 m together, 3 frames late."""
+        """The rows of a cluster (footprint ``rect``) in the last footprint of each seed of a
+        vehicle's size (``_seen_wide``), ``CARVE_MARGIN_M`` around it, that holds ``fit_min_points``
+        of them (a point in several: the nearest centre's). A cluster larger than any vehicle
+        (``_beyond_any_vehicle``) is taken apart into them: seeds persist through merges. Before
+        the background is learned, a MAN standing beside a parked trailer was one 24 x 12 m cluster
+        with it in some frames and apart in others; its seed, lost with every merged frame, started
+        4 frames late; one whose points came within a voxel of a 20-ft container's, 25.8 m together,
+        3 frames late. (Taken apart whenever it held two seeds, a Volvo coming into `l2`'s view, its
+        cab a seed of one face and its trailer another, lost its cab's points: it started 3 frames
+        later, its trailer learned 0.65 m too long, hitch RMSE 0.45 -> 1.63 deg.)"""
         reach = rect.length_m / 2 + CARVE_MARGIN_M
         rects = [
             s.rect
             for s in self.seeds
-            if s.rect is not None and np.hypot(*(s.rect.center_xy - rect.center_xy)) <= reach + s.rect.length_m / 2
+            if s.rect is not None
+            and self._seen_wide(s.rect)
+            and np.hypot(*(s.rect.center_xy - rect.center_xy)) <= reach + s.rect.length_m / 2
         ]
         if not rects:
             return []
@@ -1045,6 +1054,11 @@ class VehicleStarts:
         ]
         best = min(rigid, key=lambda h: h[2].cost, default=None)
         return [(best[0], best[2])] if best is not None and self._explains(best[2], best[0]) else []
+
+
+def _beyond_any_vehicle(rect: Rect, params: ArticulatedParams) -> bool:
+    """Whether a footprint is longer than ``start_max_length_m`` or wider than ``FOOTPRINT_MAX_WIDTH_M``."""
+    return rect.length_m > params.start_max_length_m or rect.width_m > FOOTPRINT_MAX_WIDTH_M
 
 
 def _in_rect(xy: np.ndarray, rect: Rect, margin_m: float) -> np.ndarray:
