@@ -426,7 +426,7 @@ class VehicleStarts:
             rect = min_area_rect(cluster[:, :2])
             parts = self._seeds_in(cluster, rect) if _beyond_any_vehicle(rect, p) else []
             if parts:
-                out += [(cluster[r], part) for r in parts if self._seen_wide(part := min_area_rect(cluster[r, :2]))]
+                out += [(cluster[r], own) for r in parts if self._seen_wide(own := min_area_rect(cluster[r, :2]))]
             elif self._seen_wide(rect) or one_face_sized(rect, p):
                 out.append((cluster, rect))
         return out
