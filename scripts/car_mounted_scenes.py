@@ -23,7 +23,6 @@ from __future__ import annotations
 import argparse
 import math
 import sys
-import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -33,7 +32,7 @@ import car_mounted as cm  # noqa: E402
 
 from i2v_loc.commands.detect import single_sweep  # noqa: E402
 from i2v_loc.frame import Frame, SensorScan  # noqa: E402
-from i2v_loc.params import Params, load_params  # noqa: E402
+from i2v_loc.params import Params  # noqa: E402
 from i2v_loc.pipelines import build_pipeline  # noqa: E402
 from i2v_loc.sim import meshes as m  # noqa: E402
 
@@ -139,9 +138,7 @@ def main() -> int:
     args = parser.parse_args()
     if args.scenes.startswith("yard"):
         return yard(args)
-    with tempfile.TemporaryDirectory() as tmp:
-        (Path(tmp) / "roof.yaml").write_text(cm.params_yaml())
-        params = load_params(Path(tmp) / "roof.yaml")
+    params = cm.sensor_params()
     params = single_sweep(params.model_copy(update={"sensors": [params.sensor(cm.SENSOR.name)]}), "default")
     found = near = near_found = false = 0
     for index in range(args.first, args.first + args.count):

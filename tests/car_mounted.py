@@ -135,26 +135,26 @@ def sweep(
     return points[np.isfinite(points).all(axis=1)].astype(np.float32)
 
 
-def params_yaml() -> str:
-    """The roof sensor for ``detect --params``: its height, the region around the car."""
+def params_yaml(sensor: SensorConfig = SENSOR) -> str:
+    """``sensor`` (the roof's unless given) for ``detect --params``: its height, the region around it."""
     return (
-        f"sensors:\n- name: {SENSOR.name}\n  model: OS1-64\n  columns: 2048\n"
-        f"  extrinsics: {{z_m: {SENSOR_HEIGHT_M}}}\n"
+        f"sensors:\n- name: {sensor.name}\n  model: {sensor.model}\n  columns: {sensor.columns}\n"
+        f"  extrinsics: {{z_m: {sensor.extrinsics.z_m}}}\n"
         "region: {x_min_m: -60, x_max_m: 60, y_min_m: -60, y_max_m: 60}\n"
     )
+
+
+def sensor_params(sensor: SensorConfig = SENSOR) -> Params:
+    """The parameters of ``params_yaml`` as the service loads them (the roof's sensor unless given)."""
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / f"{sensor.name}.yaml"
+        path.write_text(params_yaml(sensor))
+        return load_params(path)
 
 
 def pole_params() -> Params:
     """The service's parameters for ``POLE`` alone: frames to come, the map learned."""
-    text = (
-        f"sensors:\n- name: {POLE.name}\n  model: OS1-32\n  columns: {POLE.columns}\n"
-        f"  extrinsics: {{z_m: {POLE.extrinsics.z_m}}}\n"
-        "region: {x_min_m: -60, x_max_m: 60, y_min_m: -60, y_max_m: 60}\n"
-    )
-    with tempfile.TemporaryDirectory() as tmp:
-        path = Path(tmp) / "pole.yaml"
-        path.write_text(text)
-        return load_params(path)
+    return sensor_params(POLE)
 
 
 def yard_reports(parts: list[m.Mesh], frames: int, first_seed: int = 0, params: Params | None = None) -> list[list]:

@@ -36,6 +36,7 @@ from i2v_loc.stages.hinged_fit import (
     with_rear_end,
 )
 from i2v_loc.stages.kinematic_filter import KinematicFilter, unit_motions
+from i2v_loc.stages.primitives import unit_axes
 from i2v_loc.stages.unit_frames import (
     END_BAND_M,
     FACE_SEEN_SPAN,
@@ -1023,7 +1024,8 @@ def _changed(obj, **values):
 def _unit_axes(m: Measurement, model: VehicleModel, unit: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """A unit's origin at the fit ``m`` and its unit vectors along it and across it (to its left)."""
     origin, yaw = unit_origins(m.vector, model)[unit]
-    return origin, np.array([np.cos(yaw), np.sin(yaw)]), np.array([-np.sin(yaw), np.cos(yaw)])
+    along, across = unit_axes(yaw)
+    return origin, along, across
 
 
 def _on_trailer_axis(m: Measurement, model: VehicleModel, x_m: float) -> np.ndarray:
