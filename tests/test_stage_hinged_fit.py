@@ -21,6 +21,7 @@ from i2v_loc.stages.hinged_fit import (
     fit,
     fit_hinge,
     rear_sigma_m,
+    trailer_pose_only,
     with_rear_end,
 )
 from i2v_loc.stages.vehicle_model import VehicleModel
@@ -163,6 +164,27 @@ def test_a_hidden_cab_is_not_measured_only_its_trailer_is():
     # all measured: the observed directions carry the covariance's information (the weak prior's aside)
     information = seen.observed[0].T @ np.linalg.inv(seen.observed[1]) @ seen.observed[0]
     assert np.allclose(np.linalg.inv(information), seen.covariance, rtol=0.05, atol=1e-6)
+
+
+def test_the_trailers_pose_alone_is_its_kingpin_and_yaw_as_the_fit_measured_them():
+    """``trailer_pose_only`` of a fit that saw both units: three directions, none of them the cab
+    turned about the kingpin (the trailer standing still), carrying the fit's information on the
+    kingpin's place and the trailer's yaw (no floor: it is added per measured direction)."""
+    params = PARAMS.articulated.model_copy(update={"fit_position_floor_m": 0.0, "fit_angle_floor_deg": 0.0})
+    model, hitch = volvo(), np.radians(30.0)
+    prior = Prior(*TRUTH, hitch, model)
+    m = fit(vehicle_points(model, *TRUTH, hitch, sensors=SENSORS), prior, params)
+    rows, noise = trailer_pose_only(m, model, params).observed
+    assert rows.shape == (3, 4) and noise.shape == (3, 3)
+    m_kp, yaw = model.kingpin_behind_axle_m, m.yaw_rad
+    cab_turn = np.array([-m_kp * np.sin(yaw), m_kp * np.cos(yaw), 1.0, -1.0])
+    assert np.abs(rows @ cab_turn).max() < 1e-9 * np.abs(rows).max()
+    kingpin_and_yaw = np.array(
+        [[1.0, 0.0, m_kp * np.sin(yaw), 0.0], [0.0, 1.0, -m_kp * np.cos(yaw), 0.0], [0, 0, 1, 1]]
+    )
+    measured = np.linalg.inv(rows.T @ np.linalg.inv(noise) @ rows + np.outer(cab_turn, cab_turn))  # cab turn pinned
+    fitted = kingpin_and_yaw @ m.covariance @ kingpin_and_yaw.T
+    assert np.allclose(np.diag(kingpin_and_yaw @ measured @ kingpin_and_yaw.T), np.diag(fitted), rtol=0.1)
 
 
 def test_the_observed_directions_are_the_data_information_less_the_prior():

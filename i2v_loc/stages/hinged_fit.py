@@ -314,6 +314,32 @@ def without_hitch(m: Measurement, params: ArticulatedParams) -> Measurement:
     return replace(m, observed=(np.column_stack([rows, np.zeros(len(rows))]), noise))
 
 
+def trailer_pose_only(m: Measurement, model: VehicleModel, params: ArticulatedParams) -> Measurement:
+    """The fit ``m`` measuring the trailer's pose only (its kingpin's place and its yaw), for a cab
+    whose own points do not show where it is: the cab turned about the kingpin moves no trailer
+    point, and what a fit gives that direction comes from its warm start and from whatever else
+    it claims there. The directions the points measured of the trailer's pose (``_observed`` on
+    its covariance, through the Jacobian) as rows of (x, y, yaw, hitch)."""
+    floor, marginal = _floor(params, 4), _without_floor(m, params)
+    jacobian = _trailer_pose_jacobian(m.yaw_rad, model.kingpin_behind_axle_m)
+    prior_sigmas = np.sqrt(np.diag(jacobian @ np.diag(WEAK_PRIOR_SIGMAS**2) @ jacobian.T))
+    rows, noise = _observed(np.ascontiguousarray(jacobian @ marginal @ jacobian.T), prior_sigmas, floor[:3])
+    return replace(m, observed=(rows @ jacobian, noise))
+
+
+def _trailer_pose_jacobian(yaw_rad: float, kingpin_behind_axle_m: float) -> np.ndarray:
+    """d(kingpin x, kingpin y, trailer yaw) / d(x, y, yaw, hitch): the kingpin lies
+    ``kingpin_behind_axle_m`` behind the rear axle (x, y) along the tractor's yaw."""
+    arm = kingpin_behind_axle_m
+    return np.array(
+        [
+            [1.0, 0.0, arm * math.sin(yaw_rad), 0.0],
+            [0.0, 1.0, -arm * math.cos(yaw_rad), 0.0],
+            [0.0, 0.0, 1.0, 1.0],
+        ]
+    )
+
+
 def _rear_along(m: Measurement, model: VehicleModel, params: ArticulatedParams) -> tuple[np.ndarray, np.ndarray]:
     """How the trailer's rear face moves along the trailer's axis with the pose (x, y, yaw, hitch:
     the kingpin swings about the rear axle with the yaw), and the fit's covariance without its floor."""
