@@ -545,6 +545,24 @@ def test_a_shorter_cab_is_learned_driving_straight_where_its_sides_end_before_th
     assert max(centre_errors) < 0.03
 
 
+def test_no_cab_is_learned_shorter_than_any_cab(monkeypatch):
+    """Rays that crossed a cab's side plane 0.09 m behind its front (a Volvo's cab leaving two
+    LiDARs' view, carried with a speed that was falling) bound no cab: none is shorter than
+    ``CAB_LENGTH_RANGE_M``'s 1 m. The cab keeps the catalogue's length (that bound alone had made it
+    0.09 m long, its box 1.2 m off)."""
+    from i2v_loc.stages import kernels
+    from i2v_loc.stages.hinged_fit import CAB_LENGTH_RANGE_M
+    from i2v_loc.stages.hinged_fit import FRONT as CAB_FRONT
+
+    def ends_behind_its_front(self, track, m, q, points):
+        return kernels.face_median(q, 0, m.unit, m.face, 0, CAB_FRONT, vd.ANYWHERE)[1] - 0.09
+
+    monkeypatch.setattr(vd.DimensionLearner, "_cab_side_end", ends_behind_its_front)
+    track, centre_errors = _cab_driving_straight(volvo().tractor.length_m)
+    assert len(track.cab_length.uppers) == 0 and track.model.tractor.length_m == volvo().tractor.length_m
+    assert CAB_LENGTH_RANGE_M[0] == 1.0 and max(centre_errors) < 0.03
+
+
 def test_a_tractor_with_another_kingpin_is_learned_in_the_turn():
     """The catalogue's Volvo FH has its kingpin 0.3 m ahead of the rear axle; this tractor has it
     on the axle. Straight, it does not show; turning (|hitch| >= 8 deg) the frames of the turn

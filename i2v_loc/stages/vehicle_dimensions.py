@@ -20,6 +20,7 @@ from i2v_loc.params import ArticulatedParams
 from i2v_loc.stages import kernels
 from i2v_loc.stages.faces import END_FACE_WIDTH_M
 from i2v_loc.stages.hinged_fit import (
+    CAB_LENGTH_RANGE_M,
     FRONT,
     LEFT,
     REAR,
@@ -539,17 +540,20 @@ class DimensionLearner:
         face unseen, at most from its front face to where the rays show the gap behind a side
         (``_cab_side_end``): an upper bound (``_Extent.add_upper_bound``). (Five points on each
         face, before: with the chassis behind the cab no longer on its rear face, an unknown
-        tractor's cab had them only after 20 s.)"""
+        tractor's cab had them only after 20 s.) Never shorter or longer than any cab
+        (``CAB_LENGTH_RANGE_M``): a Volvo's cab leaving two LiDARs' view had a ray cross its side's
+        plane 0.09 m behind its front, and that one bound made it 0.09 m long (1.2 m off)."""
         model, band = track.model, self.params.fit_top_band_m
         if not face_seen(m, model, 0, FRONT, track.ground_z_m, band):
             return
         _, front = kernels.face_median(q, 0, m.unit, m.face, 0, FRONT, ANYWHERE)
         if face_seen(m, model, 0, REAR, track.ground_z_m, band):
             _, rear = kernels.face_median(q, 0, m.unit, m.face, 0, REAR, ANYWHERE)
-            track.cab_length.add(front - rear)
+            if CAB_LENGTH_RANGE_M[0] <= front - rear <= CAB_LENGTH_RANGE_M[1]:
+                track.cab_length.add(front - rear)
         elif len(track.cab_length.uppers) < CAB_ENDS_KEPT:
             end = self._cab_side_end(track, m, q, points)
-            if end is not None:
+            if end is not None and front - end >= CAB_LENGTH_RANGE_M[0]:
                 track.cab_length.add_upper_bound(front - end)
 
     def _cab_side_end(self, track: VehicleTrack, m: Measurement, q: np.ndarray, points: np.ndarray) -> float | None:
