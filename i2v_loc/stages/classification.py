@@ -72,12 +72,7 @@ class TruckTrailerClassifier:
     @staticmethod
     def _in_footprint(points: np.ndarray, body: np.ndarray) -> np.ndarray:
         """Points whose xy falls inside the body's oriented rectangle (plus a small margin)."""
-        rect = min_area_rect(body[:, :2])
-        d = points[:, :2] - rect.center_xy
-        along = d @ [np.cos(rect.yaw_rad), np.sin(rect.yaw_rad)]
-        across = d @ [-np.sin(rect.yaw_rad), np.cos(rect.yaw_rad)]
-        margin = FOOTPRINT_MARGIN_M
-        return (np.abs(along) <= rect.length_m / 2 + margin) & (np.abs(across) <= rect.width_m / 2 + margin)
+        return min_area_rect(body[:, :2]).holds(points, FOOTPRINT_MARGIN_M)
 
     def _find_trailer(self, body: np.ndarray, vehicle: VehicleConfig):
         """Second clustering at the trailer tolerance; when the cab still touches the trailer (the

@@ -119,6 +119,14 @@ class Rect:
     def area_m2(self) -> float:
         return self.length_m * self.width_m
 
+    def holds(self, points: np.ndarray, margin_m: float = 0.0) -> np.ndarray:
+        """Which of ``points`` lie (xy) within ``margin_m`` of the rectangle (``kernels.in_upright_box``)."""
+        c, s = np.cos(self.yaw_rad), np.sin(self.yaw_rad)
+        box = np.array([*self.center_xy, c, s, self.length_m / 2 + margin_m, self.width_m / 2 + margin_m])
+        inside = np.empty(len(points), dtype=bool)
+        kernels.in_upright_box(np.ascontiguousarray(points), box, inside)
+        return inside
+
 
 def min_area_rect(xy: np.ndarray) -> Rect:
     """Rotating-calipers minimum-area rectangle over the convex hull's edge directions (compiled)."""

@@ -454,7 +454,7 @@ class VehicleStarts:
             return []
         xy = cluster[:, :2]
         distance = np.array([np.hypot(*(xy - r.center_xy).T) for r in rects])
-        distance[~np.array([_in_rect(xy, r, CARVE_MARGIN_M) for r in rects])] = np.inf
+        distance[~np.array([r.holds(xy, CARVE_MARGIN_M) for r in rects])] = np.inf
         nearest = np.where(np.isfinite(distance.min(axis=0)), np.argmin(distance, axis=0), -1)
         parts = [np.flatnonzero(nearest == k) for k in range(len(rects))]
         return [rows for rows in parts if len(rows) >= self.params.fit_min_points]
@@ -1059,12 +1059,6 @@ class VehicleStarts:
 def _beyond_any_vehicle(rect: Rect, params: ArticulatedParams) -> bool:
     """Whether a footprint is longer than ``start_max_length_m`` or wider than ``FOOTPRINT_MAX_WIDTH_M``."""
     return rect.length_m > params.start_max_length_m or rect.width_m > FOOTPRINT_MAX_WIDTH_M
-
-
-def _in_rect(xy: np.ndarray, rect: Rect, margin_m: float) -> np.ndarray:
-    """Which points ``xy`` lie within ``margin_m`` of the rectangle ``rect``."""
-    along, across = rotate_xy(xy - rect.center_xy, -rect.yaw_rad).T
-    return (np.abs(along) <= rect.length_m / 2 + margin_m) & (np.abs(across) <= rect.width_m / 2 + margin_m)
 
 
 def _explained_footprint(m: Measurement, min_points: int) -> Rect | None:
