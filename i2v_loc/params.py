@@ -69,6 +69,11 @@ class SensorConfig(Section):
         description="Ouster sensor metadata JSON (as ouster-cli records it); its beam table overrides the model's",
     )
     extrinsics: Extrinsics = Field(default_factory=Extrinsics)
+    enabled: bool = Field(
+        True,
+        description="Fused into the frames; `calibrate` writes false for a sensor whose calibration it refused "
+        "(at its guess, tens of cm and degrees off, its points bend and widen the vehicles they fall on)",
+    )
 
     @property
     def beams(self) -> int:

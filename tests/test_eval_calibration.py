@@ -98,7 +98,7 @@ def test_tasks_run_with_the_calibrated_sensors_and_the_guess_clock_offsets(fake_
     assert params.tracking.max_distance_m == 2.5 and params.sensor("l3").extrinsics == TRUTH.sensor("l3").extrinsics
 
 
-def test_a_refused_sensor_is_evaluated_at_its_guess_the_others_calibrated_and_it_is_said(fake_calibration, tmp_path):
+def test_a_refused_sensor_is_left_out_the_others_calibrated_and_it_is_said(fake_calibration, tmp_path):
     _, fitness = fake_calibration
     fitness["l3"] = 0.1
     result = cal.calibrate_recording(str(SAMPLE), {}, tmp_path)
@@ -107,13 +107,16 @@ def test_a_refused_sensor_is_evaluated_at_its_guess_the_others_calibrated_and_it
         and "l3 (0.10, 1.00 at the guess, weakest direction 1000.0 points)" in result["message"]
     )
     used = {s["name"]: s for s in result["sensors"]}
-    assert used["l3"] == GUESS.sensor("l3").model_dump(mode="json")  # the refused one: its guess
+    # the refused one: its guess, left out of the frames
+    assert used["l3"] == GUESS.sensor("l3").model_copy(update={"enabled": False}).model_dump(mode="json")
     assert used["l2"]["extrinsics"] != GUESS.sensor("l2").model_dump(mode="json")["extrinsics"]
+    assert [name for name, s in used.items() if not s["enabled"]] == ["l3"]
     rows = {r["sensor"]: r for r in result["per_sensor"]}
     assert rows["l3"]["error_cm"] == pytest.approx(rows["l3"]["guess_error_cm"])  # the guess is what is used
     assert rows["l2"]["error_cm"] == pytest.approx(rows["l2"]["calibrated_error_cm"]) == pytest.approx(5.0)
     text = _report(result)
     assert "WARNING — volvo_fh_u_turn: CALIBRATION REFUSED" in text and "**REFUSED**" in text
+    assert "l3 (0.10, 1.00 at the guess, weakest direction 1000.0 points)): left out" in result["message"]
 
 
 def test_calibrate_writes_the_sensors_it_could_calibrate_and_fails_naming_the_refused_one(
@@ -130,7 +133,8 @@ def test_calibrate_writes_the_sensors_it_could_calibrate_and_fails_naming_the_re
         "REFUSED" in err and "l3 (0.10, 1.00 at the guess, weakest direction 1000.0 points)" in err and str(out) in err
     )
     written = load_params(out)
-    assert written.sensor("l3").extrinsics == GUESS.sensor("l3").extrinsics
+    assert written.sensor("l3").extrinsics == GUESS.sensor("l3").extrinsics and not written.sensor("l3").enabled
+    assert all(written.sensor(name).enabled for name in ("l1", "l2", "l4"))
     assert written.sensor("l2").extrinsics == _perturbed(TRUTH.sensor("l2").extrinsics, 0.03, -0.04, 1.5)
     assert written.sensor("l4").extrinsics == TRUTH.sensor("l4").extrinsics
 

@@ -147,3 +147,15 @@ def test_a_turning_hint_with_an_age_is_turned_to_the_capture_time():
     assert result.points[0, :2].tolist() == pytest.approx([12.5 + 0.15 * 1.7, 1.7 - 0.15 * 2.5], abs=1e-5)
     result = stage.process(late, [MotionHint((10.0, 0.0), 0.0, 3.0, 1.5, (0.0, 0.0), 1.0)])
     assert result.points[0, :2].tolist() == pytest.approx([12.5, 1.7], abs=1e-5)
+
+
+def test_a_disabled_sensor_is_left_out_and_said_so_not_missed():
+    """``enabled: false`` (a sensor whose calibration was refused): its sweep is not merged, the
+    frame says why, and its absence is no fault either."""
+    sensors = SENSORS + [SensorConfig(name="c", enabled=False, extrinsics=Extrinsics(x_m=50.0))]
+    stage = Concatenation(ConcatenationParams(voxel_size_m=0), sensors)
+    scans = {"a": scan("a", 1.0, [[3, 0, 0]]), "b": scan("b", 1.0, [[0, 2, 0]])}
+    result = stage.process({**scans, "c": scan("c", 1.0, [[1, 1, 1]])})
+    assert result.faults == {"c": "disabled"}
+    assert sorted(np.round(result.points, 4).tolist()) == [[0.0, 2.0, 4.0], [10.0, 3.0, 4.0]]
+    assert stage.process(scans).faults == {}

@@ -290,7 +290,7 @@ def _calibration_table(calibration: dict) -> list[str]:
     lines = [
         "## Calibration: each sensor's error against the truth",
         "",
-        "Used = the extrinsics the evaluation ran with (the calibrated ones; a refused sensor's guess).",
+        "Used = the extrinsics the evaluation ran with (the calibrated ones; a refused sensor was left out: its guess).",
         "",
         "Weakest = information of the sensor's weakest horizontal direction, in overlapping structure points.",
         "",

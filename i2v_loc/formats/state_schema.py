@@ -9,7 +9,7 @@ from typing import Literal
 from pydantic import BaseModel, ConfigDict, Field
 
 Vector3 = list[float]
-FAULTS = Literal["missing", "empty", "nan_points", "out_of_sync", "unknown_sensor"]
+FAULTS = Literal["missing", "empty", "nan_points", "out_of_sync", "unknown_sensor", "disabled"]
 
 
 class _Strict(BaseModel):

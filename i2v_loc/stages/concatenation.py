@@ -61,8 +61,9 @@ class ConcatenationResult:
 class Concatenation:
     def __init__(self, params: ConcatenationParams, sensors: list[SensorConfig]):
         self.params = params
-        self.sensors = {s.name: s for s in sensors}
-        to_yard = {s.name: extrinsics_matrix(s.extrinsics).astype(np.float32) for s in sensors}
+        self.sensors = {s.name: s for s in sensors if s.enabled}
+        self.disabled = {s.name for s in sensors if not s.enabled}
+        to_yard = {s.name: extrinsics_matrix(s.extrinsics).astype(np.float32) for s in self.sensors.values()}
         self._to_yard = {name: (np.ascontiguousarray(t[:3, :3]), t[:3, 3].copy()) for name, t in to_yard.items()}
         kernels.warm_up()
 
@@ -109,7 +110,7 @@ class Concatenation:
             sweeps.append((name, scan.stamp_s + config.time_offset_s, start, kept))
             start += kept
         for name in scans.keys() - self.sensors.keys():
-            faults[name] = "unknown_sensor"
+            faults[name] = "disabled" if name in self.disabled else "unknown_sensor"
         reference_s, in_sync = self._synchronise([stamp for _, stamp, _, _ in sweeps])
         for (name, *_), ok in zip(sweeps, in_sync):
             if not ok:
