@@ -81,6 +81,7 @@ class Service:
             if sensor is not None:
                 e = sensor.extrinsics
                 entry["position"] = {"x_m": e.x_m, "y_m": e.y_m, "z_m": e.z_m, "yaw_deg": e.yaw_deg}
+                entry["enabled"] = sensor.enabled
                 entry["nominal_rate_hz"] = sensor.rate_hz
             out.append(entry)
         return out

@@ -59,6 +59,7 @@ class SensorStatus(Open):
     drops: int
     last_fault: str | None
     configured: bool
+    enabled: bool | None = None  # configured: fused into the frames (a refused calibration writes false)
     position: dict[str, float] | None = None
     nominal_rate_hz: float | None = None
 

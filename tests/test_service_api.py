@@ -222,6 +222,29 @@ def test_valid_patch_changes_the_next_frame_and_rolls_back(client, live):
     assert max(restored) < min(after)
 
 
+def test_a_sensor_disabled_over_rest_is_left_out_from_the_next_frame_and_said_so(client, live):
+    server, service, _ = live
+    start = client.get("/api/v1/params").json()
+    sensors = [dict(s, enabled=s["name"] != "l2") for s in start["params"]["sensors"]]
+    response = client.patch("/api/v1/params", json={"sensors": sensors}, headers=AUTH)
+    assert response.status_code == 200, response.text
+    version = response.json()["version"]
+
+    async def state_at(v):
+        async with _ws(server) as ws:
+            return await next_state(ws, where=lambda m: m["params_version"] == v)
+
+    state = asyncio.run(state_at(version))
+    assert state["faults"] == {"l2": "disabled"}
+    listed = {s["name"]: s for s in client.get("/api/v1/sensors").json()["sensors"]}
+    assert listed["l2"]["enabled"] is False and listed["l2"]["status"] == "fault:disabled"
+    assert all(listed[name]["enabled"] for name in ("l1", "l3", "l4"))
+    assert "sensor l2: fault:disabled" in client.get("/api/v1/health").json()["reasons"]
+    back = client.post(f"/api/v1/params/rollback/{start['version']}", headers=AUTH)
+    assert back.status_code == 200
+    assert asyncio.run(state_at(back.json()["version"]))["faults"] == {}
+
+
 def test_params_message_on_the_websocket(client, live):
     server, _, _ = live
 
