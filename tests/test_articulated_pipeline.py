@@ -685,6 +685,29 @@ def test_a_trailer_front_reaching_further_is_learned_driving_straight():
     assert len(late) >= 25 and late[:, 1].max() < 0.03  # without the reach: up to 0.07 m
 
 
+def test_a_trailer_front_reaching_further_is_learned_from_the_cabs_front_its_rear_face_hidden():
+    """As above, the cab's rear face hidden in every frame (no point on it): the cab's front face
+    pins the axle (the model's anchor; a learned cab length moves its rear), and the reach is
+    learned from the first frames (needing the rear face, an unknown 6.5 m trailer's cab had its
+    box 0.51 m ahead of its front face for its first five frames)."""
+    truth_model = replace(volvo(), kingpin_behind_axle_m=-0.6)
+    cab = truth_model.tractor
+    tracker = VehicleTracker(PARAMS.articulated, PARAMS.vehicles)
+    rows = []
+    for t, points, (truth,) in drive([(truth_model, (-14.0, 3.0, 0.0, 0.0))], 4.0, 2.0, 0.0):
+        along = (points[:, 0] - truth[0]) * np.cos(truth[2]) + (points[:, 1] - truth[1]) * np.sin(truth[2])
+        across = -(points[:, 0] - truth[0]) * np.sin(truth[2]) + (points[:, 1] - truth[1]) * np.cos(truth[2])
+        on_cab_rear = (np.abs(along - cab.rear_m) < 0.1) & (np.abs(across) <= cab.width_m / 2 + 0.05)
+        reports = tracker.process(points[~on_cab_rear], flat, t)
+        if reports:
+            rows.append((t, *errors(reports[0], truth)))
+    track = tracker.tracks[0]
+    assert len(track.reach.values) >= 5 and abs(track.reach.estimate - 1.5) < 0.05
+    rows = np.array(rows)
+    late = rows[rows[:, 0] >= 1.0]
+    assert len(late) >= 25 and late[:, 1].max() < 0.03
+
+
 def test_a_parked_trailer_alone_is_no_vehicle():
     """A trailer without its tractor, standing, seen all around or from one side only: no tractor is
     made of its front, and it never moves, so it is no rigid vehicle either."""

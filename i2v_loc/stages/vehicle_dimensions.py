@@ -612,8 +612,10 @@ class DimensionLearner:
         -0.52 m, -0.70, and its cab's yaw ran 4.5 deg off. The first 40 turning frames of a
         roundabout alone put a 13.6 m trailer's hinge 2-3 cm off, and its hitch 0.2 deg.) Only
         once the filter knows the speed within ``TURN_MAX_SPEED_STD_M_S``: the frames are de-skewed
-        with it. Straight, a fit with the hinge free measures the reach, when the cab's rear face
-        pins the axle: until the first hinge is fitted."""
+        with it. Straight, a fit with the hinge free measures the reach, when the cab's front face
+        (the model's anchor: a learned cab length moves its rear) or its rear face pins the axle:
+        until the first hinge is fitted. (Its rear face alone, with one or two points on it, a 6.5 m
+        trailer's unknown cab waited five frames with its box 0.51 m ahead of its front face.)"""
         if track.reach is None:
             return
         turning = abs(prior.hitch_rad) >= KINGPIN_MIN_HITCH_RAD and track.filter.speed_std_m_s <= TURN_MAX_SPEED_STD_M_S
@@ -634,8 +636,12 @@ class DimensionLearner:
         if m is None:
             return
         model = _changed(track.model, kingpin_behind_axle_m=m.kingpin_m)
-        front_seen = face_seen(m, model, 1, FRONT, track.ground_z_m, self.params.fit_top_band_m)
-        if front_seen and np.sum((m.unit == 0) & (m.face == REAR)) >= REAR_FACE_MIN_POINTS:
+        band = self.params.fit_top_band_m
+        axle_pinned = (
+            face_seen(m, model, 0, FRONT, track.ground_z_m, band)
+            or np.sum((m.unit == 0) & (m.face == REAR)) >= REAR_FACE_MIN_POINTS
+        )
+        if axle_pinned and face_seen(m, model, 1, FRONT, track.ground_z_m, band):
             track.reach.add(m.trailer_front_m - m.kingpin_m)
 
     def _fit_turn(self, track: VehicleTrack, prior: Prior, own: Measurement) -> None:
