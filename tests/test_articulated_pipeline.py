@@ -581,30 +581,6 @@ def test_a_tractor_with_another_kingpin_is_learned_in_the_turn():
     assert np.sqrt(np.mean(late[:, 3] ** 2)) < 0.5 and late[:, 1].max() < 0.05
 
 
-def test_a_turns_hinge_is_fitted_from_the_straight_estimate_not_from_the_last_fit():
-    """The frames of a turn fitted together give the same hinge whatever the previous fit left in
-    the model: a first hinge fitted to three frames at 9-11 deg was 0.09 m off a Twizy's kingpin,
-    and every later fit, warm-started there, stayed 0.1 m off (its hitch 0.9 deg off for 5 s)."""
-    import copy
-
-    truth_model = replace(volvo(), kingpin_behind_axle_m=0.0)
-    tracker = VehicleTracker(PARAMS.articulated, PARAMS.vehicles)
-    steer = lambda t: float(np.clip(0.4 * (t - 2.0), 0.0, 0.5))  # noqa: E731
-    for t, points, _ in drive([(truth_model, (-12.0, 4.0, 0.0, 0.0))], 6.0, 2.5, steer):
-        tracker.process(points, flat, t)
-    track = tracker.tracks[0]
-    assert track.hinge is not None and len(track.turn) >= 5
-    prior = track.last
-    fitted = []
-    for kingpin in (track.model.kingpin_behind_axle_m, track.model.kingpin_behind_axle_m + 0.12):
-        again = copy.deepcopy(track)
-        again.model = replace(again.model, kingpin_behind_axle_m=kingpin)
-        tracker.dimensions._fit_turn(again, Prior(*prior.vector, again.model, 0.0), prior)
-        fitted.append((again.hinge.kingpin_m, again.hinge.trailer_front_m))
-    np.testing.assert_allclose(fitted[0], fitted[1], atol=1e-6)
-    assert abs(fitted[0][0]) < 0.05
-
-
 def test_a_trailer_front_the_points_pin_in_a_turn_is_learned_though_its_face_is_not_seen():
     """An unknown tractor and trailer taken for the catalogue's MAN, standing bent 49 deg, seen by one
     sensor ahead of the cab: the trailer's front is 1.6 m ahead of its kingpin (the MAN's 1.2), the

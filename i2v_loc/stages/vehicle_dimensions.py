@@ -645,20 +645,11 @@ class DimensionLearner:
             track.reach.add(m.trailer_front_m - m.kingpin_m)
 
     def _fit_turn(self, track: VehicleTrack, prior: Prior, own: Measurement) -> None:
-        """``own`` kept as a frame of the turn, and the hinge fitted to the frames kept (``_learn_hinge``),
-        each time from the estimate before any turn (the catalogue's kingpin, the front where the
-        straight reach puts it), not from the last fit: the joint fit has more than one valley along
-        the kingpin. Warm-started from the last, a Twizy's first hinge, fitted to three frames at
-        9-11 deg 0.09 m off its kingpin, held every later one 0.1 m off (its hitch 0.9 deg off for
-        5 s; from the straight estimate, 0.01-0.03 m off)."""
+        """``own`` kept as a frame of the turn, and the hinge fitted to the frames kept (``_learn_hinge``)."""
         track.turn.append(TurnFrame.of(own, prior.ground_z_m, track.model, self.params.fit_top_band_m))
         cab = track.cab_length
         cab_prior = None if cab.counted else (cab.prior, CAB_LENGTH_SIGMA_M)
-        kingpin, front = _straight_hinge(track)
-        start = _changed(
-            track.model, kingpin_behind_axle_m=kingpin, trailer=_changed(track.model.trailer, front_m=front)
-        )
-        hinge = fit_hinge(list(track.turn), start, self.params, cab_prior=cab_prior)
+        hinge = fit_hinge(list(track.turn), track.model, self.params, cab_prior=cab_prior)
         if hinge.std_m.max() <= HINGE_MAX_STD_M:
             track.hinge = hinge
             # the next fit starts where this one ended (each frame's pose was the model's then)
@@ -999,15 +990,10 @@ def _slab(
 
 def _hinge(track: VehicleTrack) -> tuple[float, float]:
     """The kingpin's offset behind the rear axle and the trailer's front ahead of the kingpin:
-    fitted in a turn, else ``_straight_hinge``."""
+    fitted in a turn, else the catalogue's kingpin with the front where the reach seen straight puts
+    it, else the catalogue's."""
     if track.hinge is not None:
         return track.hinge.kingpin_m, track.hinge.trailer_front_m
-    return _straight_hinge(track)
-
-
-def _straight_hinge(track: VehicleTrack) -> tuple[float, float]:
-    """The catalogue's kingpin with the front where the reach seen straight puts it, else the
-    catalogue's."""
     kingpin, front = track.hinge_prior
     return kingpin, (track.reach.estimate + kingpin if track.reach.values else front)
 
