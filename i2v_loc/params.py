@@ -72,7 +72,8 @@ class SensorConfig(Section):
     enabled: bool = Field(
         True,
         description="Fused into the frames; `calibrate` writes false for a sensor whose calibration it refused "
-        "(at its guess, tens of cm and degrees off, its points bend and widen the vehicles they fall on)",
+        "(at its guess, tens of cm and degrees off, its points bend and widen the vehicles they fall on), "
+        "true for one it accepted",
     )
 
     @property

@@ -135,6 +135,11 @@ def test_calibrate_writes_the_sensors_it_could_calibrate_and_fails_naming_the_re
     written = load_params(out)
     assert written.sensor("l3").extrinsics == GUESS.sensor("l3").extrinsics and not written.sensor("l3").enabled
     assert all(written.sensor(name).enabled for name in ("l1", "l2", "l4"))
+    # calibrated again from that file, l3 accepted this time: enabled again
+    fitness["l3"] = 0.9
+    again = tmp_path / "again.yaml"
+    assert main(["calibrate", str(SAMPLE), "--guess", str(out), "--out", str(again)]) == 0
+    assert all(load_params(again).sensor(name).enabled for name in ("l1", "l2", "l3", "l4"))
     assert written.sensor("l2").extrinsics == _perturbed(TRUTH.sensor("l2").extrinsics, 0.03, -0.04, 1.5)
     assert written.sensor("l4").extrinsics == TRUTH.sensor("l4").extrinsics
 

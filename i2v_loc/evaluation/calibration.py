@@ -126,7 +126,8 @@ def run_calibration(recording, params, progress=None) -> tuple[list, bool]:
 def accepted_sensors(guess_sensors, results, min_fitness: float) -> tuple[list, list]:
     """The guess's sensors with the calibrated extrinsics where the calibration was accepted and,
     where it was refused (``SensorCalibration.accepted``), the guessed ones left out (``enabled``
-    false), and the refused results. One sensor whose registration failed leaves the others'
+    false; the accepted ones enabled, also when the guess, a file written before, had them off), and the
+    refused results. One sensor whose registration failed leaves the others'
     calibrations standing: a refused one had made every sensor of a sloped docking stay at its
     guess, 52 cm off (38.7 % success; 94.0 % with the others calibrated). Fused at its guess (52 cm
     and 3.4 deg off), that one sensor's points made held-out generalization +1300's unknown 10.5 m
@@ -135,7 +136,9 @@ def accepted_sensors(guess_sensors, results, min_fitness: float) -> tuple[list, 
     refused = [by_name[s.name] for s in guess_sensors if not by_name[s.name].accepted(min_fitness)]
     calibrated = calibrated_sensors(guess_sensors, results)
     sensors = [
-        c if by_name[g.name].accepted(min_fitness) else g.model_copy(update={"enabled": False})
+        c.model_copy(update={"enabled": True})
+        if by_name[g.name].accepted(min_fitness)
+        else g.model_copy(update={"enabled": False})
         for g, c in zip(guess_sensors, calibrated)
     ]
     return sensors, refused
