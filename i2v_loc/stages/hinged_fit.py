@@ -344,8 +344,8 @@ def _rear_along(m: Measurement, model: VehicleModel, params: ArticulatedParams) 
     """How the trailer's rear face moves along the trailer's axis with the pose (x, y, yaw, hitch:
     the kingpin swings about the rear axle with the yaw), and the fit's covariance without its floor."""
     along = m.yaw_rad + m.hitch_rad
-    g = np.array([math.cos(along), math.sin(along), -model.kingpin_behind_axle_m * math.sin(m.hitch_rad), 0.0])
-    return g, _without_floor(m, params)
+    kingpin = _trailer_pose_jacobian(m.yaw_rad, model.kingpin_behind_axle_m)[:2]
+    return np.array([math.cos(along), math.sin(along)]) @ kingpin, _without_floor(m, params)
 
 
 def _without_floor(m: Measurement, params: ArticulatedParams) -> np.ndarray:
