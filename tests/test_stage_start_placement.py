@@ -14,6 +14,7 @@ from hinged_points import WorldBox, cast_rays, vehicle_points, world_boxes
 from i2v_loc.params import Params, apply_patch
 from i2v_loc.stages.hinged_fit import Prior, fit, thin
 from i2v_loc.stages.primitives import min_area_rect
+from i2v_loc.stages.unit_frames import supported, unit_frames
 from i2v_loc.stages.vehicle_model import Box, VehicleModel
 from i2v_loc.stages.vehicle_start import COARSE_ITERATIONS, START_ITERATIONS, START_SCALE_M, _bent_flags, _sized_start
 from i2v_loc.stages.vehicle_tracker import VehicleTracker
@@ -211,3 +212,23 @@ def test_while_the_map_is_learned_a_vehicle_starts_by_its_shape_only_where_each_
     assert not _shape_shown(fit_of(18, SHAPE_MIN_UNIT_POINTS - 1), twizy, rigid_allowed=False)
     assert _shape_shown(fit_of(SHAPE_MIN_UNIT_POINTS, 18), twizy, rigid_allowed=False)
     assert _shape_shown(few, twizy, rigid_allowed=True)
+
+
+@pytest.mark.parametrize("sensor", [(-9.6, -1.5, 5.1), (-10.3, 5.3, 4.8)])
+def test_a_cab_half_hidden_behind_its_trailer_is_spanned_by_what_shows_and_what_is_hidden(sensor):
+    """A MAN folded -40 deg, seen from behind its trailer: 0.6-0.9 m of its cab's 2.77 m show, the
+    rest lies behind the trailer's front. Its points alone do not span half the cab; with the
+    length the rays show hidden behind the trailer they do. Without the trailer the same rays
+    would end on the cab's own side: nothing hides it then, and it is not spanned."""
+    starts = VehicleTracker(PARAMS.articulated, PARAMS.vehicles).starts
+    man, hitch = starts.catalogue["man_tgx"], np.radians(-40.0)
+    points = vehicle_points(man, 0.0, 0.0, 0.0, hitch, sensors=[sensor], spacing=0.15)
+    m = fit(points, Prior(0.0, 0.0, 0.0, hitch, man, 0.0), PARAMS.articulated)
+    cab = unit_frames(m.points, m.vector, man)[0][m.unit == 0, 0]
+    assert np.ptp(cab) < 0.5 * man.tractor.length_m and not supported(m, man, 0.0)
+    starts.rays = cast_rays(world_boxes(man, 0.0, 0.0, 0.0, hitch), [sensor])
+    hidden = starts._hidden_length(m, man, 0.0, 0, float(cab.min()), float(cab.max()))
+    assert 1.5 <= hidden <= man.tractor.length_m - np.ptp(cab) and starts._spanned(m, man, 0.0, True)
+    starts.rays = cast_rays(world_boxes(man, 0.0, 0.0, 0.0, hitch)[:1], [sensor])  # the trailer gone
+    assert starts._hidden_length(m, man, 0.0, 0, float(cab.min()), float(cab.max())) == 0.0
+    assert not starts._spanned(m, man, 0.0, True)

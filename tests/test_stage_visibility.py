@@ -181,3 +181,48 @@ def test_rays_that_returned_nothing_cross_every_box_on_their_way_out_to_the_sens
     lost = Unreturned([along_x.astype(np.float32)], turned[None], SENSOR, [20.0])
     assert rays(row(1.5, 0.0), unreturned=lost).unreturned_through(**box)[0] == 1
     assert seen.through(**BOX)[0] == sampled_through(row(1.5, 0.0), SENSOR[0])
+
+
+# A unit's box 4 m long (x from -2 to 2) and 2 m wide; its side y = -1 faces SENSOR, 9 m from it.
+UNIT = dict(center_xy=(0.0, 0.0), yaw_rad=0.0, half_length_m=2.0, half_width_m=1.0)
+ALONG = np.arange(-1.75, 2.0, 0.5)  # the places asked, 1 m up
+HIDE = dict(height_m=1.0, cone_rad=np.radians(1.0), before_m=0.3)
+
+
+def grid(xs, y, zs):
+    x, z = np.meshgrid(xs, zs)
+    return np.column_stack([x.ravel(), np.full(x.size, y), z.ravel()]).astype(np.float32)
+
+
+def side_behind_wall(wall_y=-5.0):
+    """The unit's near side returns where x > 0; a wall at ``wall_y`` stands before it where x <= 0
+    (a ray to (x, -1, 1) meets y = -5 at x 5/9, 1.89 m up: the wall's returns cover those rays)."""
+    wall = grid(np.arange(-3.0, 0.001, 0.02), wall_y, np.arange(1.0, 2.6, 0.04))
+    side = grid(np.arange(0.02, 2.0, 0.04), -1.0, np.arange(0.5, 1.6, 0.04))
+    return np.vstack([wall, side])
+
+
+def test_places_behind_something_else_are_hidden_those_showing_their_own_side_not():
+    hidden = rays(side_behind_wall()).hidden_along_side(**UNIT, along_m=ALONG, **HIDE)
+    assert hidden.tolist() == (ALONG < 0).tolist()  # the four places behind the wall
+
+
+def test_no_return_near_a_ray_hides_nothing_nor_a_wall_at_the_units_own_face():
+    side = side_behind_wall()
+    open_sky = side[side[:, 1] == -1.0]  # the wall gone: nothing returned towards x < 0
+    assert not rays(open_sky).hidden_along_side(**UNIT, along_m=ALONG, **HIDE).any()
+    near = side_behind_wall(wall_y=-1.2)  # within before_m of the box: its own face's returns
+    assert not rays(near).hidden_along_side(**UNIT, along_m=ALONG, **HIDE).any()
+
+
+def test_a_place_one_sensor_sees_is_not_hidden_whatever_another_saw():
+    first = side_behind_wall()
+    other_side = grid(np.arange(-2.0, 2.0, 0.04), 1.0, np.arange(0.5, 1.6, 0.04))  # its y = 1 side, all of it
+    both = rays(
+        np.vstack([first, other_side]),
+        origins=[SENSOR[0], [0.0, 10.0, 3.0]],
+        bounds=[0, len(first), len(first) + len(other_side)],
+    )
+    assert not both.hidden_along_side(**UNIT, along_m=ALONG, **HIDE).any()
+    unknown = rays(np.vstack([first, other_side]), origins=[SENSOR[0], [np.nan] * 3], bounds=both.bounds)
+    assert unknown.hidden_along_side(**UNIT, along_m=ALONG, **HIDE).tolist() == (ALONG < 0).tolist()

@@ -1599,6 +1599,43 @@ def rays_through_box(points, origins, bounds, rotation, box, beyond_m):
 
 
 @njit(**_JIT)
+def rays_before_side(points, origins, bounds, rotation, box, along, height, cone_cos, before_m):
+    """Per place on a box's side and sweep: how many of the sweep's returns lie within the cone
+    (cosine ``cone_cos``) about the ray from its sensor to the place, and how many of those ended
+    ``before_m`` or more before it, not within ``before_m`` of the box (its own). The places:
+    ``along`` its length (its frame, centre 0) at ``height`` (level frame), on the side facing
+    that sweep's sensor. ``box``: centre x, y, cos and sin of its yaw, half length, half width
+    (heights not asked); yard-frame rays turned by ``rotation`` into the level frame. Sweeps with
+    a NaN origin count nothing."""
+    cx, cy, c, s, half_l, half_w = box[0], box[1], box[2], box[3], box[4], box[5]
+    n = along.shape[0]
+    in_cone = np.zeros((n, origins.shape[0]), dtype=np.int64)
+    before = np.zeros((n, origins.shape[0]), dtype=np.int64)
+    for k in range(origins.shape[0]):
+        if not (np.isfinite(origins[k, 0]) and np.isfinite(origins[k, 1]) and np.isfinite(origins[k, 2])):
+            continue
+        ox, oy, oz = _box_frame(origins[k, 0], origins[k, 1], origins[k, 2], rotation, cx, cy, c, s)
+        side = half_w if oy >= 0.0 else -half_w
+        ux, uy, uz, reach = np.empty(n), np.empty(n), np.empty(n), np.empty(n)
+        for j in range(n):
+            dx, dy, dz = along[j] - ox, side - oy, height - oz
+            reach[j] = math.sqrt(dx * dx + dy * dy + dz * dz)
+            ux[j], uy[j], uz[j] = dx / reach[j], dy / reach[j], dz / reach[j]
+        for i in range(bounds[k], bounds[k + 1]):
+            px, py, pz = _box_frame(points[i, 0], points[i, 1], points[i, 2], rotation, cx, cy, c, s)
+            dx, dy, dz = px - ox, py - oy, pz - oz
+            r = math.sqrt(dx * dx + dy * dy + dz * dz)
+            if r == 0.0:
+                continue
+            outside = abs(px) > half_l + before_m or abs(py) > half_w + before_m
+            for j in range(n):
+                if (dx * ux[j] + dy * uy[j] + dz * uz[j]) >= cone_cos * r:
+                    in_cone[j, k] += 1
+                    before[j, k] += outside and r <= reach[j] - before_m
+    return in_cone, before
+
+
+@njit(**_JIT)
 def plane_crossings(points, origins, bounds, rotation, lag, plane, motion, beyond_m):
     """Where rays (each sweep's origin to each of its returns, rows ``bounds[k]:bounds[k + 1]``; yard
     frame, turned by ``rotation`` into the level frame) cross an upright plane and end at least

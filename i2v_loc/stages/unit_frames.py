@@ -4,6 +4,7 @@ points give its units, and how far a trailer's body reaches."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import replace
 
 import numpy as np
@@ -75,8 +76,15 @@ def face_seen(m: Measurement, model: VehicleModel, unit: int, face: int, ground_
     return np.count_nonzero(np.abs(across) <= width / 4) >= 2 and float(np.ptp(across)) >= FACE_SEEN_SPAN * width
 
 
-def supported(m: Measurement, model: VehicleModel, ground_z_m: float, top_seen: bool = True) -> bool:
-    """Each unit's explained points span at least ``UNIT_SUPPORT`` of its length, reach
+def supported(
+    m: Measurement,
+    model: VehicleModel,
+    ground_z_m: float,
+    top_seen: bool = True,
+    hidden_m: Callable[[int, float, float], float] | None = None,
+) -> bool:
+    """Each unit's explained points span at least ``UNIT_SUPPORT`` of its length (with the length
+    ``hidden_m(unit, first, last)`` tells is hidden outside their span, its frame), reach
     ``UNIT_SUPPORT`` of its height above its floor (a car's side on a trailer's faces is no truck;
     unless the sensors' view ends below: ``top_seen`` False)
     and the cab's are at least ``UNIT_SUPPORT`` of its share of the side area (a parked trailer's
@@ -93,10 +101,13 @@ def supported(m: Measurement, model: VehicleModel, ground_z_m: float, top_seen: 
         if (
             mine.sum() < 3
             or (u == 0 and mine.sum() / explained < UNIT_SUPPORT * areas[u] / areas.sum())
-            or np.ptp(q[mine, 0]) < UNIT_SUPPORT * box.length_m
             or (top_seen and z_rel[mine].max() < box.floor_m + UNIT_SUPPORT * box.height_m)
             or np.mean(z_rel[mine] < box.floor_m) > UNIT_SUPPORT
         ):
+            return False
+        along = q[mine, 0]
+        span, need = float(np.ptp(along)), UNIT_SUPPORT * box.length_m
+        if span < need and (hidden_m is None or span + hidden_m(u, float(along.min()), float(along.max())) < need):
             return False
     return True
 

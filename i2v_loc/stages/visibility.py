@@ -106,6 +106,27 @@ class Rays:
             self.points, self.origins, self.bounds, self._rotation, self._lag_s, plane, carry, float(beyond_m)
         )
 
+    def hidden_along_side(
+        self, center_xy: tuple[float, float], yaw_rad: float, half_length_m: float, half_width_m: float,
+        along_m: np.ndarray, height_m: float, cone_rad: float, before_m: float,
+    ) -> np.ndarray:  # fmt: skip
+        """Which places ``along_m`` the upright box's length (level frame: centre, yaw, half sizes;
+        ``height_m`` up) every sensor's view of ends short of: on the side facing each sweep's
+        sensor, some of its returns lie within ``cone_rad`` of the ray there and all of those ended
+        ``before_m`` or more before it, on something not within ``before_m`` of the box (its own returns hide
+        nothing of it: a container's end hides its length). A sweep with no return near the ray
+        (the sky, or out of its view) shows nothing hidden; neither does a sweep whose sensor is
+        not known."""
+        box = np.array([*center_xy, np.cos(yaw_rad), np.sin(yaw_rad), half_length_m, half_width_m], dtype=float)
+        in_cone, before = kernels.rays_before_side(
+            self.points, self.origins, self.bounds, self._rotation, box,
+            np.asarray(along_m, dtype=float), float(height_m), float(np.cos(cone_rad)), float(before_m),
+        )  # fmt: skip
+        known = np.isfinite(self.origins).all(axis=1)
+        if not known.any():
+            return np.zeros(len(along_m), dtype=bool)
+        return ((in_cone > 0) & (before == in_cone))[:, known].all(axis=1)
+
     @cached_property
     def _rotation(self) -> np.ndarray:
         """``to_level`` as the kernels take it, once per frame (a copy: a read-only one is another
