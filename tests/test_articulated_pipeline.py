@@ -2540,36 +2540,3 @@ def test_a_vehicle_whose_unseen_cab_the_rays_cross_leaves():
             bool(tracker.process(no_cab, flat, 0.5 + 0.1 * k, Background.LEARNING, rays)) for k in range(leave + 2)
         ]
         assert alive == [True] * (leave + 2) if stays else alive == [True] * (leave - 1) + [False] * 3
-
-
-def _shelter_beside_trailer_rear(model: VehicleModel, x: float, y: float, yaw: float) -> np.ndarray:
-    """A dock's shelter around a trailer's rear: pads 0.6 m deep standing 0.5-1.1 m out past each
-    of its sides along its last metre, 5 m high, and a bar across above its rear at 4.8 m."""
-    trailer = world_boxes(model, x, y, yaw)[1]
-    c, s = np.cos(trailer.yaw_rad), np.sin(trailer.yaw_rad)
-    rear = -trailer.box.length_m / 2
-    along, out, up = np.meshgrid(
-        np.arange(rear, rear + 1.0, 0.1), np.arange(0.5, 1.15, 0.15), np.arange(0.1, 5.0, 0.15)
-    )
-    half = trailer.box.width_m / 2
-    pads = [np.column_stack([along.ravel(), side * (half + out.ravel()), up.ravel()]) for side in (-1.0, 1.0)]
-    across = np.arange(-half - 1.1, half + 1.1, 0.1)
-    bar = np.column_stack([np.full(across.size, rear + 0.3), across, np.full(across.size, 4.8)])
-    q = np.vstack(pads + [bar])
-    xy = trailer.center_xy + np.column_stack([c * q[:, 0] - s * q[:, 1], s * q[:, 0] + c * q[:, 1]])
-    return np.column_stack([xy, q[:, 2]])
-
-
-def test_a_standing_vehicle_in_a_docks_shelter_keeps_its_hitch_while_the_map_is_learned():
-    """A Twizy standing in a dock: the shelter's pads beside its trailer's rear stand within the
-    claim's gate of its box, and they reach 5 m up, higher than any vehicle. No track claims the
-    points of such a column (``in_tall_columns``); claimed, their sides pulled a docked Twizy's
-    trailer 4 deg round while the map was learned (held-out paper +1200: 3-7 deg for 3 s)."""
-    twizy = VehicleModel.from_config("twizy", PARAMS.vehicles["twizy"])
-    shelter = _shelter_beside_trailer_rear(twizy, 0.0, 4.0, 0.4)
-    tracker = VehicleTracker(PARAMS.articulated, PARAMS.vehicles)
-    hitches = []
-    for t, points, (truth,) in drive([(twizy, (0.0, 4.0, 0.4, 0.4))], 3.0, 0.0, 0.0):
-        reports = tracker.process(np.vstack([points, shelter]), flat, t, Background.LEARNING)
-        hitches += [errors(r, truth)[2] for r in reports]
-    assert len(hitches) > 20 and max(np.abs(hitches)) < 0.5  # 1.5 deg with the pads claimed

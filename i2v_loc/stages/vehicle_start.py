@@ -415,7 +415,7 @@ class VehicleStarts:
         (a cab and its trailer are apart by up to about 1.5 m), of a vehicle's length and at least
         ``start_min_width_m`` wide (a wall, or a vehicle seen from one side only, is a plane)."""
         p = self.params
-        points = _in_grid_precision(points[~in_tall_columns(points, ground, p.start_voxel_m)])
+        points = _in_grid_precision(_below_tall_structures(points, ground, p.start_voxel_m))
         out = []
         for rows in seed_group_rows(
             points,
@@ -1318,19 +1318,19 @@ def gap_band(model: VehicleModel) -> tuple[float, float]:
     return model.trailer.floor_m + END_BAND_M, min(model.tractor.top_m, model.trailer.top_m) - END_BAND_M
 
 
-def in_tall_columns(points: np.ndarray, ground, cell_m: float) -> np.ndarray:
-    """Which ``points`` lie in the ``cell_m`` columns that reach higher than any vehicle: a dock
-    wall, a building, a dock's shelter or a tree's crown (before the background map is learned, a
-    trailer standing at a dock is one component with the wall)."""
-    tall = np.zeros(len(points), dtype=bool)
+def _below_tall_structures(points: np.ndarray, ground, cell_m: float) -> np.ndarray:
+    """``points`` without the ``cell_m`` columns that reach higher than any vehicle: a dock wall, a
+    building or a tree's crown (before the background map is learned, a trailer standing at a dock
+    is one component with the wall)."""
     if len(points) == 0:
-        return tall
+        return points
     above = points[:, 2] - ground_heights(ground, points[:, :2]) > MAX_VEHICLE_HEIGHT_M
     if np.count_nonzero(above) < TALL_COLUMN_MIN_POINTS:
-        return tall
+        return points
     columns = voxel_keys(np.floor(points[:, :2] / cell_m), 1.0)  # the cells of a grid through the origin
     _, index = np.unique(columns, return_inverse=True)
-    return (np.bincount(index, weights=above) >= TALL_COLUMN_MIN_POINTS)[index]
+    tall = np.bincount(index, weights=above) >= TALL_COLUMN_MIN_POINTS
+    return points[~tall[index]]
 
 
 def ground_heights(ground, xy: np.ndarray) -> np.ndarray:

@@ -43,7 +43,6 @@ from i2v_loc.stages.vehicle_start import (
     Background,
     Seed,
     VehicleStarts,
-    in_tall_columns,
     unit_crossed,
 )
 from i2v_loc.stages.visibility import Rays
@@ -130,15 +129,11 @@ class VehicleTracker:
         (``vehicle_start.Background``); until it is the foreground holds the yard too: only
         articulated vehicles start then (two hinged units are no wall, container or parked trailer);
         a rigid one needs the learned background to tell it from a container.
-        ``rays``: the frame's sensor rays, which show whether a seed's gap was seen empty.
-        No track claims the points of a column reaching higher than any vehicle (``in_tall_columns``,
-        as no seed holds them): while the map was learned, a Twizy standing in a dock had its
-        shelter's sides beside its trailer fitted as the trailer's, 3-7 deg of hitch off for 3 s."""
+        ``rays``: the frame's sensor rays, which show whether a seed's gap was seen empty."""
         self._rays = self.starts.rays = self.dimensions.rays = rays
         priors = [self._prior(t, stamp_s, ground) for t in self.tracks]
         lost = [self._tractor_lost(t) for t in self.tracks]
         owner = self._claim(points, priors, lost)
-        owner[in_tall_columns(points, ground, self.params.start_voxel_m)] = -1
         owned = [_own_body(points, owner, i, prior) for i, prior in enumerate(priors)]
         reports = []
         free = points[owner < 0]
