@@ -708,6 +708,41 @@ def test_a_trailer_front_reaching_further_is_learned_from_the_cabs_front_its_rea
     assert len(late) >= 25 and late[:, 1].max() < 0.03
 
 
+@pytest.mark.parametrize("gap_m", [1.2, 1.85])
+def test_a_standing_vehicle_with_a_trailer_parked_just_behind_starts_while_the_map_is_learned(gap_m):
+    """A Volvo standing with a 13.6 m trailer parked ``gap_m`` behind its own: closer than
+    ``start_join_m``, the two make one 32 m seed cluster, longer than any vehicle and holding no
+    seed yet. Cut at its widest gap along its length, the Volvo starts as soon as one standing
+    alone does (held-out generalization +3000: 5 frames late); the parked trailer never does."""
+    model = volvo()
+    boxes = world_boxes(model, 0.0, 3.0, 0.0)
+    rear_x = min(float(b.center_xy[0]) - b.box.length_m / 2 for b in boxes)
+    trailer = VehicleModel.rigid("rigid", 13.6, 2.55, model.trailer.height_m, model.trailer.floor_m)
+    (at_zero,) = world_boxes(trailer, 0.0, 3.0, 0.0)
+    parked_x = rear_x - gap_m - (float(at_zero.center_xy[0]) + at_zero.box.length_m / 2)
+    parked = world_boxes(trailer, parked_x, 3.0, 0.0)
+    rays = cast_rays(boxes + parked, SENSORS)
+
+    def first_report(with_parked: bool) -> tuple[int | None, list[VehicleReport]]:
+        tracker = VehicleTracker(PARAMS.articulated, PARAMS.vehicles)
+        for k in range(8):
+            points = vehicle_points(model, 0.0, 3.0, 0.0, sensors=SENSORS, others=parked if with_parked else [], seed=k)
+            if with_parked:
+                behind = vehicle_points(trailer, parked_x, 3.0, 0.0, sensors=SENSORS, others=boxes, seed=k)
+                points = np.vstack([points, behind])
+            reports = tracker.process(points, flat, 0.1 * k, background=Background.LEARNING, rays=rays)
+            if reports:
+                return k, reports
+        return None, []
+
+    alone, _ = first_report(with_parked=False)
+    k, reports = first_report(with_parked=True)
+    assert alone is not None and k == alone and len(reports) == 1
+    state = reports[0].state
+    assert reports[0].model.name == "volvo_fh" and abs(state.hitch_rad) < np.radians(2.0)
+    assert np.hypot(state.x_m, state.y_m - 3.0) < 0.3 and abs(state.yaw_rad) < np.radians(2.0)
+
+
 def test_a_parked_trailer_alone_is_no_vehicle():
     """A trailer without its tractor, standing, seen all around or from one side only: no tractor is
     made of its front, and it never moves, so it is no rigid vehicle either."""

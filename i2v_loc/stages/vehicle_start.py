@@ -48,7 +48,7 @@ from i2v_loc.stages.hinged_fit import (
     in_unit_box,
     thin,
 )
-from i2v_loc.stages.primitives import Rect, min_area_rect, voxel_keys
+from i2v_loc.stages.primitives import Rect, min_area_rect, unit_axes, voxel_keys
 from i2v_loc.stages.unit_frames import (
     END_BAND_M,
     MAX_TRAILER_LENGTH_M,
@@ -413,7 +413,9 @@ class VehicleStarts:
     def _seed_clusters(self, points: np.ndarray, ground) -> list[tuple[np.ndarray, Rect]]:
         """Connected components tall enough to be a vehicle, those closer than ``start_join_m`` joined
         (a cab and its trailer are apart by up to about 1.5 m), of a vehicle's length and at least
-        ``start_min_width_m`` wide (a wall, or a vehicle seen from one side only, is a plane)."""
+        ``start_min_width_m`` wide (a wall, or a vehicle seen from one side only, is a plane). One
+        larger than any vehicle is taken apart into the seeds it holds (``_seeds_in``), or, holding
+        none, cut at its gaps (``_cut_at_gaps``)."""
         p = self.params
         points = _in_grid_precision(_below_tall_structures(points, ground, p.start_voxel_m))
         out = []
@@ -433,6 +435,11 @@ class VehicleStarts:
                 out += [(cluster[r], own) for r in parts if self._seen_wide(own := min_area_rect(cluster[r, :2]))]
             elif self._seen_wide(rect) or one_face_sized(rect, p):
                 out.append((cluster, rect))
+            elif _beyond_any_vehicle(rect, p):
+                for part in _cut_at_gaps(cluster, rect, p):
+                    own = min_area_rect(cluster[part, :2])
+                    if self._seen_wide(own) or one_face_sized(own, p):
+                        out.append((cluster[part], own))
         return out
 
     def _seeds_in(self, cluster: np.ndarray, rect: Rect) -> list[np.ndarray]:
@@ -1096,6 +1103,35 @@ class VehicleStarts:
 def _beyond_any_vehicle(rect: Rect, params: ArticulatedParams) -> bool:
     """Whether a footprint is longer than ``start_max_length_m`` or wider than ``FOOTPRINT_MAX_WIDTH_M``."""
     return rect.length_m > params.start_max_length_m or rect.width_m > FOOTPRINT_MAX_WIDTH_M
+
+
+def _cut_at_gaps(cluster: np.ndarray, rect: Rect, params: ArticulatedParams, depth: int = 3) -> list[np.ndarray]:
+    """The rows of a cluster longer than any vehicle cut at a gap along its length of at least
+    ``start_voxel_m``: the widest that leaves both parts of a vehicle's length (``start_min_length_m``
+    to ``start_max_length_m``), else the widest, its parts cut again. A Volvo standing with a
+    trailer parked 1.85 m behind its own was one 26 m cluster; the widest gap alone may be the one
+    between a cab and its trailer."""
+    along = (cluster[:, :2] - rect.center_xy) @ unit_axes(rect.yaw_rad)[0]
+    order = np.argsort(along)
+    ends = along[order]
+    gaps = np.diff(ends)
+    cuts = np.flatnonzero(gaps >= params.start_voxel_m)
+    if depth == 0 or not len(cuts):
+        return [np.arange(len(cluster))]
+    low, high = params.start_min_length_m, params.start_max_length_m
+    lengths = np.array([ends[cuts] - ends[0], ends[-1] - ends[cuts + 1]])
+    sized = np.all((lengths >= low) & (lengths <= high), axis=0)
+    k = cuts[sized][np.argmax(gaps[cuts[sized]])] if sized.any() else cuts[np.argmax(gaps[cuts])]
+    parts = []
+    for rows in (order[: k + 1], order[k + 1 :]):
+        own = min_area_rect(cluster[rows, :2])
+        pieces = (
+            _cut_at_gaps(cluster[rows], own, params, depth - 1)
+            if _beyond_any_vehicle(own, params)
+            else [np.arange(len(rows))]
+        )
+        parts += [rows[piece] for piece in pieces]
+    return parts
 
 
 def _explained_footprint(m: Measurement, min_points: int) -> Rect | None:
