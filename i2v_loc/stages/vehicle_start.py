@@ -433,14 +433,16 @@ class VehicleStarts:
             parts = self._seeds_in(cluster, rect) if _beyond_any_vehicle(rect, p) else []
             if parts:
                 out += [(cluster[r], own) for r in parts if self._seen_wide(own := min_area_rect(cluster[r, :2]))]
-            elif self._seen_wide(rect) or one_face_sized(rect, p):
+            elif self._seed_sized(rect):
                 out.append((cluster, rect))
             elif _beyond_any_vehicle(rect, p):
-                for part in _cut_at_gaps(cluster, rect, p):
-                    own = min_area_rect(cluster[part, :2])
-                    if self._seen_wide(own) or one_face_sized(own, p):
-                        out.append((cluster[part], own))
+                cut = [(cluster[r], min_area_rect(cluster[r, :2])) for r in _cut_at_gaps(cluster, rect, p)]
+                out += [(part, own) for part, own in cut if self._seed_sized(own)]
         return out
+
+    def _seed_sized(self, rect: Rect) -> bool:
+        """A footprint seen wide (``_seen_wide``) or of one end face's size (``one_face_sized``)."""
+        return self._seen_wide(rect) or one_face_sized(rect, self.params)
 
     def _seeds_in(self, cluster: np.ndarray, rect: Rect) -> list[np.ndarray]:
         """The rows of a cluster (footprint ``rect``) in the last footprint of each seed of a
