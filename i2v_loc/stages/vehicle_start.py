@@ -430,14 +430,14 @@ class VehicleStarts:
         ):
             cluster = points[rows]
             rect = min_area_rect(cluster[:, :2])
-            parts = self._seeds_in(cluster, rect) if _beyond_any_vehicle(rect, p) else []
+            beyond = _beyond_any_vehicle(rect, p)
+            parts = self._seeds_in(cluster, rect) if beyond else []
             if parts:
                 out += [(cluster[r], own) for r in parts if self._seen_wide(own := min_area_rect(cluster[r, :2]))]
             elif self._seed_sized(rect):
                 out.append((cluster, rect))
-            elif _beyond_any_vehicle(rect, p):
-                cut = [(cluster[r], min_area_rect(cluster[r, :2])) for r in _cut_at_gaps(cluster, rect, p)]
-                out += [(part, own) for part, own in cut if self._seed_sized(own)]
+            elif beyond:
+                out += [(cluster[r], own) for r, own in _cut_at_gaps(cluster, rect, p) if self._seed_sized(own)]
         return out
 
     def _seed_sized(self, rect: Rect) -> bool:
@@ -837,16 +837,15 @@ class VehicleStarts:
         1.6 m of its trailer seen, started at 30 deg and stayed there). Never without rays."""
         if self.rays is None or unit != 0 or not model.articulated:
             return 0.0
-        box = model.boxes[unit]
+        box = model.tractor
         along = np.arange(box.rear_m + HIDDEN_STEP_M / 2, box.front_m, HIDDEN_STEP_M)
         along = along[(along < first_m) | (along > last_m)]
         if not len(along):
             return 0.0
-        hitch = m.hitch_rad or 0.0
-        centre = model.box_centers(m.x_m, m.y_m, m.yaw_rad, hitch)[unit]
+        centre = model.box_centers(m.x_m, m.y_m, m.yaw_rad, m.hitch_rad or 0.0)[0]
         hidden = self.rays.hidden_along_side(
             tuple(centre),
-            m.yaw_rad + (hitch if unit else 0.0),
+            m.yaw_rad,
             box.length_m / 2,
             box.width_m / 2,
             along - box.center_x_m,
@@ -1107,10 +1106,12 @@ def _beyond_any_vehicle(rect: Rect, params: ArticulatedParams) -> bool:
     return rect.length_m > params.start_max_length_m or rect.width_m > FOOTPRINT_MAX_WIDTH_M
 
 
-def _cut_at_gaps(cluster: np.ndarray, rect: Rect, params: ArticulatedParams, depth: int = 3) -> list[np.ndarray]:
-    """The rows of a cluster longer than any vehicle cut at a gap along its length of at least
-    ``start_voxel_m``: the widest that leaves both parts of a vehicle's length (``start_min_length_m``
-    to ``start_max_length_m``), else the widest, its parts cut again. A Volvo standing with a
+def _cut_at_gaps(
+    cluster: np.ndarray, rect: Rect, params: ArticulatedParams, depth: int = 3
+) -> list[tuple[np.ndarray, Rect]]:
+    """The parts (rows, footprint) of a cluster longer than any vehicle cut at a gap along its
+    length of at least ``start_voxel_m``: the widest that leaves both parts of a vehicle's length
+    (``start_min_length_m`` to ``start_max_length_m``), else the widest, its parts cut again. A Volvo standing with a
     trailer parked 1.85 m behind its own was one 26 m cluster; the widest gap alone may be the one
     between a cab and its trailer."""
     along = (cluster[:, :2] - rect.center_xy) @ unit_axes(rect.yaw_rad)[0]
@@ -1119,7 +1120,7 @@ def _cut_at_gaps(cluster: np.ndarray, rect: Rect, params: ArticulatedParams, dep
     gaps = np.diff(ends)
     cuts = np.flatnonzero(gaps >= params.start_voxel_m)
     if depth == 0 or not len(cuts):
-        return [np.arange(len(cluster))]
+        return [(np.arange(len(cluster)), rect)]
     low, high = params.start_min_length_m, params.start_max_length_m
     lengths = np.array([ends[cuts] - ends[0], ends[-1] - ends[cuts + 1]])
     sized = np.all((lengths >= low) & (lengths <= high), axis=0)
@@ -1127,12 +1128,12 @@ def _cut_at_gaps(cluster: np.ndarray, rect: Rect, params: ArticulatedParams, dep
     parts = []
     for rows in (order[: k + 1], order[k + 1 :]):
         own = min_area_rect(cluster[rows, :2])
-        pieces = (
-            _cut_at_gaps(cluster[rows], own, params, depth - 1)
-            if _beyond_any_vehicle(own, params)
-            else [np.arange(len(rows))]
-        )
-        parts += [rows[piece] for piece in pieces]
+        if _beyond_any_vehicle(own, params):
+            parts += [
+                (rows[piece], footprint) for piece, footprint in _cut_at_gaps(cluster[rows], own, params, depth - 1)
+            ]
+        else:
+            parts.append((rows, own))
     return parts
 
 
