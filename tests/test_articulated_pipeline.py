@@ -1789,7 +1789,7 @@ def test_two_units_are_judged_on_the_cheapest_supported_fit():
 
 
 def test_a_moving_seed_that_fitted_one_box_is_fitted_again_before_the_map_is_ready():
-    """Only a moved seed is fitted again; before the map is ready (it cannot start rigid) after
+    """Only a seed that moved is fitted again; before the map is ready (it cannot start rigid) after
     ``SEED_RETRY_FRAMES``, once the map is ready (it may start rigid) at once."""
     tracker = VehicleTracker(PARAMS.articulated, PARAMS.vehicles)
     travel = PARAMS.articulated.start_travel_m
@@ -1797,6 +1797,10 @@ def test_a_moving_seed_that_fitted_one_box_is_fitted_again_before_the_map_is_rea
     moved = replace(_seed_that_moved(box, travel + 0.1), frames=10, rigid=True, failed_frame=5)
     standing = Seed(np.array([0.0, 5.0]), np.array([0.0, 5.0]), frames=10, rigid=True, failed_frame=5)
     assert tracker.starts._may_fit(moved) and not tracker.starts._may_fit(standing)
+    # one that left a place the rays saw empty, and is back near where it was first seen (a truck
+    # that drove ahead and reversed into its dock), is fitted again too
+    back = replace(standing, left_seen=True, points=box)
+    assert not back.moved(travel) and tracker.starts._may_fit(back)
     assert moved.retry_due(rigid_allowed=True) and not moved.retry_due(rigid_allowed=False)
     moved.frames = 5 + SEED_RETRY_FRAMES
     assert moved.retry_due(rigid_allowed=False)
