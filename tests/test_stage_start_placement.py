@@ -147,29 +147,6 @@ def test_a_start_fit_refined_in_a_wrong_valley_is_nudged_out_of_it(sensor_xy, hi
     assert refined.cost < 0.1 * alone.cost
 
 
-def test_a_standing_vehicle_whose_points_lie_askew_of_its_axis_is_fitted_straight():
-    """A Volvo standing straight, seen sparsely by two LiDARs 35-40 m off: the rectangle of its
-    points lies 14 deg off its axis, and every start hitch is placed bent against the truth. Its
-    coarse fits are ranked once they have settled (``COARSE_ITERATIONS``): ranked after 4 steps,
-    the best had stopped in the valley of a cab swung 36 deg onto the trailer's front, which the
-    refinement kept, while the fit placed 30 deg the other way was on its way to the truth."""
-    volvo = VehicleModel.from_config("volvo_fh", PARAMS.vehicles["volvo_fh"])
-    sensors = [(-38.9, 0.6, 4.6), (-34.1, 20.3, 4.6)]
-    rays = cast_rays(world_boxes(volvo, 0.0, 0.0, 0.0, 0.0), sensors)
-    points = rays.points[rays.points[:, 2] > 0.3].astype(float)
-    rect = min_area_rect(points[:, :2])
-    assert 10.0 < abs(np.degrees(rect.yaw_rad)) % 180.0 < 170.0
-    tracker = VehicleTracker(PARAMS.articulated, PARAMS.vehicles)
-    tracker.starts.rays = rays
-    hypotheses = tracker.starts._hypotheses(points, rect, 0.0, False, True)
-    m = min(
-        (m for model, _, m in hypotheses if model.name == "volvo_fh" and np.cos(m.yaw_rad) > 0.0),
-        key=lambda m: m.cost,
-    )
-    assert abs(np.degrees(m.hitch_rad)) < 1.0 and abs(np.degrees(m.yaw_rad)) < 1.0
-    assert np.hypot(m.x_m, m.y_m) < 0.1
-
-
 def test_in_one_sweep_the_start_keeps_its_centred_search():
     """``detect`` has no frame to come to refute a start: its hypotheses are placed centred only,
     as before session 31 (the wider search fitted a MAN to a row of parked cars in a real KITTI

@@ -67,10 +67,7 @@ from i2v_loc.stages.vehicle_model import MAX_VEHICLE_HEIGHT_M, RIGID_MAX_LENGTH_
 from i2v_loc.stages.visibility import Rays
 
 START_HITCHES_DEG = (-90.0, -60.0, -30.0, 0.0, 30.0, 60.0, 90.0)
-# per start hitch; the best is refined with START_ITERATIONS. Ranked after 4 steps, the coarse fits were
-# ranked by where each had stopped: a Volvo standing straight, its trailer's roof edge in view, started bent
-# 24 deg at twice the cost of the straight fit 4 deg from the straight hypothesis's fourth step
-COARSE_ITERATIONS = 8
+COARSE_ITERATIONS = 4  # per start hitch; the best is refined with START_ITERATIONS
 START_NUDGE_RAD = np.radians(7.0)  # the refined start fit fitted again this far either way in hitch
 START_ITERATIONS = 20
 START_SCALE_M = 0.8  # first loss scale of the start fits (a placed model is off by up to metres)
